@@ -8,12 +8,14 @@
 pub mod deskew;
 pub mod project;
 pub mod scan;
+pub mod score;
 pub mod segment;
 
 pub use deskew::{DeskewError, PoseTrack, TimedPose, deskew, heading_rad, leveled_frame};
 pub use nalgebra;
-pub use project::{Beam, LeveledScan, project};
+pub use project::{Beam, LeveledScan, horizontal_cut, project};
 pub use scan::{Column, CylPoint, Scan3d};
+pub use score::Precision;
 pub use segment::{ClassCounts, PointClass, SegmentParams, Segmenter, segment_column_reference};
 
 use nalgebra::Isometry3;
@@ -63,9 +65,8 @@ impl Leveler {
     /// segment → project, for a cloud already in the leveled frame.
     pub fn segment_and_project(&mut self, cloud: Scan3d) -> Leveled {
         let mut classes = Vec::new();
-        let first_landmarks = self.segmenter.segment(&cloud, &mut classes);
+        let (first_landmarks, counts) = self.segmenter.segment(&cloud, &mut classes);
         let scan = project(&cloud, &first_landmarks);
-        let counts = ClassCounts::of(&classes);
         Leveled {
             cloud,
             classes,

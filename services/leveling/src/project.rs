@@ -80,3 +80,21 @@ pub fn project(scan: &Scan3d, first_landmarks: &[Option<u32>]) -> LeveledScan {
         beams,
     }
 }
+
+/// What a fixed, horizontal 2D scanner at the sensor would see: per column, the point nearest
+/// to zero elevation, if within `max_elevation_rad`, as (bearing rad, range m). For
+/// comparing a leveled scan with a plain 2D scan (paper Fig. 4); uses the raw sensor frame,
+/// so it tilts with the robot as a fixed scanner does.
+pub fn horizontal_cut(raw: &Scan3d, max_elevation_rad: f32) -> Vec<(f32, f32)> {
+    (0..raw.columns.len())
+        .filter_map(|i| {
+            raw.column_points(i)
+                .iter()
+                .filter(|p| p.is_valid())
+                .map(|p| (p.elevation_rad().abs(), p))
+                .filter(|(e, _)| *e <= max_elevation_rad)
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .map(|(_, p)| (p.phi_rad, p.r_m))
+        })
+        .collect()
+}

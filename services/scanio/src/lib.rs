@@ -1,1 +1,107 @@
+//! Readers for 3D scan files, turning each into the organized [`leveling::Scan3d`] the
+//! leveling pipeline takes: KITTI Velodyne `.bin`, 3DTK `.3d` + `.pose` (nodding SICK), and
+//! levelmap's simulator JSON; plus SemanticKITTI `.label` files for scoring. The only crate
+//! in the workspace that reads scan files; the algorithms stay free of I/O.
 
+pub mod kitti;
+pub mod labels;
+
+pub mod threedtk;
+
+use leveling::nalgebra::Isometry3;
+use leveling::{PoseTrack, Scan3d};
+use std::path::{Path, PathBuf};
+
+/// Why a scan file could not be read. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: empty file", path.display())]
+    Empty { path: PathBuf },
+    #[error("{}: truncated: {len} bytes is not a multiple of the {point_bytes}-byte point record", path.display())]
+    Truncated {
+        path: PathBuf,
+        len: usize,
+        point_bytes: usize,
+    },
+    #[error("{}: line {line}: {message}", path.display())]
+    Line {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    #[error("{}: {message}", path.display())]
+    Invalid { path: PathBuf, message: String },
+}
+
+impl LoadError {
+    pub(crate) fn invalid(path: &Path, message: impl Into<String>) -> LoadError {
+        LoadError::Invalid {
+            path: path.to_owned(),
+            message: message.into(),
+        }
+    }
+}
+
+/// A 3D scan as read from a file, ready for [`leveling::Leveler::level`].
+#[derive(Clone, Debug)]
+pub struct LoadedScan {
+    /// The organized scan in the sensor frame (x forward, y left, z up; m).
+    pub raw: Scan3d,
+    /// Dead reckoning over the scan; stationary when the file has no motion data.
+    pub track: PoseTrack,
+    /// Sensor pose in the robot frame.
+    pub sensor_in_robot: Isometry3<f64>,
+    /// For every point of `raw`, its index in the file (to look up per-point labels).
+    pub file_index: Vec<u32>,
+}
+
+/// Supported scan file formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScanFormat {
+    /// KITTI Velodyne `.bin`: little-endian float32 x y z reflectance per point.
+    Kitti,
+    /// 3DTK `.3d` text (cm, left-handed, y up) with an optional `.pose` beside it.
+    ThreeDtk,
+    /// levelmap simulator JSON (`levelmap simulate`).
+    Sim,
+}
+
+impl ScanFormat {
+    /// The format a file name suggests: `.bin`, `.3d`, `.json`.
+    pub fn from_extension(path: &Path) -> Option<ScanFormat> {
+        match path.extension()?.to_str()? {
+            "bin" => Some(ScanFormat::Kitti),
+            "3d" => Some(ScanFormat::ThreeDtk),
+            "json" => Some(ScanFormat::Sim),
+            _ => None,
+        }
+    }
+}
+
+/// Reads a scan file of the given format.
+pub fn load(path: &Path, format: ScanFormat) -> Result<LoadedScan, LoadError> {
+    match format {
+        ScanFormat::Kitti => kitti::load(path, kitti::DEFAULT_COLUMNS),
+        ScanFormat::ThreeDtk => threedtk::load(path),
+        ScanFormat::Sim => Err(LoadError::invalid(path, "sim format: not yet")),
+    }
+}
+
+/// Reads a whole file, refusing a missing or empty one with an error naming it.
+pub(crate) fn read_nonempty(path: &Path) -> Result<Vec<u8>, LoadError> {
+    let bytes = std::fs::read(path).map_err(|source| LoadError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    if bytes.is_empty() {
+        return Err(LoadError::Empty {
+            path: path.to_owned(),
+        });
+    }
+    Ok(bytes)
+}

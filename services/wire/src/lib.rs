@@ -1,1 +1,59 @@
+//! The levelmap wire contract (DESIGN.md §4): protobuf messages generated from
+//! `proto/levelmap/v1/*.proto` (compiled by protox, no system `protoc`), the Zenoh key
+//! expressions, and checked conversions between the messages and the `leveling` types.
+//!
+//! Sending: build a [`v1::Header`] with [`v1::Header::new`], convert with
+//! [`leveled_scan_to_wire`], [`odometry_to_wire`], [`pose3d_to_wire`], encode with
+//! [`Message::encode_to_vec`], publish on [`node_key`] / [`odom_key`].
+//! Receiving: [`decode_node`], [`decode_odometry`] and [`decode_ack`] reject malformed bytes,
+//! a missing header, a foreign wire version and out-of-domain numbers with a [`WireError`]
+//! naming the field; [`leveled_scan_from_wire`] and [`pose3d_from_wire`] then give the
+//! algorithm types.
 
+mod convert;
+mod error;
+mod keys;
+
+/// Types generated from `proto/levelmap/v1` (package `levelmap.v1`).
+pub mod v1 {
+    include!(concat!(env!("OUT_DIR"), "/levelmap.v1.rs"));
+}
+
+pub use convert::{
+    check_header, counts_from_wire, counts_to_wire, decode_ack, decode_node, decode_odometry,
+    leveled_scan_from_wire, leveled_scan_to_wire, odometry_from_wire, odometry_to_wire,
+    pose2d_from_wire, pose2d_to_wire, pose3d_from_wire, pose3d_to_wire, validate_ack,
+    validate_gps_fix, validate_node,
+};
+pub use error::WireError;
+pub use keys::{
+    KEY_ROOT, RobotKey, Topic, ack_key, all_robots_key_expr, map_key, map_key_expr, node_key,
+    odom_key, parse_robot_key, robot_key, validate_id,
+};
+/// Re-exported so users can encode and decode without depending on prost themselves.
+pub use prost::Message;
+
+/// The wire version every [`v1::Header`] carries; receivers reject any other.
+pub const WIRE_VERSION: u32 = 1;
+
+impl v1::Header {
+    /// A header of the current [`WIRE_VERSION`]. `seq` counts publications per robot and topic;
+    /// `stamp_ns` is the measurement time and `sent_ns` the publication time (ns since the
+    /// Unix epoch).
+    pub fn new(
+        fleet_id: impl Into<String>,
+        robot_id: impl Into<String>,
+        seq: u64,
+        stamp_ns: u64,
+        sent_ns: u64,
+    ) -> v1::Header {
+        v1::Header {
+            version: WIRE_VERSION,
+            fleet_id: fleet_id.into(),
+            robot_id: robot_id.into(),
+            seq,
+            stamp_ns,
+            sent_ns,
+        }
+    }
+}

@@ -1,0 +1,247 @@
+//! `levelmap level`: turn one 3D scan file into its leveled range scan.
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use leveling::{Leveled, Leveler, Precision, SegmentParams};
+use scanio::labels::{GroundTruth, Labels};
+use scanio::{LoadedScan, ScanFormat};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Scan file formats on the command line.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum FormatArg {
+    /// KITTI Velodyne .bin (float32 x y z reflectance)
+    Kitti,
+    /// 3DTK .3d text in cm, with FILE.pose beside it if present
+    #[value(name = "3dtk")]
+    ThreeDtk,
+    /// levelmap simulator JSON (`levelmap simulate`)
+    Sim,
+}
+
+impl From<FormatArg> for ScanFormat {
+    fn from(f: FormatArg) -> ScanFormat {
+        match f {
+            FormatArg::Kitti => ScanFormat::Kitti,
+            FormatArg::ThreeDtk => ScanFormat::ThreeDtk,
+            FormatArg::Sim => ScanFormat::Sim,
+        }
+    }
+}
+
+/// Level one 3D scan: motion compensation, segmentation (eqs. 3.2–3.3), projection (eq. 3.4).
+#[derive(Args, Debug)]
+pub struct LevelArgs {
+    /// The 3D scan file.
+    pub file: PathBuf,
+    /// File format; guessed from the extension (.bin, .3d, .json) when omitted.
+    #[arg(long, value_enum)]
+    pub format: Option<FormatArg>,
+    /// SemanticKITTI .label file for the scan: adds landmark_precision and beam_precision.
+    #[arg(long, value_name = "FILE.label")]
+    pub labels: Option<PathBuf>,
+    /// TOML file with a [segment] table overriding the thresholds (see deploy/leveling.toml).
+    #[arg(long, value_name = "FILE.toml")]
+    pub config: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Draw the leveled scan over a horizontal 2D cut of the same cloud (paper Fig. 4).
+    #[arg(long, value_name = "OUT.svg")]
+    pub svg: Option<PathBuf>,
+    /// Time segmentation + projection over this many runs and report the median.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub repeat: u32,
+}
+
+/// The `--json` report.
+#[derive(Serialize, Debug)]
+pub struct LevelReport {
+    pub file: String,
+    pub format: String,
+    pub points: usize,
+    pub columns: usize,
+    pub invalid: usize,
+    pub ground: usize,
+    pub landmark: usize,
+    pub overhang: usize,
+    /// Beams with a return.
+    pub beams: usize,
+    /// Segmentation + projection, median over `repeat` runs (ms).
+    pub elapsed_ms: f64,
+    pub repeat: u32,
+    pub load_ms: f64,
+    pub deskew_ms: f64,
+    pub params: SegmentParams,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub landmark_precision: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub beam_precision: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scoring: Option<Precision>,
+    pub warnings: Vec<String>,
+}
+
+/// Segment thresholds from `--config` (a `[segment]` table), or the defaults.
+pub fn load_params(config: Option<&Path>) -> Result<SegmentParams> {
+    #[derive(serde::Deserialize, Default)]
+    #[serde(deny_unknown_fields)]
+    struct File {
+        #[serde(default)]
+        segment: SegmentParams,
+    }
+    let params = match config {
+        None => SegmentParams::default(),
+        Some(path) => {
+            let text =
+                std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+            toml::from_str::<File>(&text)
+                .with_context(|| format!("{}", path.display()))?
+                .segment
+        }
+    };
+    params
+        .validate()
+        .map_err(anyhow::Error::msg)
+        .context("invalid [segment] thresholds")?;
+    Ok(params)
+}
+
+pub fn run(args: &LevelArgs) -> Result<()> {
+    let params = load_params(args.config.as_deref())?;
+    let format = match args.format {
+        Some(f) => f.into(),
+        None => ScanFormat::from_extension(&args.file).with_context(|| {
+            format!(
+                "{}: cannot tell the format from the extension; pass --format kitti|3dtk|sim",
+                args.file.display()
+            )
+        })?,
+    };
+    let t0 = Instant::now();
+    let loaded = scanio::load(&args.file, format)?;
+    let load_ms = ms(t0);
+    let labels = args
+        .labels
+        .as_deref()
+        .map(|path| Labels::load(path, loaded.file_index.len()))
+        .transpose()?;
+
+    let (leveled, deskew_ms, elapsed_ms) = level_timed(&loaded, params, args.repeat)?;
+    let precision = labels.as_ref().map(|labels| {
+        Precision::score(&leveled.classes, &leveled.first_landmarks, |i| match labels
+            .truth(loaded.file_index[i] as usize)
+        {
+            GroundTruth::Ground => Some(true),
+            GroundTruth::NotGround => Some(false),
+            GroundTruth::Unscored => None,
+        })
+    });
+
+    let mut warnings = Vec::new();
+    if leveled.counts.invalid == loaded.raw.points.len() {
+        warnings.push(format!(
+            "{}: none of the {} points is a valid return (NaN, or outside {}..{} m)",
+            args.file.display(),
+            loaded.raw.points.len(),
+            params.min_range_m,
+            params.max_range_m
+        ));
+    }
+    if leveled.scan.return_count() == 0 {
+        warnings.push(format!(
+            "{}: no landmark found: the leveled scan has no beams",
+            args.file.display()
+        ));
+    }
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+
+    let report = LevelReport {
+        file: args.file.display().to_string(),
+        format: format!("{format:?}").to_lowercase(),
+        points: loaded.raw.points.len(),
+        columns: loaded.raw.columns.len(),
+        invalid: leveled.counts.invalid,
+        ground: leveled.counts.ground,
+        landmark: leveled.counts.landmark,
+        overhang: leveled.counts.overhang,
+        beams: leveled.scan.return_count(),
+        elapsed_ms,
+        repeat: args.repeat,
+        load_ms,
+        deskew_ms,
+        params,
+        landmark_precision: precision.map(|p| p.landmark_precision()),
+        beam_precision: precision.map(|p| p.beam_precision()),
+        scoring: precision,
+        warnings,
+    };
+    if let Some(out) = &args.svg {
+        let picture = crate::svg::fig4(&loaded.raw, &leveled, &args.file.display().to_string());
+        std::fs::write(out, picture)
+            .with_context(|| format!("{}: cannot write the SVG", out.display()))?;
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_text(&report);
+    }
+    Ok(())
+}
+
+/// Levels `loaded`; returns the result, the deskew time and the median segmentation +
+/// projection time (ms) over `repeat` runs.
+pub fn level_timed(
+    loaded: &LoadedScan,
+    params: SegmentParams,
+    repeat: u32,
+) -> Result<(Leveled, f64, f64)> {
+    let mut leveler = Leveler::new(params);
+    let t0 = Instant::now();
+    let cloud = leveling::deskew(&loaded.raw, &loaded.track, &loaded.sensor_in_robot)?;
+    let deskew_ms = ms(t0);
+    let mut times = Vec::with_capacity(repeat as usize);
+    let mut leveled = None;
+    for _ in 0..repeat {
+        let input = cloud.clone();
+        let t = Instant::now();
+        let out = leveler.segment_and_project(input);
+        times.push(ms(t));
+        leveled = Some(out);
+    }
+    let Some(leveled) = leveled else {
+        bail!("--repeat must be at least 1")
+    };
+    times.sort_by(f64::total_cmp);
+    Ok((leveled, deskew_ms, times[times.len() / 2]))
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+fn print_text(r: &LevelReport) {
+    println!("{} ({})", r.file, r.format);
+    println!(
+        "  points     {:>8} in {} columns ({} invalid)",
+        r.points, r.columns, r.invalid
+    );
+    println!("  landmark   {:>8}", r.landmark);
+    println!("  overhang   {:>8}", r.overhang);
+    println!("  ground     {:>8}", r.ground);
+    println!(
+        "  beams      {:>8} of {} columns have a return",
+        r.beams, r.columns
+    );
+    println!(
+        "  time       {:>8.3} ms segmentation + projection (median of {})",
+        r.elapsed_ms, r.repeat
+    );
+    if let (Some(l), Some(b)) = (r.landmark_precision, r.beam_precision) {
+        println!("  precision  landmark {l:.4}, beams {b:.4} (share not on ground classes)");
+    }
+}

@@ -1,0 +1,1 @@
+//! levelmap simulator scans (JSON, written by `levelmap simulate`).

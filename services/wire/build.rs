@@ -1,0 +1,25 @@
+//! Compiles proto/levelmap/v1/*.proto with protox (pure Rust, no system `protoc`) and
+//! generates the prost types into OUT_DIR/levelmap.v1.rs.
+
+use std::path::PathBuf;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let proto_root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../proto");
+    let version_dir = proto_root.join("levelmap/v1");
+    println!("cargo:rerun-if-changed={}", proto_root.display());
+    println!("cargo:rerun-if-changed={}", version_dir.display());
+
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(&version_dir)? {
+        let path = entry?.path();
+        if path.extension().is_some_and(|e| e == "proto") {
+            println!("cargo:rerun-if-changed={}", path.display());
+            files.push(path);
+        }
+    }
+    files.sort();
+
+    let fds = protox::compile(&files, [&proto_root])?;
+    prost_build::Config::new().compile_fds(fds)?;
+    Ok(())
+}

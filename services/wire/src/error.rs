@@ -1,0 +1,96 @@
+//! The one error type of the wire contract.
+
+use std::fmt;
+
+/// Why a message, id or key expression was rejected. Every variant names the offending field
+/// (as `Message.field`) so that a rejection can be logged and counted meaningfully.
+#[derive(Clone, Debug, PartialEq)]
+pub enum WireError {
+    /// The bytes are not a protobuf encoding of `message`.
+    Decode {
+        message: &'static str,
+        source: prost::DecodeError,
+    },
+    /// The header's wire version is not [`crate::WIRE_VERSION`] (0: the header left it unset).
+    Version { field: &'static str, found: u32 },
+    /// A required field (a header, a scan, a pose) is absent.
+    Missing { field: &'static str },
+    /// A fleet or robot id is empty or has a character outside `[A-Za-z0-9_-]`.
+    InvalidId { kind: &'static str, id: String },
+    /// A Zenoh key expression is not one of levelmap's.
+    InvalidKey { key: String },
+    /// One number is out of its domain (NaN, infinite, negative range, latitude beyond 90°).
+    /// `index` is the element index in a repeated field, `None` for a singular one.
+    InvalidValue {
+        field: &'static str,
+        index: Option<usize>,
+        value: f64,
+        problem: &'static str,
+    },
+    /// A structural inconsistency: lengths that differ, counts that do not add up, ids that
+    /// disagree between nested headers, an empty scan.
+    Invalid { field: &'static str, detail: String },
+}
+
+impl fmt::Display for WireError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            WireError::Decode { message, source } => {
+                write!(f, "not a valid levelmap.v1.{message} message: {source}")
+            }
+            WireError::Version { field, found } => write!(
+                f,
+                "{field}: wire version {found} is not supported (expected {})",
+                crate::WIRE_VERSION
+            ),
+            WireError::Missing { field } => write!(f, "{field} is missing"),
+            WireError::InvalidId { kind, id } => write!(
+                f,
+                "{kind} id {id:?} is invalid: it must be non-empty and use only A-Z, a-z, 0-9, _ and -"
+            ),
+            WireError::InvalidKey { key } => {
+                write!(f, "{key:?} is not a levelmap key expression")
+            }
+            WireError::InvalidValue {
+                field,
+                index,
+                value,
+                problem,
+            } => {
+                write!(f, "{field}")?;
+                if let Some(i) = index {
+                    write!(f, "[{i}]")?;
+                }
+                write!(f, " = {value} is {problem}")
+            }
+            WireError::Invalid { field, detail } => write!(f, "{field}: {detail}"),
+        }
+    }
+}
+
+impl std::error::Error for WireError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            WireError::Decode { source, .. } => Some(source),
+            _ => None,
+        }
+    }
+}
+
+/// Checks that `value` is finite.
+pub(crate) fn finite(
+    field: &'static str,
+    index: Option<usize>,
+    value: f64,
+) -> Result<f64, WireError> {
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(WireError::InvalidValue {
+            field,
+            index,
+            value,
+            problem: "not finite",
+        })
+    }
+}
