@@ -101,11 +101,10 @@ impl SegmentParams {
     /// for NaN, because it runs for every point.
     #[inline]
     fn in_range(&self, p: &CylPoint) -> bool {
-        (p.r_m > 0.0)
-            & (p.r_m >= self.min_range_m)
-            & (p.r_m <= self.max_range_m)
-            & (p.z_m.abs() <= self.max_range_m)
-            & (p.phi_rad.abs() <= 4.0 * std::f32::consts::PI)
+        // r > 0 excludes CylPoint::INVALID; NaN fails every comparison. φ is not checked:
+        // CylPoint::from_xyz never gives a non-finite φ to a finite point.
+        let min_r = self.min_range_m.max(f32::MIN_POSITIVE);
+        (p.r_m >= min_r) & (p.r_m <= self.max_range_m) & (p.z_m.abs() <= self.max_range_m)
     }
 }
 
@@ -256,7 +255,9 @@ impl Segmenter {
         // A valid lower point that was "below" an earlier landmark of this column.
         let mut witness: Option<usize> = None;
         let mut first_landmark = None;
-        let mut per_class = [0usize; 4];
+        // Counters in registers: a per-class array in memory would chain every point through
+        // a store and a load.
+        let (mut n_invalid, mut n_landmark, mut n_overhang) = (0usize, 0usize, 0usize);
         let mut max_r = f32::NEG_INFINITY;
         let mut running = PrefixBounds {
             min_z: f32::INFINITY,
@@ -285,7 +286,8 @@ impl Segmenter {
                 {
                     // The point that made the last landmark usually lies below this one too
                     // (same surface, a little higher): try it before walking down.
-                    landmark = witness.is_some_and(|k: usize| is_below(&points[k], p_j, h_t, h_max, tan_a));
+                    landmark = witness
+                        .is_some_and(|k: usize| is_below(&points[k], p_j, h_t, h_max, tan_a));
                     if !landmark {
                         for k in (0..j).rev() {
                             let b = &bounds[k];
@@ -310,16 +312,18 @@ impl Segmenter {
                     min_u: running.min_u.min(u_j),
                     max_v: running.max_v.max(v_j),
                 };
+                n_landmark += landmark as usize;
+                n_overhang += overhang as usize;
                 CLASS_OF[overhang as usize * 2 + landmark as usize]
             };
-            per_class[class as usize] += 1;
+            n_invalid += (class == PointClass::Invalid) as usize;
             out[j] = class;
             bounds[j] = running;
         }
-        counts.invalid += per_class[PointClass::Invalid as usize];
-        counts.ground += per_class[PointClass::Ground as usize];
-        counts.landmark += per_class[PointClass::Landmark as usize];
-        counts.overhang += per_class[PointClass::Overhang as usize];
+        counts.invalid += n_invalid;
+        counts.landmark += n_landmark;
+        counts.overhang += n_overhang;
+        counts.ground += points.len() - n_invalid - n_landmark - n_overhang;
         first_landmark
     }
 

@@ -1,7 +1,7 @@
 //! `levelmap level`: turn one 3D scan file into its leveled range scan.
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use leveling::{Leveled, Leveler, Precision, SegmentParams};
 use scanio::labels::{GroundTruth, Labels};
 use scanio::{LoadedScan, ScanFormat};
@@ -9,25 +9,22 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Scan file formats on the command line.
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum FormatArg {
-    /// KITTI Velodyne .bin (float32 x y z reflectance)
-    Kitti,
-    /// 3DTK .3d text in cm, with FILE.pose beside it if present
-    #[value(name = "3dtk")]
-    ThreeDtk,
-    /// levelmap simulator JSON (`levelmap simulate`)
-    Sim,
-}
-
-impl From<FormatArg> for ScanFormat {
-    fn from(f: FormatArg) -> ScanFormat {
-        match f {
-            FormatArg::Kitti => ScanFormat::Kitti,
-            FormatArg::ThreeDtk => ScanFormat::ThreeDtk,
-            FormatArg::Sim => ScanFormat::Sim,
-        }
+/// The format named by `--format`, or guessed from the file's extension.
+pub fn scan_format(file: &Path, format: Option<&str>) -> Result<ScanFormat> {
+    match format {
+        Some("kitti") => Ok(ScanFormat::Kitti),
+        Some("3dtk") => Ok(ScanFormat::ThreeDtk),
+        Some("sim") => Ok(ScanFormat::Sim),
+        Some(other) => bail!(
+            "{}: unknown format {other:?} (expected kitti, 3dtk or sim)",
+            file.display()
+        ),
+        None => ScanFormat::from_extension(file).with_context(|| {
+            format!(
+                "{}: cannot tell the format from the extension; pass --format kitti|3dtk|sim",
+                file.display()
+            )
+        }),
     }
 }
 
@@ -36,9 +33,11 @@ impl From<FormatArg> for ScanFormat {
 pub struct LevelArgs {
     /// The 3D scan file.
     pub file: PathBuf,
-    /// File format; guessed from the extension (.bin, .3d, .json) when omitted.
-    #[arg(long, value_enum)]
-    pub format: Option<FormatArg>,
+    /// File format: kitti (Velodyne .bin, float32 x y z reflectance), 3dtk (.3d text in cm,
+    /// with FILE.pose beside it if present) or sim (levelmap simulator JSON). Guessed from the
+    /// extension (.bin, .3d, .json) when omitted.
+    #[arg(long, value_name = "kitti|3dtk|sim")]
+    pub format: Option<String>,
     /// SemanticKITTI .label file for the scan: adds landmark_precision and beam_precision.
     #[arg(long, value_name = "FILE.label")]
     pub labels: Option<PathBuf>,
@@ -111,17 +110,14 @@ pub fn load_params(config: Option<&Path>) -> Result<SegmentParams> {
 
 pub fn run(args: &LevelArgs) -> Result<()> {
     let params = load_params(args.config.as_deref())?;
-    let format = match args.format {
-        Some(f) => f.into(),
-        None => ScanFormat::from_extension(&args.file).with_context(|| {
-            format!(
-                "{}: cannot tell the format from the extension; pass --format kitti|3dtk|sim",
-                args.file.display()
-            )
-        })?,
-    };
+    let format = scan_format(&args.file, args.format.as_deref())?;
     let t0 = Instant::now();
-    let loaded = scanio::load(&args.file, format)?;
+    let (loaded, sim_truth) = match format {
+        ScanFormat::Sim => {
+            scanio::sim_file::load(&args.file).map(|(scan, truth)| (scan, Some(truth)))?
+        }
+        _ => (scanio::load(&args.file, format)?, None),
+    };
     let load_ms = ms(t0);
     let labels = args
         .labels
@@ -130,15 +126,24 @@ pub fn run(args: &LevelArgs) -> Result<()> {
         .transpose()?;
 
     let (leveled, deskew_ms, elapsed_ms) = level_timed(&loaded, params, args.repeat)?;
-    let precision = labels.as_ref().map(|labels| {
-        Precision::score(&leveled.classes, &leveled.first_landmarks, |i| match labels
-            .truth(loaded.file_index[i] as usize)
-        {
-            GroundTruth::Ground => Some(true),
-            GroundTruth::NotGround => Some(false),
-            GroundTruth::Unscored => None,
+    // Ground truth per scan point: the labels if given, else the simulator's truth.
+    let precision = if let Some(labels) = &labels {
+        Some(Precision::score(
+            &leveled.classes,
+            &leveled.first_landmarks,
+            |i| match labels.truth(loaded.file_index[i] as usize) {
+                GroundTruth::Ground => Some(true),
+                GroundTruth::NotGround => Some(false),
+                GroundTruth::Unscored => None,
+            },
+        ))
+    } else {
+        sim_truth.as_ref().map(|truth| {
+            Precision::score(&leveled.classes, &leveled.first_landmarks, |i| {
+                truth[i].map(|kind| kind.is_ground())
+            })
         })
-    });
+    };
 
     let mut warnings = Vec::new();
     if leveled.counts.invalid == loaded.raw.points.len() {

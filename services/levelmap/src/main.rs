@@ -1,13 +1,17 @@
 //! `levelmap`: the command line of the levelmap outdoor SLAM system.
 
+mod demo;
 mod level;
+mod simulate;
 mod svg;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+/// Outdoor SLAM for robot fleets from 3D laser scans, via leveled range scans
+/// (Wulf, Brenneke & Wagner). Every command has --help.
 #[derive(Parser)]
-#[command(name = "levelmap", version, about = "Outdoor SLAM for robot fleets from 3D laser scans, via leveled range scans", long_about = None)]
+#[command(name = "levelmap", version)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -15,13 +19,16 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    Demo(demo::DemoArgs),
     Level(level::LevelArgs),
+    Simulate(simulate::SimulateArgs),
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let result = match cli.command {
+    let result = match Cli::parse().command {
+        Command::Demo(args) => demo::run(&args),
         Command::Level(args) => level::run(&args),
+        Command::Simulate(args) => simulate::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

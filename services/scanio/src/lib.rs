@@ -5,6 +5,7 @@
 
 pub mod kitti;
 pub mod labels;
+pub mod sim_file;
 
 pub mod threedtk;
 
@@ -88,7 +89,7 @@ pub fn load(path: &Path, format: ScanFormat) -> Result<LoadedScan, LoadError> {
     match format {
         ScanFormat::Kitti => kitti::load(path, kitti::DEFAULT_COLUMNS),
         ScanFormat::ThreeDtk => threedtk::load(path),
-        ScanFormat::Sim => Err(LoadError::invalid(path, "sim format: not yet")),
+        ScanFormat::Sim => sim_file::load(path).map(|(scan, _truth)| scan),
     }
 }
 
