@@ -130,6 +130,22 @@ impl Scan3d {
         self.points.iter().filter(|p| p.is_valid()).count()
     }
 
+    /// Checks that every column lies within `points` (true of every scan built with
+    /// [`Scan3d::begin_column`]; a scan read from a file must be checked).
+    pub fn check_columns(&self) -> Result<(), String> {
+        for (i, c) in self.columns.iter().enumerate() {
+            let end = c.start as u64 + c.len as u64;
+            if end > self.points.len() as u64 {
+                return Err(format!(
+                    "column {i} spans points {}..{end} of {}",
+                    c.start,
+                    self.points.len()
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Time of the first column (ns), or 0 for an empty scan.
     pub fn start_stamp_ns(&self) -> u64 {
         self.columns.iter().map(|c| c.stamp_ns).min().unwrap_or(0)
@@ -154,6 +170,19 @@ mod tests {
         assert!(!column[1].is_valid() && !column[2].is_valid());
         assert!((column[3].phi_rad - std::f32::consts::FRAC_PI_2).abs() < 1e-6);
         assert_eq!(scan.valid_points(), 2);
+    }
+
+    #[test]
+    fn columns_beyond_the_points_are_reported() {
+        let mut scan = Scan3d::default();
+        scan.begin_column(0);
+        scan.push_xyz(1.0, 0.0, 0.0);
+        assert!(scan.check_columns().is_ok());
+        scan.columns[0].len = 2;
+        assert_eq!(
+            scan.check_columns(),
+            Err("column 0 spans points 0..2 of 1".to_string())
+        );
     }
 
     #[test]

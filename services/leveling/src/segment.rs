@@ -520,5 +520,31 @@ mod tests {
             prop_assert_eq!(&fast, &reference);
             prop_assert_eq!(first, reference.iter().position(|&c| c == PointClass::Landmark));
         }
+
+        /// Whole scans: each column must come out as the reference form says, whatever the
+        /// columns around it (the segmenter reuses its buffers from column to column).
+        #[test]
+        fn whole_scans_agree_with_reference_column_by_column(
+            columns in prop::collection::vec(prop_oneof![prop::collection::vec(arb_point(), 0..40), arb_walk()], 0..20),
+            params in arb_params(),
+        ) {
+            let mut scan = Scan3d::default();
+            for column in &columns {
+                scan.begin_column(0);
+                column.iter().for_each(|p| scan.push(*p));
+            }
+            let mut classes = Vec::new();
+            let (first, counts) = Segmenter::new(params).segment(&scan, &mut classes);
+            prop_assert_eq!(first.len(), columns.len());
+            for (i, c) in scan.columns.iter().enumerate() {
+                let points = scan.column_points(i);
+                let mut reference = vec![PointClass::Invalid; points.len()];
+                segment_column_reference(points, &params, &mut reference);
+                let range = c.start as usize..(c.start + c.len) as usize;
+                prop_assert_eq!(&classes[range], &reference[..]);
+                prop_assert_eq!(first[i], reference.iter().position(|&k| k == PointClass::Landmark).map(|j| c.start + j as u32));
+            }
+            prop_assert_eq!(counts, ClassCounts::of(&classes));
+        }
     }
 }

@@ -157,12 +157,33 @@ fn out_of_range_scan_gives_zero_beams_and_a_warning() {
 #[test]
 fn bad_thresholds_in_the_config_are_refused() {
     let scan = temp_file("config", "scan.bin", &kitti_bytes(&[[5.0, 0.0, -1.7, 0.1]]));
-    let config = temp_file("config", "bad.toml", b"[segment]\nmax_misalignment_deg = 120.0\n");
-    let out = levelmap(&["level", scan.to_str().unwrap(), "--config", config.to_str().unwrap()]);
+    let config = temp_file(
+        "config",
+        "bad.toml",
+        b"[segment]\nmax_misalignment_deg = 120.0\n",
+    );
+    let out = levelmap(&[
+        "level",
+        scan.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+    ]);
     assert_clean_failure(&out, &["max_misalignment_deg", "(0, 90)"]);
-    let config = temp_file("config", "typo.toml", b"[segment]\nmin_landmark_heigth_m = 0.3\n");
-    let out = levelmap(&["level", scan.to_str().unwrap(), "--config", config.to_str().unwrap()]);
+    let config = temp_file(
+        "config",
+        "typo.toml",
+        b"[segment]\nmin_landmark_heigth_m = 0.3\n",
+    );
+    let out = levelmap(&[
+        "level",
+        scan.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+    ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains("typo.toml") && stderr.contains("min_landmark_heigth_m"), "{stderr}");
+    assert!(
+        stderr.contains("typo.toml") && stderr.contains("min_landmark_heigth_m"),
+        "{stderr}"
+    );
 }
