@@ -7,25 +7,15 @@
 //! Needs ../shared/data beside the repository (or LEVELMAP_DATA); fails loudly without it.
 
 use leveling::{Leveler, Scan3d, SegmentParams, deskew};
-use scanio::ScanFormat;
-use std::path::PathBuf;
+use scanio::{ScanFormat, shared_data};
 
 fn main() {
     divan::main();
 }
 
-fn data(relative: &str) -> PathBuf {
-    let root = std::env::var_os("LEVELMAP_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
-    let path = root.join(relative);
-    assert!(path.exists(), "benchmark data missing: {}", path.display());
-    path
-}
-
 /// A scan file, loaded and leveled up to the segmentation input.
 fn leveled_cloud(relative: &str, format: ScanFormat) -> Scan3d {
-    let loaded = scanio::load(&data(relative), format).expect("load");
+    let loaded = scanio::load(&shared_data(relative), format).expect("load");
     deskew(&loaded.raw, &loaded.track, &loaded.sensor_in_robot).expect("deskew")
 }
 

@@ -6,7 +6,6 @@ use crate::level::level_timed;
 use anyhow::{Context, Result};
 use clap::Args;
 use leveling::SegmentParams;
-use scanio::LoadedScan;
 use serde::Serialize;
 use sim::SurfaceKind;
 use std::path::PathBuf;
@@ -62,13 +61,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
     let (file, fixed2d) = sim::scenario::pavilion_hill_scan(args.seed);
     scanio::sim_file::save(&scan_path, &file)?;
-    let truth = file.truth.clone();
-    let loaded = LoadedScan {
-        track: file.track()?,
-        file_index: (0..file.raw.points.len() as u32).collect(),
-        raw: file.raw,
-        sensor_in_robot: file.sensor_in_robot,
-    };
+    let (loaded, truth) = scanio::sim_file::into_loaded(file).map_err(anyhow::Error::msg)?;
     let (leveled, _, elapsed_ms) = level_timed(&loaded, SegmentParams::default(), 10)?;
     let beam_kinds: Vec<SurfaceKind> = leveled
         .first_landmarks

@@ -3,7 +3,7 @@
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use leveling::{Leveled, Leveler, Precision, SegmentParams};
-use scanio::labels::{GroundTruth, Labels};
+use scanio::labels::Labels;
 use scanio::{LoadedScan, ScanFormat};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -131,11 +131,7 @@ pub fn run(args: &LevelArgs) -> Result<()> {
         Some(Precision::score(
             &leveled.classes,
             &leveled.first_landmarks,
-            |i| match labels.truth(loaded.file_index[i] as usize) {
-                GroundTruth::Ground => Some(true),
-                GroundTruth::NotGround => Some(false),
-                GroundTruth::Unscored => None,
-            },
+            |i| labels.is_ground(loaded.file_index[i] as usize),
         ))
     } else {
         sim_truth.as_ref().map(|truth| {

@@ -63,6 +63,16 @@ impl Labels {
         Ok(Labels { scheme, ids })
     }
 
+    /// Whether the point with file index `index` is ground; `None` where the labels do not
+    /// score it. The form [`leveling::Precision::score`] takes.
+    pub fn is_ground(&self, index: usize) -> Option<bool> {
+        match self.truth(index) {
+            GroundTruth::Ground => Some(true),
+            GroundTruth::NotGround => Some(false),
+            GroundTruth::Unscored => None,
+        }
+    }
+
     /// Ground truth of the point with file index `index`.
     pub fn truth(&self, index: usize) -> GroundTruth {
         let id = self.ids[index];

@@ -93,6 +93,22 @@ pub fn load(path: &Path, format: ScanFormat) -> Result<LoadedScan, LoadError> {
     }
 }
 
+/// A path in the public test data: `$LEVELMAP_DATA/relative`, or `../shared/data/relative`
+/// beside the repository. Panics, naming the path, if it does not exist: tests and benchmarks
+/// that need the data must fail loudly without it, never skip.
+pub fn shared_data(relative: &str) -> PathBuf {
+    let root = std::env::var_os("LEVELMAP_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
+    let path = root.join(relative);
+    assert!(
+        path.exists(),
+        "test data missing: {} (set LEVELMAP_DATA or put ../shared beside the repository)",
+        path.display()
+    );
+    path
+}
+
 /// Reads a whole file, refusing a missing or empty one with an error naming it.
 pub(crate) fn read_nonempty(path: &Path) -> Result<Vec<u8>, LoadError> {
     let bytes = std::fs::read(path).map_err(|source| LoadError::Io {

@@ -10,11 +10,14 @@ pub fn load(path: &Path) -> Result<(LoadedScan, Vec<Option<SurfaceKind>>), LoadE
     let bytes = read_nonempty(path)?;
     let file: SimScanFile = serde_json::from_slice(&bytes)
         .map_err(|e| LoadError::invalid(path, format!("not a levelmap simulator scan: {e}")))?;
-    file.validate()
-        .map_err(|e| LoadError::invalid(path, e.to_string()))?;
-    let track = file
-        .track()
-        .map_err(|e| LoadError::invalid(path, e.to_string()))?;
+    into_loaded(file).map_err(|message| LoadError::invalid(path, message))
+}
+
+/// A simulator scan, checked, as a scan ready to level, with its per-point truth.
+pub fn into_loaded(file: SimScanFile) -> Result<(LoadedScan, Vec<Option<SurfaceKind>>), String> {
+    file.raw.check_columns()?;
+    file.validate().map_err(|e| e.to_string())?;
+    let track = file.track().map_err(|e| e.to_string())?;
     let file_index = (0..file.raw.points.len() as u32).collect();
     let loaded = LoadedScan {
         raw: file.raw,

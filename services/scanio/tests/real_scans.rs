@@ -2,23 +2,9 @@
 //! thresholds. A missing data folder fails these tests: they never skip.
 
 use leveling::{Leveled, Leveler, Precision, SegmentParams};
-use scanio::labels::{GroundTruth, Labels};
+use scanio::labels::Labels;
+use scanio::shared_data as data;
 use scanio::{LoadedScan, ScanFormat};
-use std::path::PathBuf;
-
-/// `../shared/data` beside the repository, or `$LEVELMAP_DATA`.
-fn data(relative: &str) -> PathBuf {
-    let root = std::env::var_os("LEVELMAP_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
-    let path = root.join(relative);
-    assert!(
-        path.exists(),
-        "test data missing: {} (set LEVELMAP_DATA or put ../shared beside the repo)",
-        path.display()
-    );
-    path
-}
 
 fn level(loaded: &LoadedScan) -> Leveled {
     Leveler::new(SegmentParams::default())
@@ -51,12 +37,8 @@ fn kitti_landmarks_and_beams_are_not_ground() {
         let loaded = scanio::load(&data(scan), ScanFormat::Kitti).expect("load");
         let labels = Labels::load(&data(label), loaded.file_index.len()).expect("labels");
         let leveled = level(&loaded);
-        let p = Precision::score(&leveled.classes, &leveled.first_landmarks, |i| match labels
-            .truth(loaded.file_index[i] as usize)
-        {
-            GroundTruth::Ground => Some(true),
-            GroundTruth::NotGround => Some(false),
-            GroundTruth::Unscored => None,
+        let p = Precision::score(&leveled.classes, &leveled.first_landmarks, |i| {
+            labels.is_ground(loaded.file_index[i] as usize)
         });
         println!(
             "{scan}: landmark {:.4} of {}, beams {:.4} of {}",
