@@ -1,0 +1,1 @@
+//! Kümmerle et al. relations files.

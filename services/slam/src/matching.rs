@@ -1,0 +1,1 @@
+//! IDC scan matching (Lu & Milios) of 2D scans: relative pose, covariance, quality.

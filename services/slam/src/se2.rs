@@ -1,0 +1,87 @@
+//! Rigid motions of the plane, SE(2): poses of the robot in a 2D map.
+
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+
+/// A pose in the plane: position (m) and heading (rad, counter-clockwise from the x axis).
+/// As a motion, it maps a point p of its own frame to `R(theta)·p + (x, y)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pose2 {
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+}
+
+/// An angle brought into (−π, π].
+pub fn wrap_angle(a: f64) -> f64 {
+    let b = (a + PI).rem_euclid(2.0 * PI) - PI;
+    if b <= -PI { b + 2.0 * PI } else { b }
+}
+
+impl Pose2 {
+    pub const IDENTITY: Pose2 = Pose2 { x: 0.0, y: 0.0, theta: 0.0 };
+
+    pub fn new(x: f64, y: f64, theta: f64) -> Pose2 {
+        Pose2 { x, y, theta }
+    }
+
+    /// `self ⊕ other`: `other` expressed in the frame of `self`, moved to the outer frame.
+    pub fn compose(&self, other: &Pose2) -> Pose2 {
+        let (s, c) = self.theta.sin_cos();
+        Pose2 {
+            x: self.x + c * other.x - s * other.y,
+            y: self.y + s * other.x + c * other.y,
+            theta: wrap_angle(self.theta + other.theta),
+        }
+    }
+
+    /// The inverse motion.
+    pub fn inverse(&self) -> Pose2 {
+        let (s, c) = self.theta.sin_cos();
+        Pose2 { x: -c * self.x - s * self.y, y: s * self.x - c * self.y, theta: wrap_angle(-self.theta) }
+    }
+
+    /// `self⁻¹ ⊕ other`: `other` seen from `self` (the relative pose an edge i → j measures).
+    pub fn between(&self, other: &Pose2) -> Pose2 {
+        self.inverse().compose(other)
+    }
+
+    /// A point of this pose's frame, in the outer frame.
+    pub fn transform_point(&self, p: [f64; 2]) -> [f64; 2] {
+        let (s, c) = self.theta.sin_cos();
+        [self.x + c * p[0] - s * p[1], self.y + s * p[0] + c * p[1]]
+    }
+
+    /// True when every component is finite.
+    pub fn is_finite(&self) -> bool {
+        self.x.is_finite() && self.y.is_finite() && self.theta.is_finite()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: &Pose2, b: &Pose2) -> bool {
+        (a.x - b.x).abs() < 1e-12 && (a.y - b.y).abs() < 1e-12 && wrap_angle(a.theta - b.theta).abs() < 1e-12
+    }
+
+    #[test]
+    fn wrap_keeps_angles_in_half_open_interval() {
+        assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
+        assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
+        assert!((wrap_angle(-3.0 * PI / 2.0) - PI / 2.0).abs() < 1e-12);
+        assert_eq!(wrap_angle(0.25), 0.25);
+    }
+
+    #[test]
+    fn compose_inverse_between_agree() {
+        let a = Pose2::new(1.0, -2.0, 0.7);
+        let b = Pose2::new(-3.0, 0.5, -2.9);
+        assert!(close(&a.compose(&a.inverse()), &Pose2::IDENTITY));
+        assert!(close(&a.compose(&a.between(&b)), &b));
+        let p = a.transform_point([2.0, 1.0]);
+        let back = a.inverse().transform_point(p);
+        assert!((back[0] - 2.0).abs() < 1e-12 && (back[1] - 1.0).abs() < 1e-12);
+    }
+}
