@@ -1,1 +1,582 @@
-//! CARMEN logs.
+//! CARMEN logs (`.clf`, `.log`, optionally compressed as `.gz` or `.bz2`): laser scans and
+//! odometry, as the Radish / Freiburg SLAM benchmark logs store them.
+//!
+//! Messages read (one per line, fields separated by white space):
+//! - `FLASER n r_1 … r_n x y theta odom_x odom_y odom_theta ipc_timestamp ipc_hostname
+//!   logger_timestamp`: a front laser scan over 180°; `x y theta` is the laser's pose,
+//!   `odom_*` the robot's (both raw odometry in the raw logs; both the SLAM-corrected pose in
+//!   the "corrected" logs).
+//! - `ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode n
+//!   r_1 … r_n n_rem rem_1 … rem_nrem laser_x laser_y laser_theta robot_x robot_y robot_theta
+//!   tv rv forward_safety side_safety turn_axis ipc_timestamp ipc_hostname logger_timestamp`.
+//! - `ODOM x y theta tv rv accel ipc_timestamp ipc_hostname logger_timestamp`.
+//!
+//! Everything else is counted and skipped: comments (`#`), `PARAM` (except the front laser's
+//! maximum range), `SYNC`, `NEFF`, `RLASER`, `TRUEPOS`, … Unknown message types are
+//! tolerated; a malformed known message is an error naming the file and line (`path:line:
+//! message`) unless [`ReadOptions::skip_bad_lines`] asks to skip and report it.
+//!
+//! **FLASER bearings.** The message has no angles. Beam i is at `−π/2 + i·step` in the laser
+//! frame (x forward, y left, counter-clockwise), with CARMEN's own step
+//! (`carmen_laser_get_angle_increment`): 1° for 180 or 181 beams, 0.5° for 360 or 361,
+//! 0.25° for 400 or 401, else π/(n − 1). So 180 and 360 beams end half a step short of +90°.
+//! [`FlaserBearings`] selects the alternatives; the test `flaser_bearing_convention` in
+//! `tests/carmen_idc.rs` shows that CARMEN's step matches the corrected logs best.
+
+use slam::Pose2;
+use std::collections::BTreeMap;
+use std::f64::consts::{FRAC_PI_2, PI};
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+
+/// One laser scan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LaserScan {
+    /// `ipc_timestamp` (s): the time the relations files refer to.
+    pub stamp_s: f64,
+    /// `logger_timestamp` (s since the logger started).
+    pub logger_stamp_s: f64,
+    /// Bearing of beam 0 in the laser frame (rad, counter-clockwise from x forward).
+    pub first_bearing_rad: f64,
+    /// Bearing increment from one beam to the next (rad).
+    pub bearing_step_rad: f64,
+    /// Range of every beam, in beam order (m). A value ≥ `max_range_m` (or ≤ 0) is no return.
+    pub ranges_m: Vec<f32>,
+    /// Ranges at or beyond this are no return (m): ROBOTLASER1's own field; for FLASER the
+    /// log's `robot_front_laser_max` parameter, else [`ReadOptions::flaser_max_range_m`].
+    pub max_range_m: f32,
+    /// The pose the log gives for the laser (m, rad).
+    pub laser_pose: Pose2,
+    /// The pose the log gives for the robot: odometry in raw logs, the corrected pose in the
+    /// corrected logs (m, rad).
+    pub odom_pose: Pose2,
+}
+
+impl LaserScan {
+    /// Bearing of every beam (rad), for [`slam::matching::Scan2::from_polar`].
+    pub fn bearings_rad(&self) -> Vec<f32> {
+        (0..self.ranges_m.len())
+            .map(|i| (self.first_bearing_rad + self.bearing_step_rad * i as f64) as f32)
+            .collect()
+    }
+}
+
+/// One odometry reading.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Odometry {
+    /// `ipc_timestamp` (s).
+    pub stamp_s: f64,
+    /// `logger_timestamp` (s).
+    pub logger_stamp_s: f64,
+    /// Dead-reckoned pose (m, rad).
+    pub pose: Pose2,
+    /// Translational velocity (m/s).
+    pub tv_m_s: f64,
+    /// Rotational velocity (rad/s).
+    pub rv_rad_s: f64,
+}
+
+/// The contents of one log, in file order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CarmenLog {
+    /// FLASER and ROBOTLASER1 messages.
+    pub scans: Vec<LaserScan>,
+    /// ODOM messages.
+    pub odometry: Vec<Odometry>,
+    /// Lines of other message types, by type (`PARAM`, `NEFF`, …); comments not counted.
+    pub skipped_messages: BTreeMap<String, usize>,
+    /// Malformed lines skipped under [`ReadOptions::skip_bad_lines`]; empty otherwise.
+    pub bad_lines: Vec<BadLine>,
+}
+
+/// A malformed line that was skipped.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BadLine {
+    /// Line number (1-based).
+    pub line: usize,
+    /// What is wrong with it.
+    pub message: String,
+}
+
+/// How FLASER beams are spread over their 180° (beam 0 at −90° in every case).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FlaserBearings {
+    /// CARMEN's step: 1° for 180/181 beams, 0.5° for 360/361, 0.25° for 400/401, else
+    /// π/(n − 1).
+    #[default]
+    Carmen,
+    /// π/n for every n.
+    PiOverN,
+    /// π/(n − 1) for every n: the last beam at +90°.
+    PiOverNMinusOne,
+}
+
+impl FlaserBearings {
+    /// The step between beams (rad) for `n` beams.
+    pub fn step_rad(self, n: usize) -> f64 {
+        let n = n as f64;
+        match self {
+            FlaserBearings::Carmen => match n as usize {
+                180 | 181 => PI / 180.0,
+                360 | 361 => PI / 360.0,
+                400 | 401 => PI / 720.0,
+                _ => PI / (n - 1.0).max(1.0),
+            },
+            FlaserBearings::PiOverN => PI / n.max(1.0),
+            FlaserBearings::PiOverNMinusOne => PI / (n - 1.0).max(1.0),
+        }
+    }
+}
+
+/// Options of the reader.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReadOptions {
+    /// Bearing convention of FLASER scans. Default [`FlaserBearings::Carmen`].
+    pub flaser_bearings: FlaserBearings,
+    /// Maximum range of FLASER scans when the log has no `robot_front_laser_max` parameter
+    /// before them (m). Default 50: the ACES log clips at 50.00, the Intel log marks no
+    /// return with 81.83.
+    pub flaser_max_range_m: f32,
+    /// Skip malformed lines (collected in [`CarmenLog::bad_lines`]) instead of failing on the
+    /// first. Default false: no data is dropped silently.
+    pub skip_bad_lines: bool,
+}
+
+impl Default for ReadOptions {
+    fn default() -> ReadOptions {
+        ReadOptions {
+            flaser_bearings: FlaserBearings::Carmen,
+            flaser_max_range_m: 50.0,
+            skip_bad_lines: false,
+        }
+    }
+}
+
+/// Why a log could not be read. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum CarmenError {
+    /// The file could not be opened or read, or its compressed stream is corrupt or
+    /// truncated.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// A line is malformed (1-based line number).
+    #[error("{}:{line}: {message}", path.display())]
+    Line {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    /// The file holds no line at all.
+    #[error("{}: empty log", path.display())]
+    Empty { path: PathBuf },
+}
+
+/// Reads a CARMEN log, decompressing by extension (`.gz`, `.bz2`; anything else is plain
+/// text), with default options.
+pub fn read(path: &Path) -> Result<CarmenLog, CarmenError> {
+    read_with(path, &ReadOptions::default())
+}
+
+/// Reads a CARMEN log with the given options.
+pub fn read_with(path: &Path, options: &ReadOptions) -> Result<CarmenLog, CarmenError> {
+    let reader = open_decompressed(path)?;
+    parse(reader, path, options)
+}
+
+/// Opens a file for reading, decompressing `.gz` (all members) and `.bz2` (all streams).
+/// Shared with the relations reader.
+pub(crate) fn open_decompressed(path: &Path) -> Result<Box<dyn BufRead>, CarmenError> {
+    let file = File::open(path).map_err(|source| CarmenError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    let raw: Box<dyn Read> = match path.extension().and_then(|e| e.to_str()) {
+        Some("gz") => Box::new(flate2::read::MultiGzDecoder::new(BufReader::new(file))),
+        Some("bz2") => Box::new(bzip2::read::MultiBzDecoder::new(BufReader::new(file))),
+        _ => Box::new(file),
+    };
+    Ok(Box::new(BufReader::with_capacity(1 << 16, raw)))
+}
+
+/// Parses a log from `reader`; `path` names it in errors.
+pub fn parse(
+    reader: impl BufRead,
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<CarmenLog, CarmenError> {
+    let mut log = CarmenLog::default();
+    let mut flaser_max_range_m = options.flaser_max_range_m;
+    let mut lines = 0;
+    for_each_line(reader, path, |number, line| {
+        lines = number;
+        let fields: Vec<&str> = line.split_ascii_whitespace().collect();
+        let Some(&kind) = fields.first() else {
+            return Ok(());
+        };
+        if kind.starts_with('#') {
+            return Ok(());
+        }
+        let parsed = match kind {
+            "FLASER" => flaser(&fields, options.flaser_bearings, flaser_max_range_m)
+                .map(|s| log.scans.push(s)),
+            "ROBOTLASER1" => robotlaser1(&fields).map(|s| log.scans.push(s)),
+            "ODOM" => odom(&fields).map(|o| log.odometry.push(o)),
+            _ => {
+                if kind == "PARAM" && fields.get(1) == Some(&"robot_front_laser_max") {
+                    match Fields::new(&fields).number(2, "robot_front_laser_max") {
+                        Ok(max) => flaser_max_range_m = max as f32,
+                        Err(message) => return bad_line(&mut log, path, number, message, options),
+                    }
+                }
+                *log.skipped_messages.entry(kind.to_owned()).or_default() += 1;
+                Ok(())
+            }
+        };
+        match parsed {
+            Ok(()) => Ok(()),
+            Err(message) => bad_line(&mut log, path, number, message, options),
+        }
+    })?;
+    if lines == 0 {
+        return Err(CarmenError::Empty {
+            path: path.to_owned(),
+        });
+    }
+    Ok(log)
+}
+
+/// Calls `each(line_number, line)` for every line (1-based), naming the file and line when
+/// reading fails (I/O, a corrupt or truncated compressed stream, invalid UTF-8).
+pub(crate) fn for_each_line(
+    mut reader: impl BufRead,
+    path: &Path,
+    mut each: impl FnMut(usize, &str) -> Result<(), CarmenError>,
+) -> Result<(), CarmenError> {
+    let mut buf = Vec::new();
+    let mut number = 0;
+    loop {
+        buf.clear();
+        let n = reader
+            .read_until(b'\n', &mut buf)
+            .map_err(|source| CarmenError::Io {
+                path: path.to_owned(),
+                source: std::io::Error::new(
+                    source.kind(),
+                    format!("after line {number}: {source}"),
+                ),
+            })?;
+        if n == 0 {
+            return Ok(());
+        }
+        number += 1;
+        let line = std::str::from_utf8(&buf).map_err(|_| CarmenError::Line {
+            path: path.to_owned(),
+            line: number,
+            message: "not UTF-8 text".into(),
+        })?;
+        each(number, line)?;
+    }
+}
+
+fn bad_line(
+    log: &mut CarmenLog,
+    path: &Path,
+    line: usize,
+    message: String,
+    options: &ReadOptions,
+) -> Result<(), CarmenError> {
+    if options.skip_bad_lines {
+        log.bad_lines.push(BadLine { line, message });
+        Ok(())
+    } else {
+        Err(CarmenError::Line {
+            path: path.to_owned(),
+            line,
+            message,
+        })
+    }
+}
+
+fn flaser(
+    fields: &[&str],
+    bearings: FlaserBearings,
+    max_range_m: f32,
+) -> Result<LaserScan, String> {
+    let f = Fields::new(fields);
+    let n = f.count(1, "num_readings")?;
+    f.expect_len(n + 11)?;
+    let ranges_m = f.ranges(2, n)?;
+    let at = 2 + n;
+    Ok(LaserScan {
+        stamp_s: f.number(at + 6, "ipc_timestamp")?,
+        logger_stamp_s: f.number(at + 8, "logger_timestamp")?,
+        first_bearing_rad: -FRAC_PI_2,
+        bearing_step_rad: bearings.step_rad(n),
+        ranges_m,
+        max_range_m,
+        laser_pose: f.pose(at, "x y theta")?,
+        odom_pose: f.pose(at + 3, "odom_x odom_y odom_theta")?,
+    })
+}
+
+fn robotlaser1(fields: &[&str]) -> Result<LaserScan, String> {
+    let f = Fields::new(fields);
+    let n = f.count(8, "num_readings")?;
+    let remissions = f.count(9 + n, "num_remissions")?;
+    f.expect_len(n + remissions + 24)?;
+    let at = 10 + n + remissions;
+    Ok(LaserScan {
+        stamp_s: f.number(at + 11, "ipc_timestamp")?,
+        logger_stamp_s: f.number(at + 13, "logger_timestamp")?,
+        first_bearing_rad: f.number(2, "start_angle")?,
+        bearing_step_rad: f.number(4, "angular_resolution")?,
+        ranges_m: f.ranges(9, n)?,
+        max_range_m: f.number(5, "maximum_range")? as f32,
+        laser_pose: f.pose(at, "laser_pose")?,
+        odom_pose: f.pose(at + 3, "robot_pose")?,
+    })
+}
+
+fn odom(fields: &[&str]) -> Result<Odometry, String> {
+    let f = Fields::new(fields);
+    f.expect_len(10)?;
+    Ok(Odometry {
+        stamp_s: f.number(7, "ipc_timestamp")?,
+        logger_stamp_s: f.number(9, "logger_timestamp")?,
+        pose: f.pose(1, "x y theta")?,
+        tv_m_s: f.number(4, "tv")?,
+        rv_rad_s: f.number(5, "rv")?,
+    })
+}
+
+/// The fields of one message (the message name first), with errors that name the message
+/// and the field.
+struct Fields<'a, 'b> {
+    kind: &'b str,
+    fields: &'a [&'b str],
+}
+
+impl<'a, 'b> Fields<'a, 'b> {
+    fn new(fields: &'a [&'b str]) -> Fields<'a, 'b> {
+        Fields {
+            kind: fields.first().copied().unwrap_or(""),
+            fields,
+        }
+    }
+
+    fn get(&self, i: usize, name: &str) -> Result<&'b str, String> {
+        self.fields.get(i).copied().ok_or_else(|| {
+            format!(
+                "{}: truncated: no {name} (field {i}; the line has {} fields)",
+                self.kind,
+                self.fields.len()
+            )
+        })
+    }
+
+    /// A finite number: NaN and infinities are refused, as is anything that is not a number.
+    fn number(&self, i: usize, name: &str) -> Result<f64, String> {
+        let text = self.get(i, name)?;
+        match text.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            Ok(_) => Err(format!(
+                "{}: {name} (field {i}) is not finite: {text:?}",
+                self.kind
+            )),
+            Err(_) => Err(format!(
+                "{}: {name} (field {i}) is not a number: {text:?}",
+                self.kind
+            )),
+        }
+    }
+
+    fn count(&self, i: usize, name: &str) -> Result<usize, String> {
+        let text = self.get(i, name)?;
+        text.parse::<usize>()
+            .map_err(|_| format!("{}: {name} (field {i}) is not a count: {text:?}", self.kind))
+    }
+
+    fn pose(&self, i: usize, name: &str) -> Result<Pose2, String> {
+        Ok(Pose2::new(
+            self.number(i, name)?,
+            self.number(i + 1, name)?,
+            self.number(i + 2, name)?,
+        ))
+    }
+
+    fn ranges(&self, from: usize, n: usize) -> Result<Vec<f32>, String> {
+        (from..from + n)
+            .map(|i| self.number(i, "range").map(|r| r as f32))
+            .collect()
+    }
+
+    fn expect_len(&self, len: usize) -> Result<(), String> {
+        match self.fields.len() {
+            l if l == len => Ok(()),
+            l if l < len => Err(format!(
+                "{}: truncated: {l} fields, {len} expected",
+                self.kind
+            )),
+            l => Err(format!("{}: {l} fields, {len} expected", self.kind)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_str(text: &str) -> Result<CarmenLog, CarmenError> {
+        parse(
+            text.as_bytes(),
+            Path::new("test.clf"),
+            &ReadOptions::default(),
+        )
+    }
+
+    const FLASER: &str = "FLASER 4 1.0 2.0 3.0 50.0 0.5 0.25 0.1 0.6 0.3 0.2 12.5 host 0.5";
+    const ODOM: &str = "ODOM 1.0 2.0 0.5 0.3 0.01 0.0 12.4 host 0.4";
+
+    #[test]
+    fn reads_flaser_odom_and_robotlaser1() {
+        let robotlaser = "ROBOTLASER1 0 -1.570796 3.141593 0.017453 81.9 0.01 0 3 1.5 2.5 81.91 \
+                          0 0.22 0.0 0.1 0.0 0.0 0.1 0.0 0.0 0.0 0.0 0.0 99.5 host 1.5";
+        let text = format!(
+            "# comment\nPARAM robot_front_laser_max 80.99 x 0\n{ODOM}\n{FLASER}\nNEFF 100\n{robotlaser}\n"
+        );
+        let log = parse_str(&text).expect("valid log");
+        assert_eq!(log.odometry.len(), 1);
+        assert_eq!(log.odometry[0].pose, Pose2::new(1.0, 2.0, 0.5));
+        assert_eq!(log.odometry[0].stamp_s, 12.4);
+        assert_eq!(log.scans.len(), 2);
+        let s = &log.scans[0];
+        assert_eq!(s.ranges_m, vec![1.0, 2.0, 3.0, 50.0]);
+        assert_eq!(
+            (s.stamp_s, s.logger_stamp_s, s.max_range_m),
+            (12.5, 0.5, 80.99)
+        );
+        assert_eq!(s.laser_pose, Pose2::new(0.5, 0.25, 0.1));
+        assert_eq!(s.odom_pose, Pose2::new(0.6, 0.3, 0.2));
+        assert!((s.first_bearing_rad + FRAC_PI_2).abs() < 1e-12);
+        assert!(
+            (s.bearing_step_rad - PI / 3.0).abs() < 1e-12,
+            "4 beams: π/(n − 1)"
+        );
+        let r = &log.scans[1];
+        assert_eq!(r.ranges_m, vec![1.5, 2.5, 81.91]);
+        assert_eq!((r.stamp_s, r.max_range_m), (99.5, 81.9));
+        assert_eq!(r.laser_pose, Pose2::new(0.22, 0.0, 0.1));
+        assert_eq!(r.odom_pose, Pose2::new(0.0, 0.0, 0.1));
+        assert_eq!(log.skipped_messages.get("NEFF"), Some(&1));
+        assert_eq!(log.skipped_messages.get("PARAM"), Some(&1));
+    }
+
+    #[test]
+    fn bearing_conventions() {
+        assert!((FlaserBearings::Carmen.step_rad(180) - PI / 180.0).abs() < 1e-15);
+        assert!((FlaserBearings::Carmen.step_rad(361) - PI / 360.0).abs() < 1e-15);
+        assert!((FlaserBearings::PiOverNMinusOne.step_rad(180) - PI / 179.0).abs() < 1e-15);
+        assert!((FlaserBearings::PiOverN.step_rad(361) - PI / 361.0).abs() < 1e-15);
+    }
+
+    fn line_error(text: &str) -> (usize, String) {
+        match parse_str(text) {
+            Err(CarmenError::Line { line, message, .. }) => (line, message),
+            other => panic!("expected a line error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn truncated_line_names_the_line() {
+        let text = format!("{ODOM}\n{ODOM}\nFLASER 4 1.0 2.0 3.0 4.0 0.5 0.25\n");
+        let (line, message) = line_error(&text);
+        assert_eq!(line, 3);
+        assert!(message.contains("truncated"), "{message}");
+        let shown = parse_str(&text).unwrap_err().to_string();
+        assert!(
+            shown.starts_with("test.clf:3: FLASER: truncated"),
+            "{shown}"
+        );
+    }
+
+    #[test]
+    fn nan_and_bad_numbers_name_the_line_and_field() {
+        let (line, message) = line_error(&format!(
+            "{ODOM}\nODOM 1.0 NaN 0.5 0.3 0.01 0.0 12.4 host 0.4\n"
+        ));
+        assert_eq!(line, 2);
+        assert!(
+            message.contains("not finite") && message.contains("x y theta"),
+            "{message}"
+        );
+        let (line, message) = line_error(&format!("{}\n", FLASER.replace("2.0", "2.O")));
+        assert_eq!(line, 1);
+        assert!(
+            message.contains("range") && message.contains("\"2.O\""),
+            "{message}"
+        );
+        let (_, message) = line_error("FLASER four 1.0\n");
+        assert!(message.contains("num_readings"), "{message}");
+        let (_, message) = line_error(&format!("{FLASER} extra\n"));
+        assert!(message.contains("16 fields, 15 expected"), "{message}");
+        let (line, _) = line_error("PARAM robot_front_laser_max inf x 0\n");
+        assert_eq!(line, 1);
+    }
+
+    #[test]
+    fn bad_lines_can_be_skipped_and_are_reported() {
+        let text = format!("{ODOM}\nODOM 1.0\n{FLASER}\n");
+        let options = ReadOptions {
+            skip_bad_lines: true,
+            ..ReadOptions::default()
+        };
+        let log = parse(text.as_bytes(), Path::new("t.log"), &options).expect("skipping");
+        assert_eq!((log.odometry.len(), log.scans.len()), (1, 1));
+        assert_eq!(log.bad_lines.len(), 1);
+        assert_eq!(log.bad_lines[0].line, 2);
+        assert!(
+            log.bad_lines[0].message.starts_with("ODOM: truncated"),
+            "{:?}",
+            log.bad_lines
+        );
+    }
+
+    #[test]
+    fn unknown_messages_are_tolerated_and_empty_input_is_an_error() {
+        let log =
+            parse_str("SYNC tag\nTRUEPOS 1 2 3 4 5 6 7 h 8\n\n").expect("nothing to read is fine");
+        assert!(log.scans.is_empty() && log.odometry.is_empty());
+        assert_eq!(log.skipped_messages.len(), 2);
+        assert!(matches!(parse_str(""), Err(CarmenError::Empty { .. })));
+    }
+
+    #[test]
+    fn truncated_compressed_streams_are_errors() {
+        use std::io::Write;
+        let dir = std::env::temp_dir().join(format!("graphio-carmen-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let text = format!("{ODOM}\n{FLASER}\n").repeat(200);
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        gz.write_all(text.as_bytes()).expect("in memory");
+        let gz = gz.finish().expect("in memory");
+        let mut bz = bzip2::write::BzEncoder::new(Vec::new(), bzip2::Compression::default());
+        bz.write_all(text.as_bytes()).expect("in memory");
+        let bz = bz.finish().expect("in memory");
+        for (name, bytes) in [("t.log.gz", gz), ("t.clf.bz2", bz)] {
+            let path = dir.join(name);
+            std::fs::write(&path, &bytes).expect("write");
+            let log = read(&path).expect("whole file reads");
+            assert_eq!((log.odometry.len(), log.scans.len()), (200, 200));
+            std::fs::write(&path, &bytes[..bytes.len() / 2]).expect("write");
+            match read(&path) {
+                Err(e @ CarmenError::Io { .. }) => assert!(e.to_string().contains(name), "{e}"),
+                other => panic!("{name}: truncated stream read as {other:?}"),
+            }
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

@@ -3,4 +3,5 @@
 //! reads these files; the algorithms in `slam` stay free of I/O.
 
 pub mod carmen;
+pub mod posegraph;
 pub mod relations;

@@ -2,6 +2,7 @@
 
 mod demo;
 mod level;
+mod optimize;
 mod simulate;
 mod svg;
 
@@ -21,6 +22,7 @@ struct Cli {
 enum Command {
     Demo(demo::DemoArgs),
     Level(level::LevelArgs),
+    Optimize(optimize::OptimizeArgs),
     Simulate(simulate::SimulateArgs),
 }
 
@@ -28,6 +30,7 @@ fn main() -> ExitCode {
     let result = match Cli::parse().command {
         Command::Demo(args) => demo::run(&args),
         Command::Level(args) => level::run(&args),
+        Command::Optimize(args) => optimize::run(&args),
         Command::Simulate(args) => simulate::run(&args),
     };
     match result {

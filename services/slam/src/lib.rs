@@ -3,7 +3,17 @@
 //! GPS fixes; the network is solved as full nonlinear least squares on SE(2) (beyond the
 //! paper's linear solution). Pure library: no I/O, no async.
 
+pub mod init;
+pub mod linear;
 pub mod matching;
+pub mod network;
+pub mod optimize;
+pub mod robust;
 pub mod se2;
 
+pub use init::{Init, InitError, initialize};
+pub use nalgebra;
+pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
+pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};
+pub use robust::Robust;
 pub use se2::{Pose2, wrap_angle};

@@ -1,1 +1,76 @@
-//! IDC scan matching (Lu & Milios) of 2D scans: relative pose, covariance, quality.
+//! Scan matching of 2D range scans (DESIGN §3 "Scan matching"): iterative dual correspondence
+//! (Lu & Milios 1997) between two leveled scans gives the relative pose, its covariance and a
+//! quality; a match below the [`QualityGate`] is rejected, never added as a constraint.
+//!
+//! Reading order: [`Scan2`] (a scan as a bearing-ordered point set), the reference
+//! contour (`contour`: the two correspondence rules), [`idc`] (the iteration), `validate`
+//! (covariance and quality of the result), [`accept`] (the gate). [`metric`] scores poses
+//! against ground-truth relations (Kümmerle et al. 2009); [`synthetic`] ray casts test scenes.
+
+mod contour;
+mod idc;
+pub mod metric;
+mod scan;
+pub mod synthetic;
+mod validate;
+
+pub use idc::{IdcParams, Match, idc};
+pub use scan::Scan2;
+pub use validate::{QualityGate, accept};
+
+use std::fmt;
+
+/// Why two scans could not be matched. Never a panic: bad input and hopeless pairs end here.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MatchError {
+    /// `from_polar` got different numbers of bearings and ranges.
+    LengthMismatch { bearings: usize, ranges: usize },
+    /// A scan has fewer valid returns than [`IdcParams::min_correspondences`].
+    TooFewPoints {
+        scan: &'static str,
+        found: usize,
+        needed: usize,
+    },
+    /// The initial pose has a NaN or infinite component.
+    NonFiniteInitial,
+    /// An iteration found too few correspondences of one rule: the scans do not overlap at
+    /// this initial pose.
+    TooFewCorrespondences {
+        iteration: u32,
+        rule: &'static str,
+        found: usize,
+        needed: usize,
+    },
+    /// A parameter is out of its range.
+    InvalidParams(String),
+}
+
+impl fmt::Display for MatchError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MatchError::LengthMismatch { bearings, ranges } => {
+                write!(f, "scan has {bearings} bearings but {ranges} ranges")
+            }
+            MatchError::TooFewPoints {
+                scan,
+                found,
+                needed,
+            } => {
+                write!(f, "{scan} scan has {found} valid returns, {needed} needed")
+            }
+            MatchError::NonFiniteInitial => write!(f, "initial pose is not finite"),
+            MatchError::TooFewCorrespondences {
+                iteration,
+                rule,
+                found,
+                needed,
+            } => write!(
+                f,
+                "iteration {iteration}: {found} {rule} correspondences, {needed} needed (no overlap)"
+            ),
+            MatchError::InvalidParams(why) => write!(f, "invalid IDC parameters: {why}"),
+        }
+    }
+}
+
+impl std::error::Error for MatchError {}

@@ -19,7 +19,11 @@ pub fn wrap_angle(a: f64) -> f64 {
 }
 
 impl Pose2 {
-    pub const IDENTITY: Pose2 = Pose2 { x: 0.0, y: 0.0, theta: 0.0 };
+    pub const IDENTITY: Pose2 = Pose2 {
+        x: 0.0,
+        y: 0.0,
+        theta: 0.0,
+    };
 
     pub fn new(x: f64, y: f64, theta: f64) -> Pose2 {
         Pose2 { x, y, theta }
@@ -38,7 +42,11 @@ impl Pose2 {
     /// The inverse motion.
     pub fn inverse(&self) -> Pose2 {
         let (s, c) = self.theta.sin_cos();
-        Pose2 { x: -c * self.x - s * self.y, y: s * self.x - c * self.y, theta: wrap_angle(-self.theta) }
+        Pose2 {
+            x: -c * self.x - s * self.y,
+            y: s * self.x - c * self.y,
+            theta: wrap_angle(-self.theta),
+        }
     }
 
     /// `self⁻¹ ⊕ other`: `other` seen from `self` (the relative pose an edge i → j measures).
@@ -63,7 +71,9 @@ mod tests {
     use super::*;
 
     fn close(a: &Pose2, b: &Pose2) -> bool {
-        (a.x - b.x).abs() < 1e-12 && (a.y - b.y).abs() < 1e-12 && wrap_angle(a.theta - b.theta).abs() < 1e-12
+        (a.x - b.x).abs() < 1e-12
+            && (a.y - b.y).abs() < 1e-12
+            && wrap_angle(a.theta - b.theta).abs() < 1e-12
     }
 
     #[test]

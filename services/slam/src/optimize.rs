@@ -1,0 +1,452 @@
+//! Nonlinear least squares on the pose network: Gauss-Newton or Levenberg-Marquardt, with
+//! sparse Cholesky (faer) whose symbolic factorization is kept while the network's structure
+//! stays the same (warm restarts as the mapper adds measurements reuse it too).
+//!
+//! Beyond the paper, which solves a linear system: the full nonlinear problem on SE(2), with
+//! robust kernels by iteratively reweighted least squares.
+
+use crate::linear::SparsePattern;
+use crate::network::{GraphError, PoseGraph};
+use crate::se2::wrap_angle;
+use nalgebra::{Matrix3, SMatrix, SVector};
+use serde::{Deserialize, Serialize};
+
+/// Which Newton-type method.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Steps accepted only when the cost drops; undamped (Gauss-Newton) until a step fails,
+    /// then damped (Nielsen's update) until the damping has decayed away again.
+    #[default]
+    LevenbergMarquardt,
+    /// Undamped steps; fastest from a good start.
+    GaussNewton,
+}
+
+/// Stopping rules and method.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct OptimizeParams {
+    pub method: Method,
+    /// Most iterations (linear solves that changed the poses).
+    pub max_iterations: u32,
+    /// Stop when an accepted step lowers the cost by less than this fraction of it.
+    pub relative_decrease: f64,
+    /// Stop when no pose variable moves by more than this (m or rad).
+    pub min_step: f64,
+    /// Levenberg-Marquardt's damping after the first failed step, relative to the diagonal
+    /// of the normal matrix.
+    pub initial_damping: f64,
+}
+
+impl Default for OptimizeParams {
+    fn default() -> Self {
+        OptimizeParams {
+            method: Method::LevenbergMarquardt,
+            max_iterations: 100,
+            relative_decrease: 1e-9,
+            min_step: 1e-10,
+            initial_damping: 1e-4,
+        }
+    }
+}
+
+/// Why the iteration stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// The cost stopped decreasing (relative decrease below the tolerance).
+    Converged,
+    /// The step became negligible.
+    SmallStep,
+    /// Levenberg-Marquardt could not find a step that lowers the cost.
+    NoDescent,
+    MaxIterations,
+}
+
+/// What an optimization did.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OptimizeReport {
+    /// Σ eᵀΩe before and after, without robust kernels (g2o's convention).
+    pub initial_chi2: f64,
+    pub final_chi2: f64,
+    /// The robust cost Σ ρ(eᵀΩe) that was minimized.
+    pub final_cost: f64,
+    pub iterations: u32,
+    pub stop: StopReason,
+    /// Whether the symbolic factorization of an earlier call was reused.
+    pub reused_symbolic: bool,
+}
+
+/// The optimizer, with the symbolic factorization of the last network structure it saw.
+#[derive(Debug, Default)]
+pub struct Optimizer {
+    structure: Option<Structure>,
+}
+
+#[derive(Debug)]
+struct Structure {
+    /// Node pairs of the relative edges, GPS nodes, node count: the pattern's identity.
+    key: (Vec<(usize, usize)>, Vec<usize>, usize),
+    /// Variable offset of each node; `None` for the node that fixes the gauge.
+    var_of: Vec<Option<usize>>,
+    pattern: SparsePattern,
+}
+
+type Block = SMatrix<f64, 3, 3>;
+
+impl Structure {
+    fn build(graph: &PoseGraph) -> Structure {
+        let n = graph.poses.len();
+        // Without GPS the network floats: fix node 0 (the gauge).
+        let fixed = if graph.gps.is_empty() { Some(0) } else { None };
+        let mut var_of = vec![None; n];
+        let mut next = 0;
+        for (i, v) in var_of.iter_mut().enumerate() {
+            if Some(i) != fixed {
+                *v = Some(next);
+                next += 3;
+            }
+        }
+        let mut entries = Vec::new();
+        for e in &graph.edges {
+            push_edge_entries(&mut entries, var_of[e.from], var_of[e.to]);
+        }
+        for g in &graph.gps {
+            push_edge_entries(&mut entries, var_of[g.node], None);
+        }
+        // The diagonal once more, for the damping.
+        entries.extend((0..next).map(|d| (d, d)));
+        Structure {
+            key: structure_key(graph),
+            var_of,
+            pattern: SparsePattern::new_blocked(next, &entries, 3),
+        }
+    }
+}
+
+fn structure_key(graph: &PoseGraph) -> (Vec<(usize, usize)>, Vec<usize>, usize) {
+    (
+        graph.edges.iter().map(|e| (e.from, e.to)).collect(),
+        graph.gps.iter().map(|g| g.node).collect(),
+        graph.poses.len(),
+    )
+}
+
+/// Lower-triangle entries of the blocks an edge between variables `a` and `b` touches, in
+/// the order [`push_edge_values`] gives their values.
+fn push_edge_entries(entries: &mut Vec<(usize, usize)>, a: Option<usize>, b: Option<usize>) {
+    for v in [a, b].into_iter().flatten() {
+        for r in 0..3 {
+            for c in 0..=r {
+                entries.push((v + r, v + c));
+            }
+        }
+    }
+    if let (Some(a), Some(b)) = (a, b) {
+        let (hi, lo) = if a > b { (a, b) } else { (b, a) };
+        for r in 0..3 {
+            for c in 0..3 {
+                entries.push((hi + r, lo + c));
+            }
+        }
+    }
+}
+
+/// Values for [`push_edge_entries`]: diagonal blocks `haa`, `hbb`, and `hab` = Jaᵀ Ω Jb.
+fn push_edge_values(
+    values: &mut Vec<f64>,
+    a: Option<usize>,
+    b: Option<usize>,
+    haa: &Block,
+    hbb: &Block,
+    hab: &Block,
+) {
+    for (v, h) in [(a, haa), (b, hbb)] {
+        if v.is_some() {
+            for r in 0..3 {
+                for c in 0..=r {
+                    values.push(h[(r, c)]);
+                }
+            }
+        }
+    }
+    if let (Some(a), Some(b)) = (a, b) {
+        for r in 0..3 {
+            for c in 0..3 {
+                // Block (hi, lo): Hab when a is the higher variable, else Hba = Habᵀ.
+                values.push(if a > b { hab[(r, c)] } else { hab[(c, r)] });
+            }
+        }
+    }
+}
+
+/// The linearized system at the current poses.
+struct Linearization {
+    values: Vec<f64>,
+    gradient: Vec<f64>,
+    diagonal: Vec<f64>,
+    cost: f64,
+}
+
+impl Optimizer {
+    pub fn new() -> Optimizer {
+        Optimizer::default()
+    }
+
+    /// Minimizes the network's robust cost in place, starting from `graph.poses`.
+    pub fn optimize(
+        &mut self,
+        graph: &mut PoseGraph,
+        params: &OptimizeParams,
+    ) -> Result<OptimizeReport, GraphError> {
+        graph.validate()?;
+        let key = structure_key(graph);
+        let reused_symbolic = self.structure.as_ref().is_some_and(|s| s.key == key);
+        if !reused_symbolic {
+            self.structure = Some(Structure::build(graph));
+        }
+        let structure = self.structure.as_mut().expect("built above");
+        let initial_chi2 = graph.chi2();
+        let dim = structure.pattern.dim();
+        let mut report = OptimizeReport {
+            initial_chi2,
+            final_chi2: initial_chi2,
+            final_cost: robust_cost(graph),
+            iterations: 0,
+            stop: StopReason::MaxIterations,
+            reused_symbolic,
+        };
+        if dim == 0 {
+            report.stop = StopReason::SmallStep;
+            return Ok(report);
+        }
+
+        // Undamped until a step fails.
+        let mut lambda = 0.0;
+        let mut nu = 2.0;
+        let mut lin = linearize(graph, structure);
+        while report.iterations < params.max_iterations {
+            let damping = match params.method {
+                Method::GaussNewton => 0.0,
+                Method::LevenbergMarquardt => lambda,
+            };
+            // The damping sits in the diagonal entries at the end of the values.
+            let start = lin.values.len() - lin.diagonal.len();
+            for (v, d) in lin.values[start..].iter_mut().zip(&lin.diagonal) {
+                *v = damping * d.max(1e-12);
+            }
+            let factorized = structure.pattern.factorize(&lin.values);
+            lin.values[start..].iter_mut().for_each(|v| *v = 0.0);
+            let step = match factorized {
+                Ok(()) => structure
+                    .pattern
+                    .solve(&lin.gradient.iter().map(|g| -g).collect::<Vec<_>>()),
+                Err(_) if params.method == Method::LevenbergMarquardt => {
+                    lambda = if lambda == 0.0 {
+                        params.initial_damping
+                    } else {
+                        lambda * nu
+                    };
+                    nu *= 2.0;
+                    if lambda > 1e16 {
+                        report.stop = StopReason::NoDescent;
+                        break;
+                    }
+                    continue;
+                }
+                Err(_) => return Err(GraphError::Singular),
+            };
+            let max_step = step.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let previous = graph.poses.clone();
+            apply_step(graph, structure, &step);
+            let candidate = linearize(graph, structure);
+            let cost = candidate.cost;
+            let accepted = match params.method {
+                Method::GaussNewton => true,
+                Method::LevenbergMarquardt => {
+                    // Predicted decrease of the quadratic model with this damping.
+                    let h_dx = mat_vec(&structure.pattern, &lin.values, &lin.diagonal, &step, 0.0);
+                    let damp: f64 = step
+                        .iter()
+                        .zip(&lin.diagonal)
+                        .map(|(s, d)| damping * d.max(1e-12) * s * s)
+                        .sum();
+                    let predicted = dot(&step, &h_dx) + 2.0 * damp;
+                    let rho = (lin.cost - cost) / predicted.max(f64::MIN_POSITIVE);
+                    if rho > 0.0 && cost.is_finite() {
+                        lambda *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
+                        if lambda < 1e-3 * params.initial_damping {
+                            lambda = 0.0;
+                        }
+                        nu = 2.0;
+                        true
+                    } else {
+                        lambda = if lambda == 0.0 {
+                            params.initial_damping
+                        } else {
+                            lambda * nu
+                        };
+                        nu *= 2.0;
+                        false
+                    }
+                }
+            };
+            if !accepted {
+                graph.poses = previous;
+                if lambda > 1e16 {
+                    report.stop = StopReason::NoDescent;
+                    break;
+                }
+                continue;
+            }
+            report.iterations += 1;
+            let decrease = (lin.cost - cost) / lin.cost.max(f64::MIN_POSITIVE);
+            lin = candidate;
+            if max_step < params.min_step {
+                report.stop = StopReason::SmallStep;
+                break;
+            }
+            if decrease.abs() < params.relative_decrease {
+                report.stop = StopReason::Converged;
+                break;
+            }
+        }
+        report.final_chi2 = graph.chi2();
+        report.final_cost = robust_cost(graph);
+        Ok(report)
+    }
+
+    /// Marginal covariance of node `node`'s (x, y, θ) at the current poses (the inverse of the
+    /// normal matrix, block `node`); `None` for the node that fixes the gauge. Call after
+    /// [`Optimizer::optimize`] on the same graph.
+    pub fn marginal_covariance(
+        &mut self,
+        graph: &PoseGraph,
+        node: usize,
+    ) -> Result<Option<Matrix3<f64>>, GraphError> {
+        graph.validate()?;
+        if self
+            .structure
+            .as_ref()
+            .is_none_or(|s| s.key != structure_key(graph))
+        {
+            self.structure = Some(Structure::build(graph));
+        }
+        let structure = self.structure.as_mut().expect("built above");
+        let Some(v) = structure.var_of[node] else {
+            return Ok(None);
+        };
+        let lin = linearize(graph, structure);
+        structure
+            .pattern
+            .factorize(&lin.values)
+            .map_err(|_| GraphError::Singular)?;
+        let mut cov = Matrix3::zeros();
+        for c in 0..3 {
+            let mut unit = vec![0.0; structure.pattern.dim()];
+            unit[v + c] = 1.0;
+            let x = structure.pattern.solve(&unit);
+            for r in 0..3 {
+                cov[(r, c)] = x[v + r];
+            }
+        }
+        Ok(Some(cov))
+    }
+}
+
+/// Σ ρ(eᵀΩe) with each edge's robust kernel.
+pub fn robust_cost(graph: &PoseGraph) -> f64 {
+    graph
+        .edges
+        .iter()
+        .map(|e| e.robust.cost(e.chi2(&graph.poses)))
+        .sum::<f64>()
+        + graph
+            .gps
+            .iter()
+            .map(|g| g.robust.cost(g.chi2(&graph.poses)))
+            .sum::<f64>()
+}
+
+fn linearize(graph: &PoseGraph, s: &Structure) -> Linearization {
+    let dim = s.pattern.dim();
+    let mut lin = Linearization {
+        values: Vec::with_capacity(graph.edges.len() * 21 + graph.gps.len() * 6 + dim),
+        gradient: vec![0.0; dim],
+        diagonal: vec![0.0; dim],
+        cost: 0.0,
+    };
+    let zero = Block::zeros();
+    for e in &graph.edges {
+        let (err, ji, jj) = e.linearize(&graph.poses);
+        let chi2 = err.dot(&(e.information * err));
+        let w = e.robust.weight(chi2);
+        lin.cost += e.robust.cost(chi2);
+        let omega = e.information * w;
+        let (oi, oj) = (ji.transpose() * omega, jj.transpose() * omega);
+        let (hii, hjj, hij) = (oi * ji, oj * jj, oi * jj);
+        let (a, b) = (s.var_of[e.from], s.var_of[e.to]);
+        push_edge_values(&mut lin.values, a, b, &hii, &hjj, &hij);
+        accumulate(&mut lin, a, &(oi * err), &hii);
+        accumulate(&mut lin, b, &(oj * err), &hjj);
+    }
+    for g in &graph.gps {
+        let (err, j) = g.linearize(&graph.poses);
+        let chi2 = err.dot(&(g.information * err));
+        let w = g.robust.weight(chi2);
+        lin.cost += g.robust.cost(chi2);
+        let o = j.transpose() * (g.information * w);
+        let h = o * j;
+        let a = s.var_of[g.node];
+        push_edge_values(&mut lin.values, a, None, &h, &zero, &zero);
+        accumulate(&mut lin, a, &(o * err), &h);
+    }
+    lin.values.extend(std::iter::repeat_n(0.0, dim));
+    lin
+}
+
+fn accumulate(lin: &mut Linearization, v: Option<usize>, g: &SVector<f64, 3>, h: &Block) {
+    if let Some(v) = v {
+        for r in 0..3 {
+            lin.gradient[v + r] += g[r];
+            lin.diagonal[v + r] += h[(r, r)];
+        }
+    }
+}
+
+fn apply_step(graph: &mut PoseGraph, s: &Structure, step: &[f64]) {
+    for (pose, v) in graph.poses.iter_mut().zip(&s.var_of) {
+        if let Some(v) = *v {
+            pose.x += step[v];
+            pose.y += step[v + 1];
+            pose.theta = wrap_angle(pose.theta + step[v + 2]);
+        }
+    }
+}
+
+/// (H + damping·diag) x for H given by its lower-triangle `values` in pattern order.
+fn mat_vec(
+    pattern: &SparsePattern,
+    values: &[f64],
+    diagonal: &[f64],
+    x: &[f64],
+    damping: f64,
+) -> Vec<f64> {
+    let mut y: Vec<f64> = x
+        .iter()
+        .zip(diagonal)
+        .map(|(xi, d)| damping * d * xi)
+        .collect();
+    for (&(r, c), v) in pattern.entries().iter().zip(values) {
+        y[r] += v * x[c];
+        if r != c {
+            y[c] += v * x[r];
+        }
+    }
+    y
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}

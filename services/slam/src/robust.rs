@@ -1,0 +1,77 @@
+//! Robust kernels, applied by iteratively reweighted least squares: an edge whose squared
+//! Mahalanobis error s = eᵀΩe is large gets a weight below 1 (GPS multipath jumps, wrong
+//! loop closures).
+
+use serde::{Deserialize, Serialize};
+
+/// A robust kernel and its scale (in units of the Mahalanobis distance √s).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kernel", rename_all = "snake_case")]
+pub enum Robust {
+    /// Plain least squares.
+    #[default]
+    None,
+    /// Quadratic up to `delta`, linear beyond.
+    Huber { delta: f64 },
+    /// ρ(s) = c² log(1 + s/c²): outliers fade out.
+    Cauchy { c: f64 },
+    /// Dynamic covariance scaling (Agarwal et al. 2013) with parameter φ.
+    Dcs { phi: f64 },
+}
+
+impl Robust {
+    /// IRLS weight for squared Mahalanobis error `s`.
+    pub fn weight(&self, s: f64) -> f64 {
+        match *self {
+            Robust::None => 1.0,
+            Robust::Huber { delta } => {
+                let d = s.sqrt();
+                if d <= delta { 1.0 } else { delta / d }
+            }
+            Robust::Cauchy { c } => 1.0 / (1.0 + s / (c * c)),
+            Robust::Dcs { phi } => {
+                let scale = (2.0 * phi / (phi + s)).min(1.0);
+                scale * scale
+            }
+        }
+    }
+
+    /// The kernel's cost ρ(s) (equal to s for plain least squares).
+    pub fn cost(&self, s: f64) -> f64 {
+        match *self {
+            Robust::None => s,
+            Robust::Huber { delta } => {
+                let d = s.sqrt();
+                if d <= delta {
+                    s
+                } else {
+                    2.0 * delta * d - delta * delta
+                }
+            }
+            Robust::Cauchy { c } => c * c * (1.0 + s / (c * c)).ln(),
+            Robust::Dcs { phi } => {
+                let scale = (2.0 * phi / (phi + s)).min(1.0);
+                scale * scale * s
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weights_are_one_for_inliers_and_shrink_for_outliers() {
+        for k in [
+            Robust::Huber { delta: 2.0 },
+            Robust::Cauchy { c: 2.0 },
+            Robust::Dcs { phi: 4.0 },
+        ] {
+            assert!((k.weight(0.01) - 1.0).abs() < 0.01, "{k:?}");
+            assert!(k.weight(400.0) < 0.2, "{k:?}");
+            assert!(k.cost(400.0) < 400.0, "{k:?}");
+        }
+        assert_eq!(Robust::None.weight(1e6), 1.0);
+    }
+}
