@@ -4,6 +4,7 @@ mod demo;
 mod level;
 mod optimize;
 mod simulate;
+mod slam2d;
 mod svg;
 
 use clap::{Parser, Subcommand};
@@ -24,6 +25,7 @@ enum Command {
     Level(level::LevelArgs),
     Optimize(optimize::OptimizeArgs),
     Simulate(simulate::SimulateArgs),
+    Slam2d(slam2d::Slam2dArgs),
 }
 
 fn main() -> ExitCode {
@@ -32,6 +34,7 @@ fn main() -> ExitCode {
         Command::Level(args) => level::run(&args),
         Command::Optimize(args) => optimize::run(&args),
         Command::Simulate(args) => simulate::run(&args),
+        Command::Slam2d(args) => slam2d::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

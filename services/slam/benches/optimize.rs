@@ -14,18 +14,25 @@ fn main() {
     divan::main();
 }
 
-const GRAPHS: [&str; 3] =
-    ["pose_graph_2d/se-sync/manhattan.g2o", "pose_graph_2d/se-sync/city10000.g2o", "pose_graph_2d/se-sync/intel.g2o"];
+const GRAPHS: [&str; 3] = [
+    "pose_graph_2d/se-sync/manhattan.g2o",
+    "pose_graph_2d/se-sync/city10000.g2o",
+    "pose_graph_2d/se-sync/intel.g2o",
+];
 
 fn graph(file: &str) -> PoseGraph {
-    posegraph::read(&scanio::shared_data(file), GraphFormat::G2o).expect("read").graph
+    posegraph::read(&scanio::shared_data(file), GraphFormat::G2o)
+        .expect("read")
+        .graph
 }
 
 /// The chordal initialization (two sparse linear solves).
 #[divan::bench(args = GRAPHS, sample_count = 10)]
 fn init_chordal(bencher: divan::Bencher, file: &str) {
     let g = graph(file);
-    bencher.with_inputs(|| g.clone()).bench_local_values(|mut g| initialize(&mut g, Init::Chordal).expect("init"));
+    bencher
+        .with_inputs(|| g.clone())
+        .bench_local_values(|mut g| initialize(&mut g, Init::Chordal).expect("init"));
 }
 
 /// The optimization from the chordal start (symbolic factorization included, as in a
@@ -36,5 +43,9 @@ fn solve_from_chordal(bencher: divan::Bencher, file: &str) {
     initialize(&mut g, Init::Chordal).expect("init");
     bencher
         .with_inputs(|| g.clone())
-        .bench_local_values(|mut g| Optimizer::new().optimize(&mut g, &OptimizeParams::default()).expect("optimize"));
+        .bench_local_values(|mut g| {
+            Optimizer::new()
+                .optimize(&mut g, &OptimizeParams::default())
+                .expect("optimize")
+        });
 }

@@ -78,17 +78,25 @@ fn align_to_gps(graph: &mut PoseGraph) {
     let pairs: Vec<([f64; 2], [f64; 2])> = graph
         .gps
         .iter()
-        .map(|g| (graph.poses[g.node].transform_point([g.lever_arm_m.x, g.lever_arm_m.y]), [g.position_m.x, g.position_m.y]))
+        .map(|g| {
+            (
+                graph.poses[g.node].transform_point([g.lever_arm_m.x, g.lever_arm_m.y]),
+                [g.position_m.x, g.position_m.y],
+            )
+        })
         .collect();
     if pairs.len() < 2 {
         return;
     }
     let n = pairs.len() as f64;
-    let mean = |f: fn(&([f64; 2], [f64; 2])) -> [f64; 2]| {
-        let s = pairs.iter().map(f).fold([0.0, 0.0], |a, p| [a[0] + p[0], a[1] + p[1]]);
+    let mean = |points: &mut dyn Iterator<Item = [f64; 2]>| {
+        let s = points.fold([0.0, 0.0], |a, p| [a[0] + p[0], a[1] + p[1]]);
         [s[0] / n, s[1] / n]
     };
-    let (ma, mb) = (mean(|p| p.0), mean(|p| p.1));
+    let (ma, mb) = (
+        mean(&mut pairs.iter().map(|p| p.0)),
+        mean(&mut pairs.iter().map(|p| p.1)),
+    );
     // Rotation angle maximizing Σ (b − mb)·R(a − ma).
     let (mut sin_sum, mut cos_sum) = (0.0, 0.0);
     for (a, b) in &pairs {
@@ -101,7 +109,11 @@ fn align_to_gps(graph: &mut PoseGraph) {
     }
     let angle = sin_sum.atan2(cos_sum);
     let (s, c) = angle.sin_cos();
-    let motion = Pose2::new(mb[0] - (c * ma[0] - s * ma[1]), mb[1] - (s * ma[0] + c * ma[1]), angle);
+    let motion = Pose2::new(
+        mb[0] - (c * ma[0] - s * ma[1]),
+        mb[1] - (s * ma[0] + c * ma[1]),
+        angle,
+    );
     for pose in &mut graph.poses {
         *pose = motion.compose(pose);
     }
@@ -116,8 +128,8 @@ fn odometry(graph: &mut PoseGraph) -> Result<(), InitError> {
         }
     }
     graph.poses[0] = Pose2::IDENTITY;
-    for i in 0..n.saturating_sub(1) {
-        let z = step[i].ok_or(InitError::MissingOdometry { from: i })?;
+    for (i, z) in step.iter().enumerate() {
+        let z = z.ok_or(InitError::MissingOdometry { from: i })?;
         graph.poses[i + 1] = graph.poses[i].compose(&z);
     }
     Ok(())
@@ -249,12 +261,12 @@ fn add_pair_blocks(
                 triplets.push((j + k, j + k, w));
                 triplets.push((i + k, i + k, w));
             }
-            for r in 0..2 {
-                for c in 0..2 {
+            for (r, m_row) in m.iter().enumerate() {
+                for (c, m_rc) in m_row.iter().enumerate() {
                     let (row, col, v) = if j > i {
-                        (j + r, i + c, -w * m[r][c])
+                        (j + r, i + c, -w * m_rc)
                     } else {
-                        (i + c, j + r, -w * m[r][c])
+                        (i + c, j + r, -w * m_rc)
                     };
                     triplets.push((row, col, v));
                 }
@@ -294,9 +306,9 @@ mod tests {
     fn square() -> (PoseGraph, Vec<Pose2>) {
         let truth = vec![
             Pose2::new(0.0, 0.0, 0.0),
-            Pose2::new(2.0, 0.0, 1.5707963267948966),
-            Pose2::new(2.0, 2.0, 3.141592653589793),
-            Pose2::new(0.0, 2.0, -1.5707963267948966),
+            Pose2::new(2.0, 0.0, std::f64::consts::FRAC_PI_2),
+            Pose2::new(2.0, 2.0, std::f64::consts::PI),
+            Pose2::new(0.0, 2.0, -std::f64::consts::FRAC_PI_2),
         ];
         let mut g = PoseGraph {
             poses: vec![Pose2::IDENTITY; 4],

@@ -3,8 +3,10 @@
 //! GPS fixes; the network is solved as full nonlinear least squares on SE(2) (beyond the
 //! paper's linear solution). Pure library: no I/O, no async.
 
+pub mod geodesy;
 pub mod init;
 pub mod linear;
+pub mod mapping2d;
 pub mod matching;
 pub mod network;
 pub mod optimize;
@@ -12,6 +14,7 @@ pub mod robust;
 pub mod se2;
 
 pub use init::{Init, InitError, initialize};
+pub use mapping2d::{Mapper2d, Mapper2dParams, MapperStats, Placed};
 pub use nalgebra;
 pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

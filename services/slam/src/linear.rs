@@ -138,12 +138,15 @@ impl SparsePattern {
 /// Approximate minimum degree ordering of the block graph, expanded to the unknowns:
 /// (forward, inverse) permutations of 0..n.
 fn block_amd(n: usize, entries: &[(usize, usize)], block: usize) -> (Vec<usize>, Vec<usize>) {
-    assert!(block > 0 && n % block == 0, "unknowns come in whole blocks");
+    assert!(
+        block > 0 && n.is_multiple_of(block),
+        "unknowns come in whole blocks"
+    );
     let blocks = n / block;
     // Every block holds its top-left entry: one pair per block suffices.
     let pairs: Vec<Pair<usize, usize>> = entries
         .iter()
-        .filter(|&&(r, c)| r % block == 0 && c % block == 0)
+        .filter(|&&(r, c)| r.is_multiple_of(block) && c.is_multiple_of(block))
         .map(|&(r, c)| Pair {
             row: r / block,
             col: c / block,

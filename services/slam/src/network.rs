@@ -275,6 +275,31 @@ impl RelativeEdge {
 }
 
 impl GpsEdge {
+    /// The edge for a WGS84 fix of node `node`'s antenna: its position in the datum's
+    /// east-north frame (exact, through ECEF) and the information of its east-north
+    /// covariance (m²). `None` when the covariance is not positive definite or a value is not
+    /// finite.
+    pub fn from_fix(
+        datum: &crate::geodesy::GeoDatum,
+        node: usize,
+        fix: &crate::geodesy::Geodetic,
+        covariance_en_m2: Matrix2<f64>,
+        lever_arm_m: Vector2<f64>,
+        robust: Robust,
+    ) -> Option<GpsEdge> {
+        let enu = datum.geodetic_to_enu(fix);
+        let information = covariance_en_m2.try_inverse()?;
+        let edge = GpsEdge {
+            node,
+            position_m: Vector2::new(enu.x, enu.y),
+            information,
+            lever_arm_m,
+            robust,
+        };
+        (edge.position_m.iter().all(|v| v.is_finite()) && is_information(&edge.information))
+            .then_some(edge)
+    }
+
     /// Antenna position predicted by the node pose, minus the fix (m).
     pub fn error(&self, poses: &[Pose2]) -> Vector2<f64> {
         let p = &poses[self.node];
@@ -360,6 +385,40 @@ mod tests {
         minus[0].theta -= h;
         let numeric = (g.error(&plus) - g.error(&minus)) / (2.0 * h);
         assert!((numeric - j.column(2)).norm() < 1e-6);
+    }
+
+    #[test]
+    fn gps_edge_from_a_wgs84_fix() {
+        let datum = crate::geodesy::GeoDatum {
+            origin: crate::geodesy::Geodetic {
+                latitude_deg: 52.39,
+                longitude_deg: 9.71,
+                height_m: 55.0,
+            },
+        };
+        let fix = datum.enu_to_geodetic(&nalgebra::Vector3::new(12.0, -7.0, 0.0));
+        let e = GpsEdge::from_fix(
+            &datum,
+            0,
+            &fix,
+            Matrix2::identity() * 0.25,
+            Vector2::zeros(),
+            Robust::None,
+        )
+        .unwrap();
+        assert!((e.position_m - Vector2::new(12.0, -7.0)).norm() < 1e-6);
+        assert!((e.information[(0, 0)] - 4.0).abs() < 1e-12);
+        assert!(
+            GpsEdge::from_fix(
+                &datum,
+                0,
+                &fix,
+                -Matrix2::identity(),
+                Vector2::zeros(),
+                Robust::None
+            )
+            .is_none()
+        );
     }
 
     #[test]

@@ -3,7 +3,10 @@
 //! towards the jumps.
 
 use slam::nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
-use slam::{EdgeKind, GpsEdge, Init, OptimizeParams, Optimizer, Pose2, PoseGraph, RelativeEdge, Robust, initialize};
+use slam::{
+    EdgeKind, GpsEdge, Init, OptimizeParams, Optimizer, Pose2, PoseGraph, RelativeEdge, Robust,
+    initialize,
+};
 
 /// A lap of the park: one node per GPS period, noisy odometry between them, GPS fixes with
 /// the simulator's dropouts and multipath episodes. Returns the graph, the true poses, and
@@ -25,10 +28,15 @@ fn park_run(gps_robust: Robust) -> (PoseGraph, Vec<Pose2>, Vec<bool>) {
         let iso = truth(t);
         Pose2::new(iso.translation.x, iso.translation.y, slam_heading(&iso))
     };
-    let stamps: Vec<u64> = (0..=lap_ns / gps.period_ns).map(|k| k * gps.period_ns).collect();
+    let stamps: Vec<u64> = (0..=lap_ns / gps.period_ns)
+        .map(|k| k * gps.period_ns)
+        .collect();
     let true_poses: Vec<Pose2> = stamps.iter().map(|&t| planar(t)).collect();
 
-    let mut graph = PoseGraph { poses: vec![Pose2::IDENTITY; stamps.len()], ..Default::default() };
+    let mut graph = PoseGraph {
+        poses: vec![Pose2::IDENTITY; stamps.len()],
+        ..Default::default()
+    };
     let (sigma_xy, sigma_theta) = (0.03, 0.4f64.to_radians());
     for k in 0..stamps.len() - 1 {
         let z = true_poses[k].between(&true_poses[k + 1]);
@@ -73,10 +81,20 @@ fn slam_heading(iso: &slam::nalgebra::Isometry3<f64>) -> f64 {
 /// Position errors (m) after optimizing with the given GPS kernel.
 fn errors(gps_robust: Robust) -> (Vec<f64>, Vec<bool>) {
     let (mut graph, truth, multipath) = park_run(gps_robust);
-    assert!(multipath.iter().filter(|m| **m).count() >= 5, "the run needs multipath episodes");
+    assert!(
+        multipath.iter().filter(|m| **m).count() >= 5,
+        "the run needs multipath episodes"
+    );
     initialize(&mut graph, Init::Odometry).expect("initialize");
-    Optimizer::new().optimize(&mut graph, &OptimizeParams::default()).expect("optimize");
-    let e = graph.poses.iter().zip(&truth).map(|(p, t)| (p.x - t.x).hypot(p.y - t.y)).collect();
+    Optimizer::new()
+        .optimize(&mut graph, &OptimizeParams::default())
+        .expect("optimize");
+    let e = graph
+        .poses
+        .iter()
+        .zip(&truth)
+        .map(|(p, t)| (p.x - t.x).hypot(p.y - t.y))
+        .collect();
     (e, multipath)
 }
 
@@ -88,7 +106,13 @@ fn rmse(e: &[f64]) -> f64 {
 fn robust_kernel_ignores_multipath_that_pulls_least_squares_off() {
     let (plain, multipath) = errors(Robust::None);
     let (robust, _) = errors(Robust::Cauchy { c: 2.0 });
-    let at_jumps = |e: &[f64]| e.iter().zip(&multipath).filter(|(_, m)| **m).map(|(v, _)| *v).fold(0.0, f64::max);
+    let at_jumps = |e: &[f64]| {
+        e.iter()
+            .zip(&multipath)
+            .filter(|(_, m)| **m)
+            .map(|(v, _)| *v)
+            .fold(0.0, f64::max)
+    };
     println!(
         "rmse: plain {:.3} m, robust {:.3} m; worst at multipath nodes: plain {:.3} m, robust {:.3} m ({} multipath nodes of {})",
         rmse(&plain),
@@ -100,7 +124,15 @@ fn robust_kernel_ignores_multipath_that_pulls_least_squares_off() {
     );
     // Within the GPS noise (σ 0.5 m per axis) with the kernel; pulled off without it.
     assert!(rmse(&robust) < 0.3, "robust rmse {}", rmse(&robust));
-    assert!(at_jumps(&robust) < 0.6, "robust worst at jumps {}", at_jumps(&robust));
-    assert!(at_jumps(&plain) > 1.0, "plain least squares should be pulled off: {}", at_jumps(&plain));
+    assert!(
+        at_jumps(&robust) < 0.6,
+        "robust worst at jumps {}",
+        at_jumps(&robust)
+    );
+    assert!(
+        at_jumps(&plain) > 1.0,
+        "plain least squares should be pulled off: {}",
+        at_jumps(&plain)
+    );
     assert!(at_jumps(&plain) > 2.0 * at_jumps(&robust));
 }

@@ -56,6 +56,18 @@ pub(super) struct Query {
     start: usize,
 }
 
+/// A matching-range correspondence.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct RangeMatchPoint {
+    /// The polyline point, at the query's range where it lies on a segment (m).
+    pub point: [f64; 2],
+    /// Its range (m).
+    pub range_m: f64,
+    /// Weight of the pair in the rotation estimate (m²): a range match says little about
+    /// rotation where the range hardly changes with bearing (a wall seen square on).
+    pub weight: f64,
+}
+
 /// The reference scan with its joins and a bearing lookup table.
 pub(super) struct Contour<'a> {
     points: &'a [[f64; 2]],
@@ -75,6 +87,16 @@ impl<'a> Contour<'a> {
     /// [`MAX_JOIN_BEARING_RAD`] apart in bearing. The last return joins the first only when
     /// the scan closes the circle that way.
     pub fn new(scan: &'a Scan2, join_distance_m: f64, join_distance_per_m: f64) -> Contour<'a> {
+        let mut contour = Contour::outline(scan, join_distance_m, join_distance_per_m);
+        contour.normals = (0..contour.len())
+            .map(|j| surface_normal(contour.points, &contour.joined, j))
+            .collect();
+        contour
+    }
+
+    /// The contour without surface normals, for distances only (`distance_within`,
+    /// `min_range_near`): cheaper to build.
+    pub fn outline(scan: &'a Scan2, join_distance_m: f64, join_distance_per_m: f64) -> Contour<'a> {
         let (points, bearings, ranges) = (scan.points(), scan.bearings_rad(), scan.ranges_m());
         let n = points.len();
         let joined: Vec<bool> = (0..n)
@@ -87,7 +109,7 @@ impl<'a> Contour<'a> {
                     && dist2(points[i], points[j]) <= limit * limit
             })
             .collect();
-        let normals = (0..n).map(|j| surface_normal(points, &joined, j)).collect();
+        let normals = vec![None; n];
         let len = (2 * n).max(64);
         let mut buckets = Vec::with_capacity(len);
         let mut i = 0;
@@ -98,7 +120,14 @@ impl<'a> Contour<'a> {
             }
             buckets.push(i as u32);
         }
-        Contour { points, bearings, ranges, joined, normals, buckets }
+        Contour {
+            points,
+            bearings,
+            ranges,
+            joined,
+            normals,
+            buckets,
+        }
     }
 
     /// The returns (m, in the scan's frame), in bearing order.
@@ -114,11 +143,16 @@ impl<'a> Contour<'a> {
     /// Locates a point (in this contour's frame) by bearing; `None` at the origin.
     pub fn query(&self, point: [f64; 2]) -> Option<Query> {
         let range_m = (point[0] * point[0] + point[1] * point[1]).sqrt();
-        if !(range_m > 0.0) {
+        if range_m.is_nan() || range_m <= 0.0 {
             return None;
         }
         let bearing_rad = point[1].atan2(point[0]);
-        Some(Query { point, range_m, bearing_rad, start: self.position(bearing_rad) })
+        Some(Query {
+            point,
+            range_m,
+            bearing_rad,
+            start: self.position(bearing_rad),
+        })
     }
 
     /// Index of the first return at or after `bearing` going counter-clockwise (wrapping to 0).
@@ -137,7 +171,10 @@ impl<'a> Contour<'a> {
     pub fn closest(&self, query: &Query, max_distance_m: f64) -> Option<Closest> {
         let n = self.len();
         let q = query.point;
-        let mut best = Best { d2: max_distance_m * max_distance_m, hit: None };
+        let mut best = Best {
+            d2: max_distance_m * max_distance_m,
+            hit: None,
+        };
         // Right (counter-clockwise): at each return, first the segment that leads to it.
         let mut visited = 0;
         for k in 0..n {
@@ -146,7 +183,7 @@ impl<'a> Contour<'a> {
             if self.joined[i] {
                 self.try_segment(q, i, &mut best);
             }
-            if self.bound2(query, j) > best.d2 {
+            if self.beyond(query, j, best.d2) {
                 break;
             }
             self.try_return(q, j, &mut best);
@@ -158,16 +195,19 @@ impl<'a> Contour<'a> {
             if k > 0 && self.joined[j] {
                 self.try_segment(q, j, &mut best);
             }
-            if self.bound2(query, j) > best.d2 {
+            if self.beyond(query, j, best.d2) {
                 break;
             }
             self.try_return(q, j, &mut best);
         }
         let distance_m = best.d2.sqrt();
         Some(match best.hit? {
-            Hit::Segment { point, normal } => {
-                Closest { point, distance_m, normal: Some(normal), open_end: false }
-            }
+            Hit::Segment { point, segment, s } => Closest {
+                point,
+                distance_m,
+                normal: self.blended_normal(segment, s),
+                open_end: false,
+            },
             Hit::Return(j) => Closest {
                 point: self.points[j],
                 distance_m,
@@ -175,6 +215,11 @@ impl<'a> Contour<'a> {
                 open_end: self.joined[(j + n - 1) % n] != self.joined[j],
             },
         })
+    }
+
+    /// The distance from the query to the polyline, if within `max_distance_m`.
+    pub fn distance_within(&self, query: &Query, max_distance_m: f64) -> Option<f64> {
+        self.closest(query, max_distance_m).map(|c| c.distance_m)
     }
 
     /// The matching-range point of the query: within `window_rad` of its bearing and
@@ -188,15 +233,23 @@ impl<'a> Contour<'a> {
         query: &Query,
         window_rad: f64,
         max_distance_m: f64,
-    ) -> Option<[f64; 2]> {
+    ) -> Option<RangeMatchPoint> {
         let n = self.len();
         let r_q = query.range_m;
         let weight = MRP_BEARING_WEIGHT * r_q;
-        // A bearing offset beyond this puts any candidate further than the outlier distance.
-        let reach = if max_distance_m < r_q { (max_distance_m / r_q).asin() } else { PI };
+        // A bearing offset beyond asin(d / r) puts any candidate further than the outlier
+        // distance d; d / r is a hair smaller, and costs no arcsine.
+        let reach = if max_distance_m < r_q {
+            max_distance_m / r_q
+        } else {
+            PI
+        };
         let window = window_rad.min(reach);
         // A candidate whose range alone is off by the outlier distance is no candidate.
-        let mut best = RangeMatch { cost: max_distance_m, at: None };
+        let mut best = RangeMatch {
+            cost: max_distance_m,
+            at: None,
+        };
         let mut visited = 0;
         for k in 0..n {
             let j = wrap_index(query.start + k, n);
@@ -208,7 +261,10 @@ impl<'a> Contour<'a> {
             if !(0.0..=window).contains(&offset) || weight * offset > best.cost {
                 break;
             }
-            best.consider((self.ranges[j] - r_q).abs() + weight * offset, RangeAt::Return(j));
+            best.consider(
+                (self.ranges[j] - r_q).abs() + weight * offset,
+                RangeAt::Return(j),
+            );
             visited += 1;
         }
         for k in 0..n.saturating_sub(visited) {
@@ -220,15 +276,39 @@ impl<'a> Contour<'a> {
             if !(0.0..=window).contains(&offset) || weight * offset > best.cost {
                 break;
             }
-            best.consider((self.ranges[j] - r_q).abs() + weight * offset, RangeAt::Return(j));
+            best.consider(
+                (self.ranges[j] - r_q).abs() + weight * offset,
+                RangeAt::Return(j),
+            );
         }
-        match best.at? {
-            RangeAt::Return(j) => Some(self.points[j]),
-            RangeAt::Bearing(bearing) => {
-                let (s, c) = bearing.sin_cos();
-                Some([r_q * c, r_q * s])
+        let (point, range_m, normal) = match best.at? {
+            RangeAt::Return(j) => (self.points[j], self.ranges[j], self.normals[j]),
+            RangeAt::Segment { segment, s } => {
+                // At the query's range, in the direction of the chord point at the same
+                // fraction: within a small part of the beam spacing of the interpolated
+                // bearing, and no trigonometry.
+                let j = if segment + 1 == n { 0 } else { segment + 1 };
+                let (a, b) = (self.points[segment], self.points[j]);
+                let u = [a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1])];
+                let scale = r_q / (u[0] * u[0] + u[1] * u[1]).sqrt();
+                (
+                    [u[0] * scale, u[1] * scale],
+                    r_q,
+                    self.blended_normal(segment, s),
+                )
             }
-        }
+        };
+        // Rotation information of the pair: how far a small turn about the origin moves the
+        // point across the surface, (n · perp(q))²; in full (r²) at an isolated return.
+        let weight = match normal {
+            Some(n) => (n[1] * query.point[0] - n[0] * query.point[1]).powi(2),
+            None => r_q * r_q,
+        };
+        Some(RangeMatchPoint {
+            point,
+            range_m,
+            weight,
+        })
     }
 
     /// The smallest range among the returns within `window_rad` of the query's bearing: how
@@ -256,22 +336,25 @@ impl<'a> Contour<'a> {
         min
     }
 
-    /// Squared lower bound of the distance from the query to any polyline point at the
-    /// bearing of return j or further from the query's bearing: `(r·sin δ)²`, or `r²` past a
-    /// right angle.
-    fn bound2(&self, query: &Query, j: usize) -> f64 {
+    /// Whether every polyline point at the bearing of return j or further from the query's
+    /// bearing is more than √d2 from the query. The bound is `r·sin δ` (δ: bearing offset,
+    /// r: the query's range), or r past a right angle; compared squared, without division.
+    fn beyond(&self, query: &Query, j: usize, d2: f64) -> bool {
         let (q, p) = (query.point, self.points[j]);
         if q[0] * p[0] + q[1] * p[1] <= 0.0 {
-            return query.range_m * query.range_m;
+            return query.range_m * query.range_m > d2;
         }
-        let cross = (q[0] * p[1] - q[1] * p[0]) / self.ranges[j];
-        cross * cross
+        let cross = q[0] * p[1] - q[1] * p[0];
+        cross * cross > d2 * self.ranges[j] * self.ranges[j]
     }
 
     fn try_return(&self, q: [f64; 2], j: usize, best: &mut Best) {
         let d2 = dist2(q, self.points[j]);
         if d2 < best.d2 {
-            *best = Best { d2, hit: Some(Hit::Return(j)) };
+            *best = Best {
+                d2,
+                hit: Some(Hit::Return(j)),
+            };
         }
     }
 
@@ -281,39 +364,68 @@ impl<'a> Contour<'a> {
         let j = if i + 1 == self.len() { 0 } else { i + 1 };
         let (a, b) = (self.points[i], self.points[j]);
         let ab = [b[0] - a[0], b[1] - a[1]];
+        let aq = [q[0] - a[0], q[1] - a[1]];
         let len2 = ab[0] * ab[0] + ab[1] * ab[1];
-        if len2 <= 0.0 {
+        let along = aq[0] * ab[0] + aq[1] * ab[1];
+        // Outside the segment (or a segment of length 0): its ends are tried on their own.
+        if along <= 0.0 || along >= len2 {
             return;
         }
-        let s = ((q[0] - a[0]) * ab[0] + (q[1] - a[1]) * ab[1]) / len2;
-        if s <= 0.0 || s >= 1.0 {
+        // Squared distance to the line, cross² / len2, compared before dividing.
+        let cross = aq[0] * ab[1] - aq[1] * ab[0];
+        if cross * cross >= best.d2 * len2 {
             return;
         }
+        let s = along / len2;
         let point = [a[0] + s * ab[0], a[1] + s * ab[1]];
-        let d2 = dist2(q, point);
-        if d2 < best.d2 {
-            // Both ends are joined, so both have normals; blend them along the segment.
-            let (na, nb) = (self.normals[i].unwrap_or_default(), self.normals[j].unwrap_or_default());
-            let blend = [(1.0 - s) * na[0] + s * nb[0], (1.0 - s) * na[1] + s * nb[1]];
-            if let Some(normal) = unit(blend).or_else(|| unit_normal(a, b)) {
-                *best = Best { d2, hit: Some(Hit::Segment { point, normal }) };
-            }
-        }
+        let hit = Some(Hit::Segment {
+            point,
+            segment: i,
+            s,
+        });
+        *best = Best {
+            d2: cross * cross / len2,
+            hit,
+        };
+    }
+
+    /// The surface normal at fraction s of segment i → i + 1: both ends are joined, so both
+    /// have normals; blended along the segment.
+    fn blended_normal(&self, i: usize, s: f64) -> Option<[f64; 2]> {
+        let j = if i + 1 == self.len() { 0 } else { i + 1 };
+        let (na, nb) = (
+            self.normals[i].unwrap_or_default(),
+            self.normals[j].unwrap_or_default(),
+        );
+        unit([(1.0 - s) * na[0] + s * nb[0], (1.0 - s) * na[1] + s * nb[1]])
+            .or_else(|| unit_normal(self.points[i], self.points[j]))
     }
 
     /// On segment i → i + 1, the bearing where the linearly interpolated range is the
     /// query's, if the segment spans that range and the bearing is within `window_rad`.
-    fn try_range(&self, i: usize, query: &Query, window_rad: f64, weight: f64, best: &mut RangeMatch) {
+    fn try_range(
+        &self,
+        i: usize,
+        query: &Query,
+        window_rad: f64,
+        weight: f64,
+        best: &mut RangeMatch,
+    ) {
         let j = if i + 1 == self.len() { 0 } else { i + 1 };
         let (ra, rb, r_q) = (self.ranges[i], self.ranges[j], query.range_m);
         if r_q < ra.min(rb) || r_q > ra.max(rb) {
             return;
         }
-        let s = if rb == ra { 0.5 } else { (r_q - ra) / (rb - ra) };
-        let bearing = wrap(self.bearings[i] + s * bearing_offset(self.bearings[i], self.bearings[j]));
+        let s = if rb == ra {
+            0.5
+        } else {
+            (r_q - ra) / (rb - ra)
+        };
+        let bearing =
+            wrap(self.bearings[i] + s * bearing_offset(self.bearings[i], self.bearings[j]));
         let offset = bearing_offset(query.bearing_rad, bearing).abs();
         if offset <= window_rad {
-            best.consider(weight * offset, RangeAt::Bearing(bearing));
+            best.consider(weight * offset, RangeAt::Segment { segment: i, s });
         }
     }
 }
@@ -325,7 +437,12 @@ struct Best {
 
 enum Hit {
     Return(usize),
-    Segment { point: [f64; 2], normal: [f64; 2] },
+    /// At fraction s of segment i → i + 1.
+    Segment {
+        point: [f64; 2],
+        segment: usize,
+        s: f64,
+    },
 }
 
 /// The best matching-range candidate so far.
@@ -337,8 +454,8 @@ struct RangeMatch {
 enum RangeAt {
     /// A return of the reference.
     Return(usize),
-    /// The point at the query's range and this bearing, on a segment.
-    Bearing(f64),
+    /// The point at the query's range at fraction s of segment i → i + 1.
+    Segment { segment: usize, s: f64 },
 }
 
 impl RangeMatch {
@@ -403,7 +520,7 @@ fn unit_normal(a: [f64; 2], b: [f64; 2]) -> Option<[f64; 2]> {
 }
 
 fn unit(v: [f64; 2]) -> Option<[f64; 2]> {
-    let len = v[0].hypot(v[1]);
+    let len = (v[0] * v[0] + v[1] * v[1]).sqrt();
     (len > 1e-12).then(|| [v[0] / len, v[1] / len])
 }
 
@@ -444,7 +561,9 @@ mod tests {
         let query = contour.query([2.0, 1.75]).expect("not the origin");
         assert!(contour.closest(&query, 0.5).expect("near the end").open_end);
         // A point beside the wall, at a return: the normal is the wall's.
-        let query = contour.query([2.05, 2.0 * 10f64.to_radians().tan()]).expect("not the origin");
+        let query = contour
+            .query([2.05, 2.0 * 10f64.to_radians().tan()])
+            .expect("not the origin");
         let c = contour.closest(&query, 0.5).expect("near the wall");
         assert!(!c.open_end && c.normal.is_some_and(|n| n[0].abs() > 0.999));
     }
@@ -457,13 +576,23 @@ mod tests {
         let r = 2.0 / 10f64.to_radians().cos();
         let (s, c) = 12f64.to_radians().sin_cos();
         let query = contour.query([r * c, r * s]).expect("not the origin");
-        let m = contour.matching_range(&query, 0.1, 0.5).expect("in window");
+        let m = contour
+            .matching_range(&query, 0.1, 0.5)
+            .expect("in window")
+            .point;
         assert!((m[0].hypot(m[1]) - r).abs() < 1e-5);
         let bearing = m[1].atan2(m[0]);
-        assert!((bearing - 10f64.to_radians()).abs() < 1e-3, "bearing {}", bearing.to_degrees());
+        assert!(
+            (bearing - 10f64.to_radians()).abs() < 1e-3,
+            "bearing {}",
+            bearing.to_degrees()
+        );
         // With an outlier distance of 5 cm the exact point, 7 cm away, is out of reach: a
         // return nearer in bearing, close in range, stands in.
-        let m = contour.matching_range(&query, 0.1, 0.05).expect("in reach");
+        let m = contour
+            .matching_range(&query, 0.1, 0.05)
+            .expect("in reach")
+            .point;
         assert!((m[1].atan2(m[0]) - 12f64.to_radians()).abs() < 1.5f64.to_radians());
     }
 

@@ -1,14 +1,16 @@
 //! Iterative dual correspondence (Lu & Milios 1997, section 4). Each iteration moves the
 //! current scan into the reference frame by the current estimate, then
-//! 1. pairs every point with its closest point on the reference polyline and solves the
-//!    translation from these pairs, and
+//! 1. pairs every point with its closest point on the reference polyline and takes the
+//!    translation of the least-squares motion of these pairs (point-to-line), and
 //! 2. pairs every point with its matching-range point (same range from the reference origin,
-//!    within a rotation window) and solves the rotation from those pairs;
+//!    within a rotation window) and takes the rotation of those pairs (weighted least
+//!    squares about the reference origin);
 //!
-//! pairs further apart than an outlier distance are dropped. The distance and the window
-//! shrink geometrically to their floors; the iteration stops when the update is negligible.
-//! The closest-point rule pins translation but turns slowly; the range rule turns quickly
-//! but is blind to translation. Together they converge in a few iterations.
+//! and applies both ("(ω₂, T₁)" in the paper). Pairs further apart than an outlier distance
+//! are dropped. The distance and the window shrink geometrically to their floors; the
+//! iteration stops when the update is negligible (or alternates between two poses). The
+//! closest-point rule pins translation but turns slowly; the range rule turns quickly but
+//! is blind to translation. Together they converge in about ten iterations on real scans.
 
 use super::contour::Contour;
 use super::validate::validate;
@@ -27,21 +29,27 @@ pub struct IdcParams {
     /// Floor of the outlier distance (m), reached after a few iterations. Default 0.2.
     pub final_max_distance_m: f64,
     /// Rotation window B_r of the matching-range rule at the first iteration (rad): covers
-    /// the rotation error of the initial guess. Default 0.25 (14°).
+    /// the rotation error of the initial guess. Default 0.15 (8.6°).
     pub initial_rotation_window_rad: f64,
     /// Floor of the rotation window (rad). Default 0.03 (1.7°).
     pub final_rotation_window_rad: f64,
     /// Factor applied to the outlier distance and the window after every iteration
     /// (0 < shrink ≤ 1). Default 0.7.
     pub shrink: f64,
+    /// Until the schedules reach their floors, only every `coarse_stride`-th point of the
+    /// current scan is paired, for speed. It narrows the basin of convergence: with 2 or 3,
+    /// the 2D mapper on ACES found 45 % fewer loop closures (their initial guesses are
+    /// far off). Default 1: every point throughout.
+    pub coarse_stride: usize,
     /// Iterations at most. Default 50.
     pub max_iterations: u32,
     /// Converged when, with both schedules at their floors, one update moves the pose by
-    /// less than this (m) ... Default 1e-4.
+    /// less than this (m) ... Default 1e-3.
     pub converged_translation_m: f64,
-    /// ... and turns it by less than this (rad). Default 1e-5.
+    /// ... and turns it by less than this (rad). Default 1e-4.
     pub converged_rotation_rad: f64,
-    /// Fewest returns per scan and fewest pairs per rule and iteration. Default 20.
+    /// Fewest returns per scan, and fewest pairs per rule and iteration (divided by the
+    /// stride in coarse iterations). Default 20.
     pub min_correspondences: usize,
     /// Neighbouring reference returns lie on one surface (and are interpolated between)
     /// when at most `join_distance_m + join_distance_per_m · range` apart (m). Default 0.3.
@@ -77,12 +85,13 @@ impl Default for IdcParams {
         IdcParams {
             initial_max_distance_m: 1.0,
             final_max_distance_m: 0.2,
-            initial_rotation_window_rad: 0.25,
+            initial_rotation_window_rad: 0.15,
             final_rotation_window_rad: 0.03,
             shrink: 0.7,
+            coarse_stride: 1,
             max_iterations: 50,
-            converged_translation_m: 1e-4,
-            converged_rotation_rad: 1e-5,
+            converged_translation_m: 1e-3,
+            converged_rotation_rad: 1e-4,
             min_correspondences: 20,
             join_distance_m: 0.3,
             join_distance_per_m: 0.05,
@@ -146,6 +155,9 @@ impl IdcParams {
                 self.initial_rotation_window_rad,
             ));
         }
+        if self.coarse_stride == 0 {
+            return Err(MatchError::InvalidParams("coarse_stride = 0".into()));
+        }
         if self.max_iterations == 0 {
             return Err(MatchError::InvalidParams("max_iterations = 0".into()));
         }
@@ -168,15 +180,15 @@ pub struct Match {
     /// Covariance of (x, y, theta) of `pose` (m², m·rad, rad²). See `validate` for how.
     pub covariance: [[f64; 3]; 3],
     /// What the match is worth, 0 (nothing) to 1: inlier share × (1 − conflict share) × a
-    /// factor in [0.5, 1] for conditioning.
+    /// factor in [0.5, 1] for conditioning. See `validate` for the heuristic.
     pub quality: f64,
-    /// Share of the current points visible to the reference that lie within
-    /// `inlier_distance_m` of its polyline.
+    /// Share of the points of either scan visible to the other (it has a return near their
+    /// bearing) that lie within `inlier_distance_m` of the other's polyline.
     pub inlier_share: f64,
-    /// Share of the explained-or-contradicting points that contradict the reference: points
-    /// in space the reference saw free (conflicts / (inliers + conflicts)).
+    /// Share of points that lie in space the other scan saw free, among those it explains or
+    /// contradicts (conflicts / (inliers + conflicts)); the smaller of the two directions.
     pub conflict_share: f64,
-    /// Mean distance of the inliers to the reference polyline (m).
+    /// Mean distance of the inliers to the other scan's polyline, both ways (m).
     pub mean_residual_m: f64,
     /// Smallest over largest eigenvalue of the information matrix, rotation scaled by the
     /// RMS point range to be unitless: near 0 for a degenerate scene (corridor), up to 1.
@@ -229,30 +241,33 @@ pub fn idc(
     };
     while iterations < params.max_iterations && !converged {
         iterations += 1;
+        let at_floor = max_distance_m <= params.final_max_distance_m
+            && window_rad <= params.final_rotation_window_rad;
+        let stride = if at_floor { 1 } else { params.coarse_stride };
         correspond(
             &contour,
             current,
             &pose,
             max_distance_m,
             window_rad,
+            stride,
             &mut pairs,
         );
+        let needed = params.min_correspondences.div_ceil(stride);
         for (rule, found) in [
             ("closest-point", pairs.closest.len()),
             ("matching-range", pairs.matching),
         ] {
-            if found < params.min_correspondences {
+            if found < needed {
                 return Err(MatchError::TooFewCorrespondences {
                     iteration: iterations,
                     rule,
                     found,
-                    needed: params.min_correspondences,
+                    needed,
                 });
             }
         }
         let mut next = pairs.update().compose(&pose);
-        let at_floor = max_distance_m <= params.final_max_distance_m
-            && window_rad <= params.final_rotation_window_rad;
         let close = |a: &Pose2, b: &Pose2| {
             (a.x - b.x).hypot(a.y - b.y) < params.converged_translation_m
                 && wrap_angle(a.theta - b.theta).abs() < params.converged_rotation_rad
@@ -267,9 +282,6 @@ pub fn idc(
                 wrap_angle(pose.theta + wrap_angle(next.theta - pose.theta) / 2.0),
             );
             converged = true;
-        }
-        if std::env::var_os("IDC_TRACE").is_some() {
-            eprintln!("it {iterations} d {max_distance_m:.3} w {window_rad:.3} cp {} mrp {} pose {:.6} {:.6} {:.7}", pairs.closest.len(), pairs.matching, next.x, next.y, next.theta);
         }
         before = pose;
         pose = next;
@@ -291,13 +303,22 @@ pub fn idc(
     })
 }
 
+/// A closest-point pair (reference frame, m).
+struct ClosestPair {
+    /// The point of the current scan.
+    point: [f64; 2],
+    /// Its closest point on the reference polyline.
+    target: [f64; 2],
+    /// The reference surface normal there; `None` at an isolated return.
+    normal: Option<[f64; 2]>,
+}
+
 /// One iteration's pairs (points in the reference frame).
 #[derive(Default)]
 struct Pairs {
-    /// Closest-point pairs: the point, its closest point, the reference surface normal there
-    /// (`None` at a return).
-    closest: Vec<([f64; 2], [f64; 2], Option<[f64; 2]>)>,
-    /// Number of matching-range pairs (q, m), with Σ q × m and Σ q · m over them.
+    closest: Vec<ClosestPair>,
+    /// Number of matching-range pairs, with Σ w·sin δ and Σ w·cos δ over them (δ: bearing
+    /// offset from the point to its match, w: the pair's rotation information).
     matching: usize,
     cross: f64,
     dot: f64,
@@ -313,7 +334,7 @@ impl Pairs {
     }
 
     /// The matching-range pairs have equal ranges, so they differ by a rotation about the
-    /// reference origin; this is its least-squares angle (rad).
+    /// reference origin; this is its weighted least-squares angle (rad).
     fn matching_range_rotation(&self) -> f64 {
         self.cross.atan2(self.dot)
     }
@@ -332,11 +353,20 @@ impl Pairs {
             h += j * j.transpose();
             g += j * e;
         };
-        for (q, target, normal) in &self.closest {
+        for ClosestPair {
+            point: q,
+            target,
+            normal,
+        } in &self.closest
+        {
             // d(R(ω)q)/dω at ω = 0 is perp(q) = (−q_y, q_x).
             let (perp, d) = ([-q[1], q[0]], [target[0] - q[0], target[1] - q[1]]);
             match normal {
-                Some(n) => add(*n, n[0] * perp[0] + n[1] * perp[1], n[0] * d[0] + n[1] * d[1]),
+                Some(n) => add(
+                    *n,
+                    n[0] * perp[0] + n[1] * perp[1],
+                    n[0] * d[0] + n[1] * d[1],
+                ),
                 None => {
                     add([1.0, 0.0], perp[0], d[0]);
                     add([0.0, 1.0], perp[1], d[1]);
@@ -351,31 +381,45 @@ impl Pairs {
     }
 }
 
-/// Both correspondence rules for every point of `current` at `pose`, into `pairs`.
+/// Both correspondence rules for every `stride`-th point of `current` at `pose`, into `pairs`.
 fn correspond(
     contour: &Contour,
     current: &Scan2,
     pose: &Pose2,
     max_distance_m: f64,
     window_rad: f64,
+    stride: usize,
     pairs: &mut Pairs,
 ) {
     pairs.closest.clear();
     (pairs.matching, pairs.cross, pairs.dot) = (0, 0.0, 0.0);
     let max2 = max_distance_m * max_distance_m;
     let to_reference = motion(pose);
-    for &p in current.points() {
-        let Some(query) = contour.query(to_reference(p)) else { continue };
+    for &p in current.points().iter().step_by(stride) {
+        let Some(query) = contour.query(to_reference(p)) else {
+            continue;
+        };
         let q = query.point;
-        if let Some(c) = contour.closest(&query, max_distance_m).filter(|c| !c.open_end) {
-            pairs.closest.push((q, c.point, c.normal));
+        // No polyline point within the outlier distance: no pair by either rule (a
+        // matching-range point is never nearer than the closest point).
+        let Some(c) = contour.closest(&query, max_distance_m) else {
+            continue;
+        };
+        if !c.open_end {
+            pairs.closest.push(ClosestPair {
+                point: q,
+                target: c.point,
+                normal: c.normal,
+            });
         }
         if let Some(m) = contour.matching_range(&query, window_rad, max_distance_m)
-            && (m[0] - q[0]).powi(2) + (m[1] - q[1]).powi(2) <= max2
+            && (m.point[0] - q[0]).powi(2) + (m.point[1] - q[1]).powi(2) <= max2
         {
+            // (sin δ, cos δ) of the pair's bearing offset δ, weighted.
+            let scale = m.weight / (query.range_m * m.range_m);
             pairs.matching += 1;
-            pairs.cross += q[0] * m[1] - q[1] * m[0];
-            pairs.dot += q[0] * m[0] + q[1] * m[1];
+            pairs.cross += scale * (q[0] * m.point[1] - q[1] * m.point[0]);
+            pairs.dot += scale * (q[0] * m.point[0] + q[1] * m.point[1]);
         }
     }
 }
@@ -410,7 +454,7 @@ mod tests {
     /// 0.3 m and 5° off the truth, in a direction that depends on `k`.
     fn perturbed(truth: &Pose2, k: usize) -> Pose2 {
         let a = k as f64 * 2.0 * PI / 5.0;
-        let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+        let sign = if k.is_multiple_of(2) { 1.0 } else { -1.0 };
         Pose2::new(
             truth.x + 0.3 * a.cos(),
             truth.y + 0.3 * a.sin(),
@@ -436,6 +480,13 @@ mod tests {
             let m = idc(&reference, &current, perturbed(&truth, k), &params)
                 .expect("overlapping scans");
             let (dt, dr) = error(&m, &truth);
+            eprintln!(
+                "pair {k}: error {:.2} mm, {:.4}°, {} iterations, quality {:.2}",
+                dt * 1e3,
+                dr.to_degrees(),
+                m.iterations,
+                m.quality
+            );
             assert!(
                 m.converged,
                 "pair {k}: not converged in {} iterations",
@@ -485,6 +536,11 @@ mod tests {
         )
         .expect("overlap");
         let (dt, dr) = error(&m, &truth);
+        eprintln!(
+            "full circle: error {:.2} mm, {:.4}°",
+            dt * 1e3,
+            dr.to_degrees()
+        );
         assert!(
             dt < 0.01 && dr < 0.1f64.to_radians(),
             "error {dt:.4} m, {:.3}°",
@@ -524,6 +580,13 @@ mod tests {
         let axis = 0.5 * (2.0 * xy).atan2(xx - yy);
         let root = ((xx - yy).powi(2) / 4.0 + xy * xy).sqrt();
         let (major, minor) = ((xx + yy) / 2.0 + root, (xx + yy) / 2.0 - root);
+        eprintln!(
+            "corridor: std {:.4} m along, {:.4} m across, axis at {:.2}°, conditioning {:.1e}",
+            major.sqrt(),
+            minor.sqrt(),
+            axis.to_degrees(),
+            m.conditioning
+        );
         assert!(
             axis.abs() < 2f64.to_radians(),
             "major axis at {:.2}°",
@@ -561,7 +624,13 @@ mod tests {
         for k in 0..5 {
             let guess = perturbed(&Pose2::new(0.5, 0.0, 0.0), k);
             match idc(&reference, &current, guess, &IdcParams::default()) {
-                Ok(m) => assert!(!accept(&m, &gate), "guess {k}: accepted {m:?}"),
+                Ok(m) => {
+                    eprintln!(
+                        "wrong pairing, guess {k}: quality {:.2}, conflicts {:.2}, residual {:.3} m",
+                        m.quality, m.conflict_share, m.mean_residual_m
+                    );
+                    assert!(!accept(&m, &gate), "guess {k}: accepted {m:?}");
+                }
                 Err(e) => assert!(matches!(e, MatchError::TooFewCorrespondences { .. }), "{e}"),
             }
         }
@@ -622,53 +691,5 @@ mod tests {
             m.quality > 0.9 && m.inlier_share > 0.95 && m.conflict_share == 0.0,
             "{m:?}"
         );
-    }
-}
-#[cfg(test)]
-mod timing_probe {
-    use super::*;
-    use crate::matching::synthetic::{Scene, uniform_bearings};
-    #[test]
-    fn probe() {
-        let scene = Scene::park();
-        let bearings = uniform_bearings(360, -std::f64::consts::PI / 2.0, std::f64::consts::PI / 360.0);
-        let scan = |pose: &Pose2, seed| {
-            let ranges = scene.scan(pose, &bearings, 40.0, 0.01, seed);
-            Scan2::from_polar(&bearings, &ranges, 40.0).expect("same lengths")
-        };
-        let (from, to) = (Pose2::new(0.0, 0.0, 0.1), Pose2::new(1.2, 0.3, 0.24));
-        let (reference, current) = (scan(&from, 1), scan(&to, 2));
-        let truth = from.between(&to);
-        let guess = truth.compose(&Pose2::new(0.21, -0.21, 5f64.to_radians()));
-        let params = IdcParams::default();
-        let m = idc(&reference, &current, guess, &params).unwrap();
-        let t = std::time::Instant::now();
-        for _ in 0..200 { idc(&reference, &current, guess, &params).unwrap(); }
-        eprintln!("PROBE iterations {} n {} {}, {:?} per match, corr {}", m.iterations, reference.len(), current.len(), t.elapsed() / 200, m.correspondences);
-        let contour = Contour::new(&reference, 0.3, 0.05);
-        let t = std::time::Instant::now();
-        for _ in 0..200 { std::hint::black_box(crate::matching::validate::validate(&contour, &current, &m.pose, &params)); }
-        eprintln!("PROBE validate {:?}", t.elapsed() / 200);
-        let mut pairs = Pairs::default();
-        let t = std::time::Instant::now();
-        for _ in 0..200 { correspond(&contour, &current, &m.pose, 1.0, 0.25, &mut pairs); }
-        eprintln!("PROBE correspond at 1 m {:?}", t.elapsed() / 200);
-        let t = std::time::Instant::now();
-        for _ in 0..200 { correspond(&contour, &current, &m.pose, 0.2, 0.03, &mut pairs); }
-        eprintln!("PROBE correspond at 0.2 m {:?}", t.elapsed() / 200);
-        let mv = motion(&m.pose);
-        let qs: Vec<_> = current.points().iter().filter_map(|&p| contour.query(mv(p))).collect();
-        let t = std::time::Instant::now();
-        for _ in 0..200 { for &p in current.points() { std::hint::black_box(contour.query(mv(p))); } }
-        eprintln!("PROBE query {:?}", t.elapsed() / 200);
-        let t = std::time::Instant::now();
-        for _ in 0..200 { for q in &qs { std::hint::black_box(contour.closest(q, 0.2)); } }
-        eprintln!("PROBE closest {:?}", t.elapsed() / 200);
-        let t = std::time::Instant::now();
-        for _ in 0..200 { for q in &qs { std::hint::black_box(contour.matching_range(q, 0.03, 0.2)); } }
-        eprintln!("PROBE mrp {:?}", t.elapsed() / 200);
-        let t = std::time::Instant::now();
-        for _ in 0..200 { std::hint::black_box(Contour::new(&reference, 0.3, 0.05)); }
-        eprintln!("PROBE contour new {:?}", t.elapsed() / 200);
     }
 }

@@ -1,10 +1,10 @@
 //! What a match is worth (DESIGN §3: "every match yields a relative pose, a covariance and a
 //! quality; a match below the quality gate is rejected").
 //!
-//! **Covariance.** At the final pose, a closest-point pair inside a reference segment is a
-//! point-to-line residual `e = nᵀ(q − c)` with Jacobian `nᵀ [I | perp(q − t)]` with respect
-//! to (x, y, θ) of the pose (t: its translation, perp(v) = (−v_y, v_x)); a pair at a return
-//! (corner, isolated return) is point-to-point with Jacobian `[I | perp(q − t)]`. Then
+//! **Covariance.** At the final pose, a closest-point pair on a reference surface (normal n)
+//! is a point-to-line residual `e = nᵀ(q − c)` with Jacobian `nᵀ [I | perp(q − t)]` with
+//! respect to (x, y, θ) of the pose (t: its translation, perp(v) = (−v_y, v_x)); a pair at
+//! an isolated return is point-to-point with Jacobian `[I | perp(q − t)]`. Then
 //! `H = Σ JᵀJ`, the residual variance `σ² = max(Σ e² / (m − 3), range_noise²)` over m scalar
 //! residuals, and the covariance is `(H / σ² + P)⁻¹`, with
 //! `P = diag(1/s_m², 1/s_m², 1/s_rad²)` from the `unobservable_std_*` parameters: along a
@@ -12,19 +12,21 @@
 //! standard deviation becomes s instead of infinite. Pairs count as independent; residuals
 //! along one surface are correlated, so the covariance is optimistic, as ICP covariances are.
 //!
-//! **Quality** is a product of three factors in [0, 1]:
-//! - *inlier share*: of the current points the reference could have seen (it has a return
-//!   within `visibility_window_rad` of their bearing), the share within `inlier_distance_m`
-//!   of its polyline: overlap and fit at once;
-//! - *1 − conflict share*: a current point well in front of every reference return around its
-//!   bearing lies in space the reference saw free; a wrong match produces such points, a
-//!   right one only through moving objects. This is the outdoor check that residuals alone
-//!   miss: sparse trunks and walls fit many wrong poses loosely;
+//! **Quality** is a product of three factors in [0, 1], each scan checked against the other
+//! (current in the reference frame, and reference in the current frame):
+//! - *inlier share*: of the points the other scan could have seen (it has a return within
+//!   `visibility_window_rad` of their bearing), the share within `inlier_distance_m` of its
+//!   polyline, both ways pooled: overlap and fit at once;
+//! - *1 − conflict share*: a point well in front of every return of the other scan around
+//!   its bearing lies in space that scan saw free. A wrong pose produces such points both
+//!   ways; an artefact of one scan (a person walking by, the ground hit by a pitched
+//!   scanner, common outdoors) only one way, so the smaller share counts. This is the
+//!   outdoor check that residuals alone miss: sparse trunks and walls fit wrong poses loosely;
 //! - *conditioning*: 0.5 + 0.5·min(1, κ / conditioning_ok), κ = λ_min / λ_max of H with the
 //!   rotation scaled by the RMS point range. A corridor is still a useful constraint (its
 //!   covariance says where it is weak), so it halves the quality instead of zeroing it.
 
-use super::contour::Contour;
+use super::contour::{Closest, Contour, Query};
 use super::idc::motion;
 use super::{IdcParams, Match, Scan2};
 use crate::Pose2;
@@ -49,22 +51,49 @@ pub(super) fn validate(
     pose: &Pose2,
     params: &IdcParams,
 ) -> Validation {
-    let fit = fit(reference, current, pose, params);
-    // Agreement both ways: the current scan seen from the reference, and the reference seen
-    // from the current scan. An artefact of one scan alone (a person, ground hit by a pitched
-    // scanner) contradicts the other scan's free space in one direction only; a wrong pose
-    // contradicts it both ways.
-    let current_contour = Contour::new(current, params.join_distance_m, params.join_distance_per_m);
-    let forward = agreement(reference, current.points(), pose, params);
-    let backward = agreement(&current_contour, reference.points(), &pose.inverse(), params);
+    // Forward: the current scan in the reference frame gives both the covariance pairs and
+    // the agreement with the reference.
+    let mut fit = Fit::default();
+    let mut forward = Agreement::default();
+    let search_m = params.final_max_distance_m.max(params.inlier_distance_m);
+    let to_reference = motion(pose);
+    for &p in current.points() {
+        let Some(query) = reference.query(to_reference(p)) else {
+            continue;
+        };
+        let closest = reference.closest(&query, search_m);
+        if let Some(c) =
+            closest.filter(|c| c.distance_m <= params.final_max_distance_m && !c.open_end)
+        {
+            fit.add(&c, query.point, pose);
+        }
+        let inlier = closest
+            .map(|c| c.distance_m)
+            .filter(|&d| d <= params.inlier_distance_m);
+        forward.add(reference, &query, inlier, params);
+    }
+    // Backward: the reference seen from the current scan. An artefact of one scan alone (a
+    // person, the ground hit by a pitched scanner) contradicts the other scan's free space
+    // in one direction only; a wrong pose contradicts it both ways.
+    let outline = Contour::outline(current, params.join_distance_m, params.join_distance_per_m);
+    let mut backward = Agreement::default();
+    let to_current = motion(&pose.inverse());
+    for &p in reference.points() {
+        let Some(query) = outline.query(to_current(p)) else {
+            continue;
+        };
+        let inlier = outline.distance_within(&query, params.inlier_distance_m);
+        backward.add(&outline, &query, inlier, params);
+    }
+    let (covariance, conditioning) = fit.finish(params);
     let inliers = forward.inliers + backward.inliers;
     let inlier_share = ratio(inliers, forward.visible + backward.visible);
     let conflict_share = forward.conflict_share().min(backward.conflict_share());
     let quality = inlier_share
         * (1.0 - conflict_share)
-        * (0.5 + 0.5 * (fit.conditioning / params.conditioning_ok).min(1.0));
+        * (0.5 + 0.5 * (conditioning / params.conditioning_ok).min(1.0));
     Validation {
-        covariance: fit.covariance,
+        covariance,
         quality,
         inlier_share,
         conflict_share,
@@ -73,29 +102,26 @@ pub(super) fn validate(
         } else {
             f64::INFINITY
         },
-        conditioning: fit.conditioning,
+        conditioning,
         correspondences: fit.pairs,
     }
 }
 
-/// Covariance and conditioning of the pose from the closest-point pairs at the final pose.
+/// Gauss-Newton information of the pose from the closest-point pairs at the final pose.
+#[derive(Default)]
 struct Fit {
-    covariance: [[f64; 3]; 3],
-    conditioning: f64,
+    info: Matrix3<f64>,
+    /// Σ squared residuals over `rows` scalar residuals.
+    sse: f64,
+    rows: usize,
     pairs: usize,
+    /// Σ squared lever arms (m²).
+    lever2: f64,
 }
 
-fn fit(reference: &Contour, current: &Scan2, pose: &Pose2, params: &IdcParams) -> Fit {
-    let mut info = Matrix3::<f64>::zeros();
-    let (mut sse, mut rows, mut pairs, mut lever2) = (0.0, 0usize, 0usize, 0.0);
-    let to_reference = motion(pose);
-    for &p in current.points() {
-        let Some(query) = reference.query(to_reference(p)) else { continue };
-        let q = query.point;
-        let Some(c) = reference.closest(&query, params.final_max_distance_m).filter(|c| !c.open_end)
-        else {
-            continue;
-        };
+impl Fit {
+    /// Adds the pair (q, c.point), q in the reference frame.
+    fn add(&mut self, c: &Closest, q: [f64; 2], pose: &Pose2) {
         // d(q)/dθ = perp(q − t): the lever arm of the point about the current scan origin.
         let arm = [q[0] - pose.x, q[1] - pose.y];
         let perp = [-arm[1], arm[0]];
@@ -103,40 +129,42 @@ fn fit(reference: &Contour, current: &Scan2, pose: &Pose2, params: &IdcParams) -
         match c.normal {
             Some(n) => {
                 let j = Vector3::new(n[0], n[1], n[0] * perp[0] + n[1] * perp[1]);
-                info += j * j.transpose();
-                sse += (n[0] * e[0] + n[1] * e[1]).powi(2);
-                rows += 1;
+                self.info += j * j.transpose();
+                self.sse += (n[0] * e[0] + n[1] * e[1]).powi(2);
+                self.rows += 1;
             }
             None => {
                 let jx = Vector3::new(1.0, 0.0, perp[0]);
                 let jy = Vector3::new(0.0, 1.0, perp[1]);
-                info += jx * jx.transpose() + jy * jy.transpose();
-                sse += e[0] * e[0] + e[1] * e[1];
-                rows += 2;
+                self.info += jx * jx.transpose() + jy * jy.transpose();
+                self.sse += e[0] * e[0] + e[1] * e[1];
+                self.rows += 2;
             }
         }
-        pairs += 1;
-        lever2 += arm[0] * arm[0] + arm[1] * arm[1];
+        self.pairs += 1;
+        self.lever2 += arm[0] * arm[0] + arm[1] * arm[1];
     }
-    let sigma2 = (sse / rows.saturating_sub(3).max(1) as f64).max(params.range_noise_m.powi(2));
-    let prior = Matrix3::from_diagonal(&Vector3::new(
-        params.unobservable_std_m.powi(-2),
-        params.unobservable_std_m.powi(-2),
-        params.unobservable_std_rad.powi(-2),
-    ));
-    // The prior is positive definite, so the sum always is; keep the prior alone otherwise.
-    let covariance = (info / sigma2 + prior)
-        .try_inverse()
-        .or_else(|| prior.try_inverse())
-        .unwrap_or_else(Matrix3::identity);
-    Fit {
-        covariance: covariance.into(),
-        conditioning: conditioning(&info, (lever2 / pairs.max(1) as f64).sqrt()),
-        pairs,
+
+    /// The covariance and the conditioning.
+    fn finish(&self, params: &IdcParams) -> ([[f64; 3]; 3], f64) {
+        let dof = self.rows.saturating_sub(3).max(1) as f64;
+        let sigma2 = (self.sse / dof).max(params.range_noise_m.powi(2));
+        let prior = Matrix3::from_diagonal(&Vector3::new(
+            params.unobservable_std_m.powi(-2),
+            params.unobservable_std_m.powi(-2),
+            params.unobservable_std_rad.powi(-2),
+        ));
+        // The prior is positive definite, so the sum always is; keep the prior alone otherwise.
+        let covariance = (self.info / sigma2 + prior)
+            .try_inverse()
+            .or_else(|| prior.try_inverse())
+            .unwrap_or_else(Matrix3::identity);
+        let lever_m = (self.lever2 / self.pairs.max(1) as f64).sqrt();
+        (covariance.into(), conditioning(&self.info, lever_m))
     }
 }
 
-/// How the points of one scan, moved into the frame of another by `pose`, agree with it.
+/// How the points of one scan, moved into the frame of another, agree with it.
 #[derive(Default)]
 struct Agreement {
     /// Points the other scan could have seen: it has a return within the visibility window.
@@ -150,28 +178,24 @@ struct Agreement {
 }
 
 impl Agreement {
-    fn conflict_share(&self) -> f64 {
-        ratio(self.conflicts, self.inliers + self.conflicts)
-    }
-}
-
-fn agreement(other: &Contour, points: &[[f64; 2]], pose: &Pose2, params: &IdcParams) -> Agreement {
-    let mut a = Agreement::default();
-    let to_other = motion(pose);
-    for &p in points {
-        let Some(query) = other.query(to_other(p)) else { continue };
-        if let Some(c) = other.closest(&query, params.inlier_distance_m) {
-            a.inliers += 1;
-            a.visible += 1;
-            a.residual_sum_m += c.distance_m;
-        } else if let Some(seen_m) = other.min_range_near(&query, params.visibility_window_rad) {
-            a.visible += 1;
+    /// Adds one point; `inlier`: its distance to the other scan's polyline, if within
+    /// `inlier_distance_m`.
+    fn add(&mut self, other: &Contour, query: &Query, inlier: Option<f64>, params: &IdcParams) {
+        if let Some(distance_m) = inlier {
+            self.inliers += 1;
+            self.visible += 1;
+            self.residual_sum_m += distance_m;
+        } else if let Some(seen_m) = other.min_range_near(query, params.visibility_window_rad) {
+            self.visible += 1;
             if query.range_m < seen_m - params.conflict_margin_m {
-                a.conflicts += 1;
+                self.conflicts += 1;
             }
         }
     }
-    a
+
+    fn conflict_share(&self) -> f64 {
+        ratio(self.conflicts, self.inliers + self.conflicts)
+    }
 }
 
 /// λ_min / λ_max of the information with the rotation row and column scaled by `lever_m`, so

@@ -1,0 +1,61 @@
+//! The whole 2D pipeline (slam::Mapper2d) on the ACES log, scored with its 1,279 manually
+//! verified relations (Kümmerle et al. 2009). Graph mapping in that paper reports
+//! 0.044 ± 0.044 m; this test guards levelmap's current level (0.042 ± 0.048 m when
+//! written) against regressions. The aim is ≤ 0.03 m.
+
+use graphio::{carmen, relations};
+use scanio::shared_data;
+use slam::matching::Scan2;
+use slam::matching::metric::relation_metric;
+use slam::{Mapper2d, Mapper2dParams, Placed};
+use std::collections::HashMap;
+
+#[test]
+fn aces_relations_error_stays_low() {
+    let log = carmen::read(&shared_data("radish_2d_laser_logs/aces.clf.bz2")).expect("log");
+    let rel =
+        relations::read(&shared_data("radish_2d_laser_logs/aces.relations")).expect("relations");
+    let mut mapper = Mapper2d::new(Mapper2dParams::default());
+    let placed: Vec<Placed> = log
+        .scans
+        .iter()
+        .map(|s| {
+            let scan =
+                Scan2::from_polar(&s.bearings_rad(), &s.ranges_m, s.max_range_m).expect("scan");
+            mapper.add_scan(s.laser_pose, scan).expect("add")
+        })
+        .collect();
+    mapper.finish().expect("optimize");
+    let g = mapper.graph();
+    let by_stamp: HashMap<u64, usize> = log
+        .scans
+        .iter()
+        .enumerate()
+        .map(|(k, s)| (s.stamp_s.to_bits(), k))
+        .collect();
+    let m = relation_metric(rel.iter().map(|r| (r.t1_s, r.t2_s, r.delta)), |t: &f64| {
+        by_stamp.get(&t.to_bits()).map(|&k| match placed[k] {
+            Placed::Node(n) => g.poses[n],
+            Placed::Attached { node, offset } => g.poses[node].compose(&offset),
+        })
+    })
+    .expect("every relation has its scans");
+    let stats = mapper.stats();
+    println!(
+        "ACES: {} nodes, {} loop closures; relation error {:.4} ± {:.4} m (max {:.3}), rotation {:.4} rad",
+        stats.nodes,
+        stats.loop_closures,
+        m.translation_mean_m,
+        m.translation_std_m,
+        m.translation_max_m,
+        m.rotation_mean_rad
+    );
+    assert_eq!(m.count, 1279);
+    assert!(stats.loop_closures > 100, "{stats:?}");
+    assert!(
+        m.translation_mean_m <= 0.06,
+        "mean {}",
+        m.translation_mean_m
+    );
+    assert!(m.translation_max_m <= 1.0, "max {}", m.translation_max_m);
+}
