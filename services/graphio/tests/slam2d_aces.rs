@@ -26,7 +26,6 @@ fn aces_relations_error_stays_low() {
         })
         .collect();
     mapper.finish().expect("optimize");
-    let g = mapper.graph();
     let by_stamp: HashMap<u64, usize> = log
         .scans
         .iter()
@@ -34,10 +33,9 @@ fn aces_relations_error_stays_low() {
         .map(|(k, s)| (s.stamp_s.to_bits(), k))
         .collect();
     let m = relation_metric(rel.iter().map(|r| (r.t1_s, r.t2_s, r.delta)), |t: &f64| {
-        by_stamp.get(&t.to_bits()).map(|&k| match placed[k] {
-            Placed::Node(n) => g.poses[n],
-            Placed::Attached { node, offset } => g.poses[node].compose(&offset),
-        })
+        by_stamp
+            .get(&t.to_bits())
+            .map(|&k| mapper.pose_of(placed[k]))
     })
     .expect("every relation has its scans");
     let stats = mapper.stats();

@@ -7,7 +7,7 @@ use graphio::carmen::{self, LaserScan};
 use serde::Serialize;
 use slam::matching::Scan2;
 use slam::matching::metric::relation_metric;
-use slam::{Mapper2d, Mapper2dParams, MapperStats, Placed};
+use slam::{Mapper2d, Mapper2dParams, MapperStats};
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -97,11 +97,7 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
     let report = mapper.finish()?;
     let elapsed_ms = t0.elapsed().as_secs_f64() * 1e3;
     let graph = mapper.graph();
-    // Every scan's pose: its node's, or its node's composed with its offset.
-    let pose_of_scan = |k: usize| match placed[k] {
-        Placed::Node(n) => graph.poses[n],
-        Placed::Attached { node, offset } => graph.poses[node].compose(&offset),
-    };
+    let pose_of_scan = |k: usize| mapper.pose_of(placed[k]);
 
     let metric = match &args.relations {
         None => None,

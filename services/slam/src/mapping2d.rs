@@ -123,6 +123,14 @@ impl Mapper2d {
         self.stats
     }
 
+    /// The current pose estimate of a scan the mapper placed.
+    pub fn pose_of(&self, placed: Placed) -> Pose2 {
+        match placed {
+            Placed::Node(n) => self.graph.poses[n],
+            Placed::Attached { node, offset } => self.graph.poses[node].compose(&offset),
+        }
+    }
+
     /// The scan of node `node`, in its own frame.
     pub fn node_scan(&self, node: usize) -> &Scan2 {
         &self.node_scans[node]
