@@ -25,12 +25,13 @@
 //! with a scale error of 1/n; CARMEN's step agrees best with the corrected poses of four
 //! corrected logs of five (all but Freiburg 079, whose turns carry a bias of their own).
 
+use crate::FileError;
 use slam::Pose2;
 use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// One laser scan.
 #[derive(Clone, Debug, PartialEq)]
@@ -56,6 +57,13 @@ pub struct LaserScan {
 }
 
 impl LaserScan {
+    /// The scan as a point set for scan matching (returns at or beyond the maximum range
+    /// dropped).
+    pub fn to_scan2(&self) -> slam::matching::Scan2 {
+        slam::matching::Scan2::from_polar(&self.bearings_rad(), &self.ranges_m, self.max_range_m)
+            .expect("one bearing per range by construction")
+    }
+
     /// Bearing of every beam (rad), for [`slam::matching::Scan2::from_polar`].
     pub fn bearings_rad(&self) -> Vec<f32> {
         (0..self.ranges_m.len())
@@ -155,46 +163,24 @@ impl Default for ReadOptions {
     }
 }
 
-/// Why a log could not be read. Every variant names the file.
-#[derive(Debug, thiserror::Error)]
-pub enum CarmenError {
-    /// The file could not be opened or read, or its compressed stream is corrupt or
-    /// truncated.
-    #[error("{}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    /// A line is malformed (1-based line number).
-    #[error("{}:{line}: {message}", path.display())]
-    Line {
-        path: PathBuf,
-        line: usize,
-        message: String,
-    },
-    /// The file holds no line at all.
-    #[error("{}: empty log", path.display())]
-    Empty { path: PathBuf },
-}
-
 /// Reads a CARMEN log, decompressing by extension (`.gz`, `.bz2`; anything else is plain
 /// text), with default options.
-pub fn read(path: &Path) -> Result<CarmenLog, CarmenError> {
+pub fn read(path: &Path) -> Result<CarmenLog, FileError> {
     read_with(path, &ReadOptions::default())
 }
 
 /// Reads a CARMEN log with the given options.
-pub fn read_with(path: &Path, options: &ReadOptions) -> Result<CarmenLog, CarmenError> {
+pub fn read_with(path: &Path, options: &ReadOptions) -> Result<CarmenLog, FileError> {
     let reader = open_decompressed(path)?;
     parse(reader, path, options)
 }
 
 /// Opens a file for reading, decompressing `.gz` (all members) and `.bz2` (all streams).
 /// Shared with the relations reader.
-pub(crate) fn open_decompressed(path: &Path) -> Result<Box<dyn BufRead>, CarmenError> {
-    let file = File::open(path).map_err(|source| CarmenError::Io {
+pub(crate) fn open_decompressed(path: &Path) -> Result<Box<dyn BufRead>, FileError> {
+    let file = File::open(path).map_err(|source| FileError::Io {
         path: path.to_owned(),
-        source,
+        error: source,
     })?;
     let raw: Box<dyn Read> = match path.extension().and_then(|e| e.to_str()) {
         Some("gz") => Box::new(flate2::read::MultiGzDecoder::new(BufReader::new(file))),
@@ -209,7 +195,7 @@ pub fn parse(
     reader: impl BufRead,
     path: &Path,
     options: &ReadOptions,
-) -> Result<CarmenLog, CarmenError> {
+) -> Result<CarmenLog, FileError> {
     let mut log = CarmenLog::default();
     let mut flaser_max_range_m = options.flaser_max_range_m;
     let mut lines = 0;
@@ -244,8 +230,9 @@ pub fn parse(
         }
     })?;
     if lines == 0 {
-        return Err(CarmenError::Empty {
+        return Err(FileError::Invalid {
             path: path.to_owned(),
+            message: "empty log".to_string(),
         });
     }
     Ok(log)
@@ -256,26 +243,23 @@ pub fn parse(
 pub(crate) fn for_each_line(
     mut reader: impl BufRead,
     path: &Path,
-    mut each: impl FnMut(usize, &str) -> Result<(), CarmenError>,
-) -> Result<(), CarmenError> {
+    mut each: impl FnMut(usize, &str) -> Result<(), FileError>,
+) -> Result<(), FileError> {
     let mut buf = Vec::new();
     let mut number = 0;
     loop {
         buf.clear();
         let n = reader
             .read_until(b'\n', &mut buf)
-            .map_err(|source| CarmenError::Io {
+            .map_err(|source| FileError::Io {
                 path: path.to_owned(),
-                source: std::io::Error::new(
-                    source.kind(),
-                    format!("after line {number}: {source}"),
-                ),
+                error: std::io::Error::new(source.kind(), format!("after line {number}: {source}")),
             })?;
         if n == 0 {
             return Ok(());
         }
         number += 1;
-        let line = std::str::from_utf8(&buf).map_err(|_| CarmenError::Line {
+        let line = std::str::from_utf8(&buf).map_err(|_| FileError::Line {
             path: path.to_owned(),
             line: number,
             message: "not UTF-8 text".into(),
@@ -290,12 +274,12 @@ fn bad_line(
     line: usize,
     message: String,
     options: &ReadOptions,
-) -> Result<(), CarmenError> {
+) -> Result<(), FileError> {
     if options.skip_bad_lines {
         log.bad_lines.push(BadLine { line, message });
         Ok(())
     } else {
-        Err(CarmenError::Line {
+        Err(FileError::Line {
             path: path.to_owned(),
             line,
             message,
@@ -432,7 +416,7 @@ impl<'a, 'b> Fields<'a, 'b> {
 mod tests {
     use super::*;
 
-    fn parse_str(text: &str) -> Result<CarmenLog, CarmenError> {
+    fn parse_str(text: &str) -> Result<CarmenLog, FileError> {
         parse(
             text.as_bytes(),
             Path::new("test.clf"),
@@ -487,7 +471,7 @@ mod tests {
 
     fn line_error(text: &str) -> (usize, String) {
         match parse_str(text) {
-            Err(CarmenError::Line { line, message, .. }) => (line, message),
+            Err(FileError::Line { line, message, .. }) => (line, message),
             other => panic!("expected a line error, got {other:?}"),
         }
     }
@@ -553,7 +537,9 @@ mod tests {
             parse_str("SYNC tag\nTRUEPOS 1 2 3 4 5 6 7 h 8\n\n").expect("nothing to read is fine");
         assert!(log.scans.is_empty() && log.odometry.is_empty());
         assert_eq!(log.skipped_messages.len(), 2);
-        assert!(matches!(parse_str(""), Err(CarmenError::Empty { .. })));
+        assert!(
+            matches!(parse_str(""), Err(FileError::Invalid { message, .. }) if message == "empty log")
+        );
     }
 
     #[test]
@@ -575,7 +561,7 @@ mod tests {
             assert_eq!((log.odometry.len(), log.scans.len()), (200, 200));
             std::fs::write(&path, &bytes[..bytes.len() / 2]).expect("write");
             match read(&path) {
-                Err(e @ CarmenError::Io { .. }) => assert!(e.to_string().contains(name), "{e}"),
+                Err(e @ FileError::Io { .. }) => assert!(e.to_string().contains(name), "{e}"),
                 other => panic!("{name}: truncated stream read as {other:?}"),
             }
         }

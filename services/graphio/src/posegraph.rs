@@ -4,11 +4,12 @@
 //! information of (x, y, θ). TORO: `EDGE2 i j dx dy dθ Ixx Ixy Iyy Iθθ Ixθ Iyθ` (its own
 //! order). Vertex ids need not be contiguous; nodes are numbered by increasing id.
 
+use crate::FileError;
 use slam::nalgebra::Matrix3;
 use slam::{EdgeKind, Pose2, PoseGraph, RelativeEdge, Robust};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// The text formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -40,36 +41,18 @@ pub struct GraphFile {
     pub edge_lines: Vec<usize>,
 }
 
-/// Why a pose-graph file could not be read. Names the file and, where it applies, the line.
-#[derive(Debug, thiserror::Error)]
-pub enum GraphFileError {
-    #[error("{}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{}:{line}: {message}", path.display())]
-    Line {
-        path: PathBuf,
-        line: usize,
-        message: String,
-    },
-    #[error("{}: {message}", path.display())]
-    Invalid { path: PathBuf, message: String },
-}
-
 /// Reads a g2o or TORO file.
-pub fn read(path: &Path, format: GraphFormat) -> Result<GraphFile, GraphFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| GraphFileError::Io {
+pub fn read(path: &Path, format: GraphFormat) -> Result<GraphFile, FileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {
         path: path.to_owned(),
-        source,
+        error: source,
     })?;
     parse(&text, format).map_err(|(line, message)| match line {
-        0 => GraphFileError::Invalid {
+        0 => FileError::Invalid {
             path: path.to_owned(),
             message,
         },
-        line => GraphFileError::Line {
+        line => FileError::Line {
             path: path.to_owned(),
             line,
             message,

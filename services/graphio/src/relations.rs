@@ -8,8 +8,12 @@
 //! The files are 2D: z, roll and pitch must be 0; a relation that is not planar is an error,
 //! not silently flattened. Blank lines and `#` comments are skipped.
 
-use crate::carmen::{CarmenError, for_each_line, open_decompressed};
+use crate::FileError;
+use crate::carmen::LaserScan;
+use crate::carmen::{for_each_line, open_decompressed};
 use slam::Pose2;
+use slam::matching::metric::{MetricError, RelationMetric, relation_metric};
+use std::collections::HashMap;
 use std::io::BufRead;
 use std::path::Path;
 
@@ -36,21 +40,39 @@ pub struct Relation {
     pub delta: Pose2,
 }
 
-/// Reads a relations file (plain, `.gz` or `.bz2`). Errors are the CARMEN reader's: they
-/// name the file and line.
-pub fn read(path: &Path) -> Result<Vec<Relation>, CarmenError> {
+/// Reads a relations file (plain, `.gz` or `.bz2`). Errors name the file and line.
+pub fn read(path: &Path) -> Result<Vec<Relation>, FileError> {
     parse(open_decompressed(path)?, path)
 }
 
+/// Scores the poses of a log's scans against relations: each relation's timestamps are
+/// looked up among the scans' `stamp_s` exactly (they are the FLASER `ipc_timestamp`s), and
+/// `pose_of_scan(k)` gives the pose of scan `k`. A relation without its scans is an error.
+pub fn score(
+    relations: &[Relation],
+    scans: &[LaserScan],
+    pose_of_scan: impl Fn(usize) -> Pose2,
+) -> Result<RelationMetric, MetricError> {
+    let by_stamp: HashMap<u64, usize> = scans
+        .iter()
+        .enumerate()
+        .map(|(k, s)| (s.stamp_s.to_bits(), k))
+        .collect();
+    relation_metric(
+        relations.iter().map(|r| (r.t1_s, r.t2_s, r.delta)),
+        |t: &f64| by_stamp.get(&t.to_bits()).map(|&k| pose_of_scan(k)),
+    )
+}
+
 /// Parses relations from `reader`; `path` names it in errors.
-pub fn parse(reader: impl BufRead, path: &Path) -> Result<Vec<Relation>, CarmenError> {
+pub fn parse(reader: impl BufRead, path: &Path) -> Result<Vec<Relation>, FileError> {
     let mut relations = Vec::new();
     for_each_line(reader, path, |line, text| {
         let fields: Vec<&str> = text.split_ascii_whitespace().collect();
         if fields.first().is_none_or(|f| f.starts_with('#')) {
             return Ok(());
         }
-        let error = |message: String| CarmenError::Line {
+        let error = |message: String| FileError::Line {
             path: path.to_owned(),
             line,
             message,
@@ -88,7 +110,7 @@ pub fn parse(reader: impl BufRead, path: &Path) -> Result<Vec<Relation>, CarmenE
 mod tests {
     use super::*;
 
-    fn parse_str(text: &str) -> Result<Vec<Relation>, CarmenError> {
+    fn parse_str(text: &str) -> Result<Vec<Relation>, FileError> {
         parse(text.as_bytes(), Path::new("t.relations"))
     }
 

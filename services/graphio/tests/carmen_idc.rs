@@ -22,8 +22,7 @@ fn read(relative: &str, flaser_bearings: FlaserBearings) -> CarmenLog {
 }
 
 fn scan2(scan: &LaserScan) -> Scan2 {
-    Scan2::from_polar(&scan.bearings_rad(), &scan.ranges_m, scan.max_range_m)
-        .expect("one range per bearing")
+    scan.to_scan2()
 }
 
 /// Relative corrected pose of scan j seen from scan i.

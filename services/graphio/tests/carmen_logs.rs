@@ -30,6 +30,24 @@ fn check_scans(name: &str, scans: &[LaserScan], beams: &[usize]) {
     }
 }
 
+/// Reads a log and checks its scan and odometry counts and every scan's shape.
+fn read_counted(relative: &str, scans: usize, odometry: usize, beams: &[usize]) -> CarmenLog {
+    let log = read(relative);
+    eprintln!(
+        "{relative}: {} scans, {} odometry, skipped {:?}",
+        log.scans.len(),
+        log.odometry.len(),
+        log.skipped_messages
+    );
+    assert_eq!(
+        (log.scans.len(), log.odometry.len()),
+        (scans, odometry),
+        "{relative}"
+    );
+    check_scans(relative, &log.scans, beams);
+    log
+}
+
 #[test]
 fn raw_logs_have_the_manifest_counts() {
     // (file, FLASER or ROBOTLASER1 scans, ODOM lines, beams per scan)
@@ -41,20 +59,13 @@ fn raw_logs_have_the_manifest_counts() {
         ("fr-clinic_robotlaser.clf.bz2", 6917, 0, &[180, 181]),
     ];
     for (file, scans, odometry, beams) in expected {
-        let log = read(&format!("radish_2d_laser_logs/{file}"));
-        eprintln!(
-            "{file}: {} scans, {} odometry, skipped {:?}",
-            log.scans.len(),
-            log.odometry.len(),
-            log.skipped_messages
-        );
-        assert_eq!(
-            (log.scans.len(), log.odometry.len()),
-            (scans, odometry),
-            "{file}"
+        let log = read_counted(
+            &format!("radish_2d_laser_logs/{file}"),
+            scans,
+            odometry,
+            beams,
         );
         assert!(log.bad_lines.is_empty());
-        check_scans(file, &log.scans, beams);
     }
 }
 
@@ -113,24 +124,17 @@ fn corrected_logs_have_the_manifest_counts() {
         ("freiburg-campus-corrected.log.gz", 2008, 17691, &[360]),
     ];
     for (file, scans, odometry, beams) in expected {
-        let log = read(&format!("radish_2d_corrected_logs/{file}"));
-        eprintln!(
-            "{file}: {} scans, {} odometry, skipped {:?}",
-            log.scans.len(),
-            log.odometry.len(),
-            log.skipped_messages
-        );
-        assert_eq!(
-            (log.scans.len(), log.odometry.len()),
-            (scans, odometry),
-            "{file}"
+        let log = read_counted(
+            &format!("radish_2d_corrected_logs/{file}"),
+            scans,
+            odometry,
+            beams,
         );
         assert_eq!(
             log.skipped_messages.get("NEFF"),
             Some(&scans),
             "{file}: one NEFF per scan"
         );
-        check_scans(file, &log.scans, beams);
         // In these logs the FLASER pose fields both hold the corrected pose (MANIFEST 2b).
         assert!(
             log.scans.iter().all(|s| s.laser_pose == s.odom_pose),

@@ -5,10 +5,7 @@
 
 use graphio::{carmen, relations};
 use scanio::shared_data;
-use slam::matching::Scan2;
-use slam::matching::metric::relation_metric;
 use slam::{Mapper2d, Mapper2dParams, Placed};
-use std::collections::HashMap;
 
 #[test]
 fn aces_relations_error_stays_low() {
@@ -19,25 +16,11 @@ fn aces_relations_error_stays_low() {
     let placed: Vec<Placed> = log
         .scans
         .iter()
-        .map(|s| {
-            let scan =
-                Scan2::from_polar(&s.bearings_rad(), &s.ranges_m, s.max_range_m).expect("scan");
-            mapper.add_scan(s.laser_pose, scan).expect("add")
-        })
+        .map(|s| mapper.add_scan(s.laser_pose, s.to_scan2()).expect("add"))
         .collect();
     mapper.finish().expect("optimize");
-    let by_stamp: HashMap<u64, usize> = log
-        .scans
-        .iter()
-        .enumerate()
-        .map(|(k, s)| (s.stamp_s.to_bits(), k))
-        .collect();
-    let m = relation_metric(rel.iter().map(|r| (r.t1_s, r.t2_s, r.delta)), |t: &f64| {
-        by_stamp
-            .get(&t.to_bits())
-            .map(|&k| mapper.pose_of(placed[k]))
-    })
-    .expect("every relation has its scans");
+    let m = relations::score(&rel, &log.scans, |k| mapper.pose_of(placed[k]))
+        .expect("every relation has its scans");
     let stats = mapper.stats();
     println!(
         "ACES: {} nodes, {} loop closures; relation error {:.4} ± {:.4} m (max {:.3}), rotation {:.4} rad",

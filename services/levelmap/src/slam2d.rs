@@ -3,12 +3,9 @@
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use graphio::carmen::{self, LaserScan};
+use graphio::carmen;
 use serde::Serialize;
-use slam::matching::Scan2;
-use slam::matching::metric::relation_metric;
 use slam::{Mapper2d, Mapper2dParams, MapperStats};
-use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -92,7 +89,7 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
     let mut mapper = Mapper2d::new(load_params(args.config.as_deref())?);
     let mut placed = Vec::with_capacity(log.scans.len());
     for scan in &log.scans {
-        placed.push(mapper.add_scan(scan.laser_pose, to_scan2(scan)?)?);
+        placed.push(mapper.add_scan(scan.laser_pose, scan.to_scan2())?);
     }
     let report = mapper.finish()?;
     let elapsed_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -103,23 +100,14 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         None => None,
         Some(path) => {
             let relations = graphio::relations::read(path)?;
-            let by_stamp: HashMap<u64, usize> = log
-                .scans
-                .iter()
-                .enumerate()
-                .map(|(k, s)| (s.stamp_s.to_bits(), k))
-                .collect();
-            let metric = relation_metric(
-                relations.iter().map(|r| (r.t1_s, r.t2_s, r.delta)),
-                |t: &f64| by_stamp.get(&t.to_bits()).map(|&k| pose_of_scan(k)),
-            )
-            .map_err(|e| {
-                anyhow::anyhow!(
-                    "{}: {e} (no scan with that timestamp in {})",
-                    path.display(),
-                    args.log.display()
-                )
-            })?;
+            let metric =
+                graphio::relations::score(&relations, &log.scans, pose_of_scan).map_err(|e| {
+                    anyhow::anyhow!(
+                        "{}: {e} (no scan with that timestamp in {})",
+                        path.display(),
+                        args.log.display()
+                    )
+                })?;
             Some((relations.len(), metric))
         }
     };
@@ -175,11 +163,6 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         }
     }
     Ok(())
-}
-
-fn to_scan2(scan: &LaserScan) -> Result<Scan2> {
-    Scan2::from_polar(&scan.bearings_rad(), &scan.ranges_m, scan.max_range_m)
-        .map_err(|e| anyhow::anyhow!("scan at {} s: {e}", scan.stamp_s))
 }
 
 /// Scan points (black) and the node path (blue) on white, x east → right, y north → up.

@@ -16,10 +16,11 @@ use std::path::{Path, PathBuf};
 /// Why a scan file could not be read. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum LoadError {
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        /// The cause, already in the message (not a chained source, so it prints once).
+        error: std::io::Error,
     },
     #[error("{}: empty file", path.display())]
     Empty { path: PathBuf },
@@ -113,7 +114,7 @@ pub fn shared_data(relative: &str) -> PathBuf {
 pub(crate) fn read_nonempty(path: &Path) -> Result<Vec<u8>, LoadError> {
     let bytes = std::fs::read(path).map_err(|source| LoadError::Io {
         path: path.to_owned(),
-        source,
+        error: source,
     })?;
     if bytes.is_empty() {
         return Err(LoadError::Empty {

@@ -33,7 +33,7 @@ pub fn save(path: &Path, file: &SimScanFile) -> Result<(), LoadError> {
     let json = serde_json::to_vec(file).map_err(|e| LoadError::invalid(path, e.to_string()))?;
     std::fs::write(path, json).map_err(|source| LoadError::Io {
         path: path.to_owned(),
-        source,
+        error: source,
     })
 }
 

@@ -91,7 +91,7 @@ pub fn load_pose(path: &Path) -> Result<Option<Isometry3<f64>>, LoadError> {
         Err(source) => {
             return Err(LoadError::Io {
                 path: path.to_owned(),
-                source,
+                error: source,
             });
         }
     };

@@ -40,9 +40,7 @@ fn freiburg_campus_pair(bencher: divan::Bencher) {
     let path = scanio::shared_data("radish_2d_corrected_logs/freiburg-campus-corrected.log.gz");
     let log = graphio::carmen::read(&path).unwrap_or_else(|e| panic!("{e}"));
     let (a, b) = (&log.scans[7], &log.scans[8]);
-    let scan = |s: &graphio::carmen::LaserScan| {
-        Scan2::from_polar(&s.bearings_rad(), &s.ranges_m, s.max_range_m).expect("same lengths")
-    };
+    let scan = |s: &graphio::carmen::LaserScan| s.to_scan2();
     let (reference, current) = (scan(a), scan(b));
     let truth = a.laser_pose.between(&b.laser_pose);
     let guess = truth.compose(&Pose2::new(0.2, 0.2, 3f64.to_radians()));
