@@ -1,29 +1,35 @@
 //! Sparse symmetric positive definite systems, solved with faer's supernodal sparse Cholesky.
-//! The symbolic factorization (AMD ordering, elimination tree, supernodes) is computed once
-//! per sparsity pattern; every numeric factorization with that pattern reuses it, and the
-//! factor's storage and workspace are kept between factorizations.
+//! The fill-reducing ordering and the symbolic factorization (elimination tree, supernodes)
+//! are computed once per sparsity pattern. The pattern is stored already permuted, and every
+//! value's place in it is known, so a numeric factorization only scatters the values and
+//! factors: no sorting, no permuting and no allocation per factorization.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
-use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
     factorize_symbolic_cholesky,
 };
 use faer::sparse::linalg::{SupernodalThreshold, amd};
-use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
-use faer::{Conj, Mat, Par, Side};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+use faer::{Conj, MatMut, Par, Side};
 
 /// A fixed sparsity pattern (lower triangle, duplicates summed) with its symbolic Cholesky,
 /// and the storage of the last numeric factor.
 pub struct SparsePattern {
     n: usize,
     entries: Vec<(usize, usize)>,
+    /// `inverse[i]`: the place of unknown i in the fill-reducing order.
+    inverse: Vec<usize>,
+    /// The lower triangle of the permuted matrix.
     pattern: SymbolicSparseColMat<usize>,
-    argsort: Argsort<usize>,
+    /// `slot[k]`: where the value of entry k goes in `values`.
+    slot: Vec<usize>,
+    values: Vec<f64>,
     symbolic: SymbolicCholesky<usize>,
     factor: Vec<f64>,
     factored: bool,
+    rhs: Vec<f64>,
     workspace: MemBuffer,
 }
 
@@ -48,42 +54,114 @@ impl SparsePattern {
         SparsePattern::new_blocked(n, entries, 1)
     }
 
-    /// Like [`Self::new`] for unknowns in blocks of `block` (a pose's x, y, θ): the
-    /// fill-reducing ordering is computed on the graph of blocks, `block²` times smaller, and
-    /// keeps each block's unknowns together.
+    /// Like [`Self::new`] for unknowns in blocks of `block` (a pose's x, y, θ). The pattern
+    /// is built on the graph of blocks, `block²` times smaller: each block that holds an entry
+    /// is kept whole, and the fill-reducing ordering keeps each block's unknowns together.
     pub fn new_blocked(n: usize, entries: &[(usize, usize)], block: usize) -> SparsePattern {
-        let pairs: Vec<Pair<usize, usize>> = entries
+        assert!(
+            block > 0 && n.is_multiple_of(block),
+            "unknowns come in whole blocks"
+        );
+        let blocks = n / block;
+        let original = block_columns(
+            blocks,
+            entries.iter().map(|&(row, col)| {
+                debug_assert!(row >= col && row < n, "lower triangle only");
+                (row / block, col / block)
+            }),
+        );
+        let place = block_amd(&original);
+        let permuted = block_columns(
+            blocks,
+            original.iter().enumerate().flat_map(|(col, rows)| {
+                let place = &place;
+                rows.iter().map(move |&row| {
+                    let (a, b) = (place[row], place[col]);
+                    (a.max(b), a.min(b))
+                })
+            }),
+        );
+        let inverse: Vec<usize> = (0..n)
+            .map(|i| place[i / block] * block + i % block)
+            .collect();
+
+        // The lower triangle, column by column: the rest of the diagonal block, then each
+        // block below it whole.
+        let (mut col_ptr, mut row_idx) = (vec![0], Vec::new());
+        for (col, rows) in permuted.iter().enumerate() {
+            for d in 0..block {
+                row_idx.extend(col * block + d..(col + 1) * block);
+                for &row in &rows[1..] {
+                    row_idx.extend(row * block..(row + 1) * block);
+                }
+                col_ptr.push(row_idx.len());
+            }
+        }
+        let slot = entries
             .iter()
             .map(|&(row, col)| {
-                debug_assert!(row >= col, "lower triangle only");
-                Pair { row, col }
+                let (a, b) = (inverse[row], inverse[col]);
+                let (hi, lo) = (a.max(b), a.min(b));
+                let (hi_block, lo_block) = (hi / block, lo / block);
+                let start = col_ptr[lo];
+                if hi_block == lo_block {
+                    start + hi - lo
+                } else {
+                    let k = permuted[lo_block][1..]
+                        .binary_search(&hi_block)
+                        .expect("every entry's block is in the pattern");
+                    start + block - lo % block + k * block + hi % block
+                }
             })
             .collect();
-        let (pattern, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
-            .expect("indices within the matrix");
+
+        // faer's symbolic analysis with the identity ordering reads the upper triangle
+        // (whatever side it is told): the transpose, the blocks above the diagonal first.
+        let mut above: Vec<Vec<usize>> = vec![Vec::new(); blocks];
+        for (col, rows) in permuted.iter().enumerate() {
+            for &row in &rows[1..] {
+                above[row].push(col);
+            }
+        }
+        let (mut upper_ptr, mut upper_idx) = (vec![0], Vec::new());
+        for (col, rows) in above.iter().enumerate() {
+            for d in 0..block {
+                for &row in rows {
+                    upper_idx.extend(row * block..(row + 1) * block);
+                }
+                upper_idx.extend(col * block..=col * block + d);
+                upper_ptr.push(upper_idx.len());
+            }
+        }
+        let upper = SymbolicSparseColMat::new_checked(n, n, upper_ptr, None, upper_idx);
         // Pose graphs fill in: the supernodal (blocked, dense-kernel) factorization is several
         // times faster than the simplicial one faer's heuristic picks for them.
         let params = CholeskySymbolicParams {
             supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
             ..Default::default()
         };
-        let (perm, perm_inv) = block_amd(n, entries, block);
-        let ordering = SymmetricOrdering::Custom(PermRef::new_checked(&perm, &perm_inv, n));
-        let symbolic = factorize_symbolic_cholesky(pattern.as_ref(), Side::Lower, ordering, params)
-            .expect("symbolic Cholesky of a valid pattern");
+        let symbolic = factorize_symbolic_cholesky(
+            upper.as_ref(),
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            params,
+        )
+        .expect("symbolic Cholesky of a valid pattern");
         let workspace = MemBuffer::new(StackReq::any_of(&[
             symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
             symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
         ]));
-        let factor = vec![0.0; symbolic.len_val()];
         SparsePattern {
             n,
             entries: entries.to_vec(),
-            pattern,
-            argsort,
+            inverse,
+            values: vec![0.0; row_idx.len()],
+            pattern: SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx),
+            slot,
+            factor: vec![0.0; symbolic.len_val()],
             symbolic,
-            factor,
             factored: false,
+            rhs: vec![0.0; n],
             workspace,
         }
     }
@@ -100,13 +178,17 @@ impl SparsePattern {
     /// Factorizes the matrix with these `values` (one per entry given to [`Self::new`]),
     /// keeping the factor for [`Self::solve`].
     pub fn factorize(&mut self, values: &[f64]) -> Result<(), NotPositiveDefinite> {
-        let matrix = SparseColMat::new_from_argsort(self.pattern.clone(), &self.argsort, values)
-            .expect("one value per pattern entry");
+        assert_eq!(values.len(), self.slot.len(), "one value per pattern entry");
+        self.values.fill(0.0);
+        for (&slot, &value) in self.slot.iter().zip(values) {
+            self.values[slot] += value;
+        }
+        let matrix = SparseColMatRef::new(self.pattern.as_ref(), &self.values);
         self.factored = false;
         self.symbolic
             .factorize_numeric_llt::<f64>(
                 &mut self.factor,
-                matrix.as_ref(),
+                matrix,
                 Side::Lower,
                 LltRegularization::default(),
                 Par::Seq,
@@ -124,53 +206,70 @@ impl SparsePattern {
     /// If the last [`Self::factorize`] did not succeed.
     pub fn solve(&mut self, b: &[f64]) -> Vec<f64> {
         assert!(self.factored, "solve needs a successful factorize");
-        let mut rhs = Mat::from_fn(self.n, 1, |i, _| b[i]);
+        for (&place, &value) in self.inverse.iter().zip(b) {
+            self.rhs[place] = value;
+        }
         LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(
             Conj::No,
-            rhs.as_mut(),
+            MatMut::from_column_major_slice_mut(&mut self.rhs, self.n, 1),
             Par::Seq,
             MemStack::new(&mut self.workspace),
         );
-        (0..self.n).map(|i| rhs[(i, 0)]).collect()
+        self.inverse.iter().map(|&place| self.rhs[place]).collect()
     }
 }
 
-/// Approximate minimum degree ordering of the block graph, expanded to the unknowns:
-/// (forward, inverse) permutations of 0..n.
-fn block_amd(n: usize, entries: &[(usize, usize)], block: usize) -> (Vec<usize>, Vec<usize>) {
-    assert!(
-        block > 0 && n.is_multiple_of(block),
-        "unknowns come in whole blocks"
-    );
-    let blocks = n / block;
-    // Every block holds its top-left entry: one pair per block suffices.
-    let pairs: Vec<Pair<usize, usize>> = entries
-        .iter()
-        .filter(|&&(r, c)| r.is_multiple_of(block) && c.is_multiple_of(block))
-        .map(|&(r, c)| Pair {
-            row: r / block,
-            col: c / block,
-        })
-        .collect();
-    let (graph, _) =
-        SymbolicSparseColMat::try_new_from_indices(blocks, blocks, &pairs).expect("block indices");
-    let (mut fwd, mut inv) = (vec![0usize; blocks], vec![0usize; blocks]);
-    let nnz = graph.compute_nnz();
-    let mut buffer = MemBuffer::new(amd::order_maybe_unsorted_scratch::<usize>(blocks, nnz));
+/// The lower triangle of a block pattern from its `(row, col)` block pairs (duplicates
+/// allowed): for each block column, the diagonal block first, then the block rows below it
+/// in increasing order.
+fn block_columns(blocks: usize, pairs: impl Iterator<Item = (usize, usize)>) -> Vec<Vec<usize>> {
+    let mut columns: Vec<Vec<usize>> = (0..blocks).map(|col| vec![col]).collect();
+    for (row, col) in pairs {
+        // The entries of one block come together: skip the repeats cheaply here.
+        if row != col && columns[col].last() != Some(&row) {
+            columns[col].push(row);
+        }
+    }
+    for rows in &mut columns {
+        rows[1..].sort_unstable();
+        let mut unique = 1;
+        for k in 1..rows.len() {
+            if rows[k] != rows[unique - 1] {
+                rows[unique] = rows[k];
+                unique += 1;
+            }
+        }
+        rows.truncate(unique);
+    }
+    columns
+}
+
+/// Approximate minimum degree ordering of a block pattern (as [`block_columns`] gives it):
+/// the place of each block in the order.
+fn block_amd(columns: &[Vec<usize>]) -> Vec<usize> {
+    let blocks = columns.len();
+    let mut col_ptr = Vec::with_capacity(blocks + 1);
+    col_ptr.push(0);
+    let mut row_idx = Vec::new();
+    for rows in columns {
+        row_idx.extend_from_slice(rows);
+        col_ptr.push(row_idx.len());
+    }
+    let graph = SymbolicSparseColMat::new_checked(blocks, blocks, col_ptr, None, row_idx);
+    let (mut order, mut place) = (vec![0usize; blocks], vec![0usize; blocks]);
+    let mut buffer = MemBuffer::new(amd::order_maybe_unsorted_scratch::<usize>(
+        blocks,
+        graph.compute_nnz(),
+    ));
     amd::order_maybe_unsorted(
-        &mut fwd,
-        &mut inv,
+        &mut order,
+        &mut place,
         graph.as_ref(),
         amd::Control::default(),
         MemStack::new(&mut buffer),
     )
     .expect("AMD ordering of a valid pattern");
-    let expand = |p: &[usize]| -> Vec<usize> {
-        p.iter()
-            .flat_map(|&b| (0..block).map(move |d| b * block + d))
-            .collect()
-    };
-    (expand(&fwd), expand(&inv))
+    place
 }
 
 /// Solves A x = b once, for A given as lower-triangle triplets (duplicates summed), with

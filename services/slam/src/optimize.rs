@@ -30,7 +30,10 @@ pub struct OptimizeParams {
     pub method: Method,
     /// Most iterations (linear solves that changed the poses).
     pub max_iterations: u32,
-    /// Stop when an accepted step lowers the cost by less than this fraction of it.
+    /// Stop when an accepted step lowers the cost by less than this fraction of it. Default
+    /// 1e-6, Ceres' function tolerance (GTSAM's is 1e-5): near the optimum the steps shrink
+    /// quadratically, so the cost is then within about 1e-9 of its minimum on the public
+    /// benchmarks.
     pub relative_decrease: f64,
     /// Stop when no pose variable moves by more than this (m or rad).
     pub min_step: f64,
@@ -44,7 +47,7 @@ impl Default for OptimizeParams {
         OptimizeParams {
             method: Method::LevenbergMarquardt,
             max_iterations: 100,
-            relative_decrease: 1e-9,
+            relative_decrease: 1e-6,
             min_step: 1e-10,
             initial_damping: 1e-4,
         }
@@ -186,7 +189,10 @@ struct Linearization {
     values: Vec<f64>,
     gradient: Vec<f64>,
     diagonal: Vec<f64>,
+    /// Σ ρ(eᵀΩe), what is minimized.
     cost: f64,
+    /// Σ eᵀΩe, what is reported.
+    chi2: f64,
 }
 
 impl Optimizer {
@@ -207,17 +213,16 @@ impl Optimizer {
             self.structure = Some(Structure::build(graph));
         }
         let structure = self.structure.as_mut().expect("built above");
-        let initial_chi2 = graph.chi2();
-        let dim = structure.pattern.dim();
+        let mut lin = linearize(graph, structure);
         let mut report = OptimizeReport {
-            initial_chi2,
-            final_chi2: initial_chi2,
-            final_cost: robust_cost(graph),
+            initial_chi2: lin.chi2,
+            final_chi2: lin.chi2,
+            final_cost: lin.cost,
             iterations: 0,
             stop: StopReason::MaxIterations,
             reused_symbolic,
         };
-        if dim == 0 {
+        if structure.pattern.dim() == 0 {
             report.stop = StopReason::SmallStep;
             return Ok(report);
         }
@@ -225,7 +230,6 @@ impl Optimizer {
         // Undamped until a step fails.
         let mut lambda = 0.0;
         let mut nu = 2.0;
-        let mut lin = linearize(graph, structure);
         while report.iterations < params.max_iterations {
             let damping = match params.method {
                 Method::GaussNewton => 0.0,
@@ -312,8 +316,9 @@ impl Optimizer {
                 break;
             }
         }
-        report.final_chi2 = graph.chi2();
-        report.final_cost = robust_cost(graph);
+        // `lin` is always of the poses the graph holds now.
+        report.final_chi2 = lin.chi2;
+        report.final_cost = lin.cost;
         Ok(report)
     }
 
@@ -355,20 +360,6 @@ impl Optimizer {
     }
 }
 
-/// Σ ρ(eᵀΩe) with each edge's robust kernel.
-pub fn robust_cost(graph: &PoseGraph) -> f64 {
-    graph
-        .edges
-        .iter()
-        .map(|e| e.robust.cost(e.chi2(&graph.poses)))
-        .sum::<f64>()
-        + graph
-            .gps
-            .iter()
-            .map(|g| g.robust.cost(g.chi2(&graph.poses)))
-            .sum::<f64>()
-}
-
 fn linearize(graph: &PoseGraph, s: &Structure) -> Linearization {
     let dim = s.pattern.dim();
     let mut lin = Linearization {
@@ -376,12 +367,14 @@ fn linearize(graph: &PoseGraph, s: &Structure) -> Linearization {
         gradient: vec![0.0; dim],
         diagonal: vec![0.0; dim],
         cost: 0.0,
+        chi2: 0.0,
     };
     let zero = Block::zeros();
     for e in &graph.edges {
         let (err, ji, jj) = e.linearize(&graph.poses);
         let chi2 = err.dot(&(e.information * err));
         let w = e.robust.weight(chi2);
+        lin.chi2 += chi2;
         lin.cost += e.robust.cost(chi2);
         let omega = e.information * w;
         let (oi, oj) = (ji.transpose() * omega, jj.transpose() * omega);
@@ -395,6 +388,7 @@ fn linearize(graph: &PoseGraph, s: &Structure) -> Linearization {
         let (err, j) = g.linearize(&graph.poses);
         let chi2 = err.dot(&(g.information * err));
         let w = g.robust.weight(chi2);
+        lin.chi2 += chi2;
         lin.cost += g.robust.cost(chi2);
         let o = j.transpose() * (g.information * w);
         let h = o * j;
