@@ -190,6 +190,7 @@ fn push_edge_values(
 }
 
 /// The linearized system at the current poses.
+#[derive(Default)]
 struct Linearization {
     values: Vec<f64>,
     gradient: Vec<f64>,
@@ -218,7 +219,8 @@ impl Optimizer {
             self.structure = Some(Structure::build(graph));
         }
         let structure = self.structure.as_mut().expect("built above");
-        let mut lin = linearize(graph, structure);
+        let (mut lin, mut candidate) = (Linearization::default(), Linearization::default());
+        linearize(graph, structure, &mut lin);
         let mut report = OptimizeReport {
             initial_chi2: lin.chi2,
             final_chi2: lin.chi2,
@@ -270,7 +272,7 @@ impl Optimizer {
             let max_step = step.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             let previous = graph.poses.clone();
             apply_step(graph, structure, &step);
-            let candidate = linearize(graph, structure);
+            linearize(graph, structure, &mut candidate);
             let cost = candidate.cost;
             let accepted = match params.method {
                 Method::GaussNewton => true,
@@ -312,7 +314,7 @@ impl Optimizer {
             }
             report.iterations += 1;
             let decrease = (lin.cost - cost) / lin.cost.max(f64::MIN_POSITIVE);
-            lin = candidate;
+            std::mem::swap(&mut lin, &mut candidate);
             if max_step < params.min_step {
                 report.stop = StopReason::SmallStep;
                 break;
@@ -354,7 +356,8 @@ impl Optimizer {
         let Some(v) = structure.var_of[node] else {
             return Ok(None);
         };
-        let lin = linearize(graph, structure);
+        let mut lin = Linearization::default();
+        linearize(graph, structure, &mut lin);
         structure
             .pattern
             .factorize(&lin.values)
@@ -372,15 +375,15 @@ impl Optimizer {
     }
 }
 
-fn linearize(graph: &PoseGraph, s: &Structure) -> Linearization {
+/// Linearizes the network at its current poses into `lin`, reusing its storage.
+fn linearize(graph: &PoseGraph, s: &Structure, lin: &mut Linearization) {
     let dim = s.pattern.dim();
-    let mut lin = Linearization {
-        values: Vec::with_capacity(graph.edges.len() * 21 + graph.gps.len() * 6 + dim),
-        gradient: vec![0.0; dim],
-        diagonal: vec![0.0; dim],
-        cost: 0.0,
-        chi2: 0.0,
-    };
+    lin.values.clear();
+    lin.gradient.clear();
+    lin.gradient.resize(dim, 0.0);
+    lin.diagonal.clear();
+    lin.diagonal.resize(dim, 0.0);
+    (lin.cost, lin.chi2) = (0.0, 0.0);
     let zero = Block::zeros();
     for e in &graph.edges {
         let (err, ji, jj) = e.linearize(&graph.poses);
@@ -393,8 +396,8 @@ fn linearize(graph: &PoseGraph, s: &Structure) -> Linearization {
         let (hii, hjj, hij) = (oi * ji, oj * jj, oi * jj);
         let (a, b) = (s.var_of[e.from], s.var_of[e.to]);
         push_edge_values(&mut lin.values, a, b, &hii, &hjj, &hij);
-        accumulate(&mut lin, a, &(oi * err), &hii);
-        accumulate(&mut lin, b, &(oj * err), &hjj);
+        accumulate(lin, a, &(oi * err), &hii);
+        accumulate(lin, b, &(oj * err), &hjj);
     }
     for g in &graph.gps {
         let (err, j) = g.linearize(&graph.poses);
@@ -406,10 +409,9 @@ fn linearize(graph: &PoseGraph, s: &Structure) -> Linearization {
         let h = o * j;
         let a = s.var_of[g.node];
         push_edge_values(&mut lin.values, a, None, &h, &zero, &zero);
-        accumulate(&mut lin, a, &(o * err), &h);
+        accumulate(lin, a, &(o * err), &h);
     }
     lin.values.extend(std::iter::repeat_n(0.0, dim));
-    lin
 }
 
 fn accumulate(lin: &mut Linearization, v: Option<usize>, g: &SVector<f64, 3>, h: &Block) {
