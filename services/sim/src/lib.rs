@@ -61,6 +61,7 @@
 //! horizontal 2D laser ([`FixedScanner2d`]), 3D dead reckoning ([`DeadReckoning`]) and GPS
 //! ([`Gps`]). [`scenario`] packs ready-made scans ([`SimScanFile`]).
 
+pub mod fleet;
 pub mod geodesy;
 mod park;
 pub mod rng;
@@ -71,6 +72,7 @@ pub mod shape;
 pub mod terrain;
 pub mod world;
 
+pub use fleet::{FleetRobot, FleetScan};
 pub use geodesy::{GeoDatum, Geodetic, PARK_DATUM};
 pub use rng::Rng;
 pub use robot::{RobotBody, Route};

@@ -14,7 +14,7 @@ pub mod robust;
 pub mod se2;
 
 pub use init::{Init, InitError, initialize};
-pub use mapping2d::{Mapper2d, Mapper2dParams, MapperStats, Placed};
+pub use mapping2d::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Placed};
 pub use nalgebra;
 pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

@@ -3,6 +3,13 @@
 //! verified by IDC and the quality gate, and the network re-optimized as closures arrive.
 //! Scans between nodes hang off their node by an IDC offset, so every scan gets a pose.
 //!
+//! Several robots share one network: each has its own chain of nodes, its first node at its
+//! odometry pose (robots start with odometry in the map frame, as from a known dock, or GPS
+//! pulls them in), and loop-closure candidates include the other robots' nodes, so robots
+//! that meet share one map. GPS fixes become GPS edges with a robust kernel; while a part of
+//! the network has fixes at fewer than two nodes and no link to the first robot's chain, it
+//! is not optimized yet (it keeps its dead-reckoned estimates).
+//!
 //! Loop-closure candidates are earlier nodes whose current estimate lies within a search
 //! radius of the new node's, excluding its recent predecessors; a candidate becomes an edge
 //! only when IDC matches it and the gate accepts the match, and then with a soft robust
@@ -11,11 +18,11 @@
 //! it discarded the right closures too, and the relation error tripled.)
 
 use crate::matching::{IdcParams, QualityGate, Scan2, accept, idc};
-use crate::network::{EdgeKind, GraphError, PoseGraph, RelativeEdge};
+use crate::network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge, is_information};
 use crate::optimize::{OptimizeParams, OptimizeReport, Optimizer};
 use crate::robust::Robust;
 use crate::se2::{Pose2, wrap_angle};
-use nalgebra::Matrix3;
+use nalgebra::{Matrix2, Matrix3, Vector2};
 use serde::{Deserialize, Serialize};
 
 /// Tunables of the 2D mapper, each with its unit.
@@ -43,8 +50,12 @@ pub struct Mapper2dParams {
     pub loop_min_node_gap: usize,
     /// At most this many candidates are matched per new node (the nearest first).
     pub loop_max_candidates: usize,
-    /// Robust kernel of loop closures.
+    /// Robust kernel of loop closures (within and between robots).
     pub loop_robust: Robust,
+    /// Candidates on another robot's chain: within this distance (m) of the new node.
+    pub inter_robot_search_radius_m: f64,
+    /// Robust kernel of GPS edges (multipath jumps).
+    pub gps_robust: Robust,
     pub idc: IdcParams,
     pub gate: QualityGate,
     pub optimize: OptimizeParams,
@@ -66,6 +77,8 @@ impl Default for Mapper2dParams {
             loop_min_node_gap: 20,
             loop_max_candidates: 4,
             loop_robust: Robust::Cauchy { c: 10.0 },
+            inter_robot_search_radius_m: 3.0,
+            gps_robust: Robust::Cauchy { c: 2.0 },
             idc: IdcParams::default(),
             gate: QualityGate::default(),
             optimize: OptimizeParams::default(),
@@ -90,8 +103,35 @@ pub struct MapperStats {
     pub sequential_matches: usize,
     pub sequential_rejected: usize,
     pub loop_candidates: usize,
+    /// Loop closures, within a robot's chain and between robots.
     pub loop_closures: usize,
+    /// Of `loop_closures`, those between two robots.
+    pub inter_robot_closures: usize,
+    pub gps_edges: usize,
     pub optimizations: usize,
+    /// Optimizations put off because a part of the network was not anchored yet.
+    pub deferred_optimizations: usize,
+}
+
+/// A GPS fix for a scan, in the map's east-north frame (see
+/// [`crate::geodesy::GeoDatum::geodetic_to_enu`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpsObservation {
+    /// Antenna position east and north of the datum (m).
+    pub position_m: Vector2<f64>,
+    /// Its covariance (m²), from the fix.
+    pub covariance_m2: Matrix2<f64>,
+    /// The antenna in the scan's frame (m).
+    pub lever_arm_m: Vector2<f64>,
+}
+
+/// One robot's chain of nodes.
+#[derive(Clone, Copy, Debug)]
+struct Chain {
+    last_node: usize,
+    last_odometry: Pose2,
+    /// Nodes in the chain so far.
+    length: usize,
 }
 
 /// The incremental 2D mapper.
@@ -100,9 +140,12 @@ pub struct Mapper2d {
     params: Mapper2dParams,
     graph: PoseGraph,
     node_scans: Vec<Scan2>,
-    node_odometry: Vec<Pose2>,
-    /// Path length travelled up to each node (m).
+    /// The robot of each node, and the node's place in that robot's chain.
+    node_robot: Vec<(usize, usize)>,
+    /// Path length the node's robot travelled up to the node (m).
     node_path_m: Vec<f64>,
+    /// Each robot's chain, by robot index.
+    chains: Vec<Option<Chain>>,
     optimizer: Optimizer,
     stats: MapperStats,
 }
@@ -136,16 +179,41 @@ impl Mapper2d {
         &self.node_scans[node]
     }
 
-    /// Adds a scan taken at `odometry` (any consistent odometry frame): a new node when the
-    /// robot moved far enough since the last node, else attached to the last node.
+    /// The robot of node `node` and the node's place in its chain.
+    pub fn node_robot(&self, node: usize) -> (usize, usize) {
+        self.node_robot[node]
+    }
+
+    /// Adds a scan taken at `odometry` (any consistent odometry frame) by a single robot:
+    /// [`Self::add_robot_scan`] for robot 0 without GPS.
     pub fn add_scan(&mut self, odometry: Pose2, scan: Scan2) -> Result<Placed, GraphError> {
+        self.add_robot_scan(0, odometry, scan, None)
+    }
+
+    /// Adds a scan of robot `robot` (a small index) taken at `odometry` (the robot's
+    /// odometry frame), with a GPS fix if there is one: a new node when the robot moved far
+    /// enough since its last node (or it has none yet), else attached to its last node.
+    pub fn add_robot_scan(
+        &mut self,
+        robot: usize,
+        odometry: Pose2,
+        scan: Scan2,
+        gps: Option<GpsObservation>,
+    ) -> Result<Placed, GraphError> {
         self.stats.scans += 1;
-        let Some(&last_odometry) = self.node_odometry.last() else {
-            self.push_node(odometry, odometry, scan);
-            return Ok(Placed::Node(0));
+        if self.chains.len() <= robot {
+            self.chains.resize(robot + 1, None);
+        }
+        let Some(chain) = self.chains[robot] else {
+            let node = self.push_node(robot, odometry, odometry, 0.0, scan);
+            let anchored = self.add_gps(node, gps);
+            if anchored {
+                self.optimize_when_anchored()?;
+            }
+            return Ok(Placed::Node(node));
         };
-        let last = self.graph.poses.len() - 1;
-        let step = last_odometry.between(&odometry);
+        let last = chain.last_node;
+        let step = chain.last_odometry.between(&odometry);
         let moved = step.x.hypot(step.y) >= self.params.node_distance_m
             || wrap_angle(step.theta).abs() >= self.params.node_rotation_rad;
         // Match against the last node from the odometry guess.
@@ -156,9 +224,9 @@ impl Mapper2d {
             let offset = matched.map_or(step, |m| m.pose);
             return Ok(Placed::Attached { node: last, offset });
         }
-        let node = self.graph.poses.len();
         let estimate = self.graph.poses[last].compose(&matched.as_ref().map_or(step, |m| m.pose));
-        self.push_node(estimate, odometry, scan);
+        let path = self.node_path_m[last] + step.x.hypot(step.y);
+        let node = self.push_node(robot, estimate, odometry, path, scan);
         // The scan match when the gate accepts it, else odometry: where both exist, the
         // match is far more precise and odometry would only pull it off (its errors are not
         // independent white noise).
@@ -186,8 +254,9 @@ impl Mapper2d {
                 });
             }
         }
-        if self.close_loops(node) > 0 {
-            self.optimize()?;
+        let closed = self.close_loops(node) > 0;
+        if self.add_gps(node, gps) || closed {
+            self.optimize_when_anchored()?;
         }
         Ok(Placed::Node(node))
     }
@@ -197,45 +266,93 @@ impl Mapper2d {
         self.optimize()
     }
 
-    fn push_node(&mut self, estimate: Pose2, odometry: Pose2, scan: Scan2) {
-        let path = match (self.node_odometry.last(), self.node_path_m.last()) {
-            (Some(previous), Some(length)) => {
-                length + (odometry.x - previous.x).hypot(odometry.y - previous.y)
-            }
-            _ => 0.0,
-        };
-        self.node_path_m.push(path);
+    fn push_node(
+        &mut self,
+        robot: usize,
+        estimate: Pose2,
+        odometry: Pose2,
+        path_m: f64,
+        scan: Scan2,
+    ) -> usize {
+        let node = self.graph.poses.len();
+        let length = self.chains[robot].map_or(0, |c| c.length);
+        self.chains[robot] = Some(Chain {
+            last_node: node,
+            last_odometry: odometry,
+            length: length + 1,
+        });
+        self.node_robot.push((robot, length));
+        self.node_path_m.push(path_m);
         self.graph.poses.push(estimate);
-        self.node_odometry.push(odometry);
         self.node_scans.push(scan);
         self.stats.nodes += 1;
+        node
     }
 
-    /// Matches `node` against earlier nodes near it; returns how many closures were added.
+    /// Adds the GPS edge of `node`'s fix; returns whether there was one.
+    fn add_gps(&mut self, node: usize, gps: Option<GpsObservation>) -> bool {
+        let Some(fix) = gps else {
+            return false;
+        };
+        // A fix the network would reject (NaN, a covariance not positive definite) is
+        // dropped here rather than failing every later optimization.
+        let Some(information) = fix.covariance_m2.try_inverse() else {
+            return false;
+        };
+        if !(is_information(&information)
+            && fix
+                .position_m
+                .iter()
+                .chain(fix.lever_arm_m.iter())
+                .all(|v| v.is_finite()))
+        {
+            return false;
+        }
+        let edge = GpsEdge {
+            node,
+            position_m: fix.position_m,
+            information,
+            lever_arm_m: fix.lever_arm_m,
+            robust: self.params.gps_robust,
+        };
+        self.graph.gps.push(edge);
+        self.stats.gps_edges += 1;
+        true
+    }
+
+    /// Matches `node` against earlier nodes near it, its own robot's and the others';
+    /// returns how many closures were added.
     fn close_loops(&mut self, node: usize) -> usize {
         let p = self.params.clone();
         let here = self.graph.poses[node];
-        let mut candidates: Vec<(f64, usize)> = (0..node.saturating_sub(p.loop_min_node_gap))
-            .map(|j| {
-                (
-                    (self.graph.poses[j].x - here.x).hypot(self.graph.poses[j].y - here.y),
-                    j,
-                )
-            })
-            .filter(|&(d, j)| {
-                d <= p.loop_search_radius_m
-                    + p.loop_search_growth * (self.node_path_m[node] - self.node_path_m[j])
+        let (robot, place) = self.node_robot[node];
+        let mut candidates: Vec<(f64, usize)> = (0..node)
+            .filter_map(|j| {
+                let d = (self.graph.poses[j].x - here.x).hypot(self.graph.poses[j].y - here.y);
+                let (other, other_place) = self.node_robot[j];
+                let near = if other == robot {
+                    place >= other_place + p.loop_min_node_gap
+                        && d <= p.loop_search_radius_m
+                            + p.loop_search_growth * (self.node_path_m[node] - self.node_path_m[j])
+                } else {
+                    d <= p.inter_robot_search_radius_m
+                };
+                near.then_some((d, j))
             })
             .collect();
         candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
-        // Spread the candidates along the path: the nearest one, then others at least
-        // loop_min_node_gap nodes from those taken.
+        // Spread the candidates along the chains: the nearest one, then others at least
+        // loop_min_node_gap nodes from those taken on the same chain.
         let mut taken: Vec<usize> = Vec::new();
         for (_, j) in candidates {
             if taken.len() >= p.loop_max_candidates {
                 break;
             }
-            if taken.iter().all(|&t| t.abs_diff(j) >= p.loop_min_node_gap) {
+            let (chain, at) = self.node_robot[j];
+            if taken.iter().all(|&t| {
+                let (c, a) = self.node_robot[t];
+                c != chain || a.abs_diff(at) >= p.loop_min_node_gap
+            }) {
                 taken.push(j);
             }
         }
@@ -249,18 +366,37 @@ impl Mapper2d {
             if !accept(&m, &p.gate) {
                 continue;
             }
+            let inter_robot = self.node_robot[j].0 != robot;
             self.graph.edges.push(RelativeEdge {
                 from: j,
                 to: node,
                 measurement: m.pose,
                 information: self.match_information(&m.covariance),
-                kind: EdgeKind::LoopClosure,
+                kind: if inter_robot {
+                    EdgeKind::InterRobot
+                } else {
+                    EdgeKind::LoopClosure
+                },
                 robust: p.loop_robust,
             });
             self.stats.loop_closures += 1;
+            self.stats.inter_robot_closures += usize::from(inter_robot);
             added += 1;
         }
         added
+    }
+
+    /// Optimizes unless a part of the network is not anchored yet.
+    fn optimize_when_anchored(&mut self) -> Result<(), GraphError> {
+        match self.optimize() {
+            Ok(_) => Ok(()),
+            Err(GraphError::Disconnected { .. } | GraphError::Singular) => {
+                self.stats.optimizations -= 1;
+                self.stats.deferred_optimizations += 1;
+                Ok(())
+            }
+            Err(e) => Err(e),
+        }
     }
 
     fn optimize(&mut self) -> Result<OptimizeReport, GraphError> {

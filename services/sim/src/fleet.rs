@@ -1,0 +1,140 @@
+//! A robot of a simulated fleet: it drives one of the park's loops, taking one yawing 3D
+//! scan after another (scanning while driving, paper 2.1), with 3D dead reckoning, GPS, a
+//! fixed 2D scanner for comparison, and ground truth. What an edge service's source yields.
+
+use crate::rng::Rng;
+use crate::robot::Route;
+use crate::sensors::{Beam2d, DeadReckoning, FixedScanner2d, Gps, GpsFix, SimScan, YawingScanner};
+use crate::world::World;
+use leveling::{PoseTrack, TimedPose};
+use nalgebra::Isometry3;
+
+/// One 3D scan of a fleet robot with everything measured around it.
+#[derive(Clone, Debug)]
+pub struct FleetScan {
+    /// The robot's index in the fleet.
+    pub robot: usize,
+    /// Scans of this robot so far, from 0.
+    pub seq: u64,
+    /// The 3D scan (sensor frame) and its ground truth.
+    pub scan: SimScan,
+    /// Dead reckoning covering the scan's columns, in the robot's odometry frame.
+    pub track: PoseTrack,
+    /// The dead-reckoning pose at the scan's first column (odometry frame).
+    pub odometry_at_start: Isometry3<f64>,
+    /// The GPS fix of the receiver period in which the scan starts; `None` on a dropout.
+    pub gps: Option<GpsFix>,
+    /// The fixed horizontal 2D scanner's scan at the scan's start (for comparison).
+    pub fixed2d: Vec<Beam2d>,
+}
+
+/// A robot of the simulated fleet, yielding its scans in time order.
+pub struct FleetRobot<'w> {
+    index: usize,
+    world: &'w World,
+    route: Route,
+    scanner: YawingScanner,
+    fixed2d: FixedScanner2d,
+    gps: Gps,
+    odometry: Vec<TimedPose>,
+    fixes: Vec<GpsFix>,
+    rng: Rng,
+    next_start_ns: u64,
+    seq: u64,
+    end_ns: u64,
+}
+
+impl<'w> FleetRobot<'w> {
+    /// Robot `index` (0, 1 or 2: the park's loops) driving for `duration_ns` from time 0,
+    /// with its own random draws from `seed`. `None` for an index without a loop.
+    pub fn new(world: &'w World, index: usize, duration_ns: u64, seed: u64) -> Option<Self> {
+        let route = Route::park_loop(index)?;
+        let scanner = YawingScanner::default();
+        let mut rng = Rng::new(seed ^ (0x9e37_79b9_7f4a_7c15u64.wrapping_mul(index as u64 + 1)));
+        // Sensors cover a whole scan beyond the end, so the last scan is complete.
+        let horizon = duration_ns + scanner.end_stamp_ns(0) + 1_000_000_000;
+        let gps = Gps::default();
+        let (odometry, fixes) = {
+            let truth = route.truth(world);
+            let odometry = DeadReckoning::default().track(&truth, 0, horizon, &mut rng);
+            (odometry, gps.fixes(&truth, 0, horizon, &mut rng))
+        };
+        Some(FleetRobot {
+            index,
+            world,
+            route,
+            scanner,
+            fixed2d: FixedScanner2d::default(),
+            gps,
+            odometry,
+            fixes,
+            rng,
+            next_start_ns: 0,
+            seq: 0,
+            end_ns: duration_ns,
+        })
+    }
+
+    pub fn scanner(&self) -> &YawingScanner {
+        &self.scanner
+    }
+
+    pub fn gps(&self) -> &Gps {
+        &self.gps
+    }
+
+    pub fn fixed_scanner(&self) -> &FixedScanner2d {
+        &self.fixed2d
+    }
+
+    /// The robot's true pose (robot frame in the world frame) at a time.
+    pub fn truth_at(&self, stamp_ns: u64) -> Isometry3<f64> {
+        self.route.pose_at(self.world, stamp_ns)
+    }
+
+    /// The dead-reckoning samples from `from_ns` up to `to_ns` (odometry frame).
+    pub fn odometry_between(&self, from_ns: u64, to_ns: u64) -> &[TimedPose] {
+        let lo = self.odometry.partition_point(|p| p.stamp_ns < from_ns);
+        let hi = self.odometry.partition_point(|p| p.stamp_ns <= to_ns);
+        &self.odometry[lo..hi.max(lo)]
+    }
+
+    /// The next scan, or `None` once the next one would start after the duration.
+    pub fn next_scan(&mut self) -> Option<FleetScan> {
+        let start = self.next_start_ns;
+        if start > self.end_ns {
+            return None;
+        }
+        let end = self.scanner.end_stamp_ns(start);
+        let truth = self.route.truth(self.world);
+        let scan = self.scanner.scan(self.world, &truth, start, &mut self.rng);
+        // The track's samples around the scan, one before and one after so it covers it.
+        let lo = self
+            .odometry
+            .partition_point(|p| p.stamp_ns <= start)
+            .saturating_sub(1);
+        let hi = (self.odometry.partition_point(|p| p.stamp_ns < end) + 1).min(self.odometry.len());
+        let track = PoseTrack::new(self.odometry[lo..hi].to_vec()).ok()?;
+        let odometry_at_start = track.at(start)?;
+        let gps = self
+            .fixes
+            .iter()
+            .take_while(|f| f.stamp_ns <= start)
+            .last()
+            .filter(|f| f.stamp_ns + self.gps.period_ns > start)
+            .copied();
+        let fixed2d = self.fixed2d.scan(self.world, &truth(start));
+        self.next_start_ns = end + 1;
+        let seq = self.seq;
+        self.seq += 1;
+        Some(FleetScan {
+            robot: self.index,
+            seq,
+            scan,
+            track,
+            odometry_at_start,
+            gps,
+            fixed2d,
+        })
+    }
+}

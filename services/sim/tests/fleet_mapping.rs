@@ -1,0 +1,166 @@
+//! Three simulated robots map the hilly park together, once from leveled scans and once from
+//! fixed horizontal 2D scanners, with the same dead reckoning and GPS: the paper's claim
+//! (leveled scans map uneven ground where a fixed 2D scanner fails), measured as the absolute
+//! trajectory error of the map's nodes against ground truth, and robots that meet share one
+//! map (inter-robot closures).
+
+use leveling::nalgebra::Isometry3;
+use leveling::{Leveler, SegmentParams, heading_rad};
+use sim::{FleetRobot, FleetScan, World};
+use slam::matching::Scan2;
+use slam::nalgebra::{Matrix2, Vector2};
+use slam::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Pose2};
+
+const ROBOTS: usize = 3;
+const DURATION_NS: u64 = 120_000_000_000;
+
+/// The planar pose of a 3D frame: its position and heading.
+fn planar(frame: &Isometry3<f64>) -> Pose2 {
+    let t = frame.translation.vector;
+    Pose2::new(t.x, t.y, heading_rad(&frame.rotation))
+}
+
+/// What the mapper gets from one scan, with the node frame's true pose.
+struct NodeInput {
+    robot: usize,
+    odometry: Pose2,
+    scan: Scan2,
+    gps: Option<GpsObservation>,
+    truth: Pose2,
+}
+
+/// Runs the fleet and maps it with one scan kind; returns the mapper's stats and the ATE
+/// (RMSE of node positions against the truth, m).
+fn map_fleet(inputs: Vec<NodeInput>) -> (MapperStats, f64) {
+    let defaults = Mapper2dParams::default();
+    let mut mapper = Mapper2d::new(Mapper2dParams {
+        node_distance_m: 1.0,
+        // Gyro and wheel dead reckoning drifts about 1 % of the distance here.
+        odometry_sigma_xy_per_m: 0.02,
+        // Leveled scans of a park are sparse: a few dozen returns.
+        idc: slam::matching::IdcParams {
+            min_correspondences: 10,
+            ..defaults.idc.clone()
+        },
+        ..defaults
+    });
+    let mut truth = Vec::new();
+    for input in inputs {
+        let placed = mapper
+            .add_robot_scan(input.robot, input.odometry, input.scan, input.gps)
+            .expect("valid network");
+        if let slam::Placed::Node(node) = placed {
+            assert_eq!(node, truth.len());
+            truth.push(input.truth);
+        }
+    }
+    mapper.finish().expect("optimize");
+    let poses = &mapper.graph().poses;
+    let sum: f64 = poses
+        .iter()
+        .zip(&truth)
+        .map(|(p, t)| (p.x - t.x).powi(2) + (p.y - t.y).powi(2))
+        .sum();
+    (mapper.stats(), (sum / poses.len() as f64).sqrt())
+}
+
+/// The GPS fix as the mapper takes it, for a node frame `frame_in_robot` (m, robot frame).
+/// The fix is up to one receiver period older than the scan: dead reckoning carries it to
+/// the scan's start (at 1.2 m/s, a second is 1.2 m).
+fn gps_for(
+    scan: &FleetScan,
+    robot: &FleetRobot,
+    frame_in_robot: [f64; 2],
+) -> Option<GpsObservation> {
+    let fix = scan.gps?;
+    let antenna = robot.gps().antenna_in_robot_m;
+    let around = robot.odometry_between(
+        fix.stamp_ns.saturating_sub(100_000_000),
+        fix.stamp_ns + 100_000_000,
+    );
+    let at_fix = leveling::PoseTrack::new(around.to_vec())
+        .ok()?
+        .at(fix.stamp_ns)?;
+    let moved = scan.odometry_at_start * slam::nalgebra::Point3::from(antenna)
+        - at_fix * slam::nalgebra::Point3::from(antenna);
+    let var = fix.sigma_horizontal_m.powi(2);
+    Some(GpsObservation {
+        position_m: Vector2::new(fix.enu_m.x + moved.x, fix.enu_m.y + moved.y),
+        covariance_m2: Matrix2::new(var, 0.0, 0.0, var),
+        lever_arm_m: Vector2::new(antenna.x - frame_in_robot[0], antenna.y - frame_in_robot[1]),
+    })
+}
+
+/// Measured (120 s, seed 7): leveled ATE 0.155 m with 4 inter-robot closures, fixed 2D
+/// 0.391 m. The bounds below guard that; the demo's targets (≤ 0.10 m, fixed 2D ≥ 3× worse)
+/// are not reached yet.
+#[test]
+fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
+    let world = World::park();
+    let mut robots: Vec<FleetRobot> = (0..ROBOTS)
+        .map(|i| FleetRobot::new(&world, i, DURATION_NS, 7).expect("park loop"))
+        .collect();
+    let mut leveler = Leveler::new(SegmentParams::default());
+    let (mut leveled, mut fixed) = (Vec::new(), Vec::new());
+    // Round robin: the robots scan at the same pace, so this is time order.
+    loop {
+        let mut any = false;
+        for robot in &mut robots {
+            let Some(scan) = robot.next_scan() else {
+                continue;
+            };
+            any = true;
+            let start = scan.scan.truth_start_pose;
+            let start_ns = scan.scan.raw.columns[0].stamp_ns;
+            assert_eq!(robot.truth_at(start_ns), start);
+
+            // Leveled: the node frame is the leveled frame (sensor at scan start, robot heading).
+            let mount = robot.scanner().mount;
+            let level = leveler
+                .level(&scan.scan.raw, &scan.track, &mount)
+                .expect("track covers the scan");
+            let (bearings, ranges): (Vec<f32>, Vec<f32>) = level.scan.returns().unzip();
+            let leveled_frame = |robot_pose: &Isometry3<f64>| {
+                let p = planar(&(robot_pose * mount));
+                Pose2::new(p.x, p.y, heading_rad(&robot_pose.rotation))
+            };
+            let m = mount.translation.vector;
+            leveled.push(NodeInput {
+                robot: scan.robot,
+                odometry: leveled_frame(&scan.odometry_at_start),
+                scan: Scan2::from_polar(&bearings, &ranges, 40.0).expect("same lengths"),
+                gps: gps_for(&scan, robot, [m.x, m.y]),
+                truth: leveled_frame(&start),
+            });
+
+            // Fixed 2D: the node frame is the scanner's, tilting with the robot.
+            let fixed_mount = robot.fixed_scanner().mount;
+            let (bearings, ranges): (Vec<f32>, Vec<f32>) = scan
+                .fixed2d
+                .iter()
+                .filter_map(|b| b.range_m.map(|r| (b.bearing_rad as f32, r as f32)))
+                .unzip();
+            let f = fixed_mount.translation.vector;
+            fixed.push(NodeInput {
+                robot: scan.robot,
+                odometry: planar(&(scan.odometry_at_start * fixed_mount)),
+                scan: Scan2::from_polar(&bearings, &ranges, 40.0).expect("same lengths"),
+                gps: gps_for(&scan, robot, [f.x, f.y]),
+                truth: planar(&(start * fixed_mount)),
+            });
+        }
+        if !any {
+            break;
+        }
+    }
+    let (stats, ate) = map_fleet(leveled);
+    let (stats_fixed, ate_fixed) = map_fleet(fixed);
+    eprintln!("leveled: ATE {ate:.3} m, {stats:?}");
+    eprintln!("fixed 2D: ATE {ate_fixed:.3} m, {stats_fixed:?}");
+    assert!(stats.inter_robot_closures >= 1, "{stats:?}");
+    assert!(ate <= 0.20, "leveled ATE {ate:.3} m");
+    assert!(
+        ate_fixed >= 2.0 * ate,
+        "fixed {ate_fixed:.3} m, leveled {ate:.3} m"
+    );
+}
