@@ -92,11 +92,24 @@ impl<'w> FleetRobot<'w> {
         self.route.pose_at(self.world, stamp_ns)
     }
 
-    /// The dead-reckoning samples from `from_ns` up to `to_ns` (odometry frame).
-    pub fn odometry_between(&self, from_ns: u64, to_ns: u64) -> &[TimedPose] {
-        let lo = self.odometry.partition_point(|p| p.stamp_ns < from_ns);
-        let hi = self.odometry.partition_point(|p| p.stamp_ns <= to_ns);
-        &self.odometry[lo..hi.max(lo)]
+    /// Dead reckoning (odometry frame) from `from_ns` to `to_ns`, with a sample either side
+    /// so that it covers both ends.
+    ///
+    /// # Panics
+    /// Beyond the duration given to [`FleetRobot::new`] plus one scan.
+    pub fn odometry_track(&self, from_ns: u64, to_ns: u64) -> PoseTrack {
+        let lo = self
+            .odometry
+            .partition_point(|p| p.stamp_ns <= from_ns)
+            .saturating_sub(1);
+        let hi =
+            (self.odometry.partition_point(|p| p.stamp_ns < to_ns) + 1).min(self.odometry.len());
+        let track = PoseTrack::new(self.odometry[lo..hi].to_vec()).expect("ordered samples");
+        assert!(
+            track.at(to_ns).is_some(),
+            "dead reckoning ends before {to_ns} ns"
+        );
+        track
     }
 
     /// The next scan, or `None` once the next one would start after the duration.
@@ -108,14 +121,8 @@ impl<'w> FleetRobot<'w> {
         let end = self.scanner.end_stamp_ns(start);
         let truth = self.route.truth(self.world);
         let scan = self.scanner.scan(self.world, &truth, start, &mut self.rng);
-        // The track's samples around the scan, one before and one after so it covers it.
-        let lo = self
-            .odometry
-            .partition_point(|p| p.stamp_ns <= start)
-            .saturating_sub(1);
-        let hi = (self.odometry.partition_point(|p| p.stamp_ns < end) + 1).min(self.odometry.len());
-        let track = PoseTrack::new(self.odometry[lo..hi].to_vec()).ok()?;
-        let odometry_at_start = track.at(start)?;
+        let track = self.odometry_track(start, end);
+        let odometry_at_start = track.at(start).expect("the track covers the scan");
         let gps = self
             .fixes
             .iter()

@@ -4,8 +4,8 @@
 //! trajectory error of the map's nodes against ground truth, and robots that meet share one
 //! map (inter-robot closures).
 
-use leveling::nalgebra::Isometry3;
-use leveling::{Leveler, SegmentParams, heading_rad};
+use leveling::nalgebra::{Isometry3, Point3};
+use leveling::{Leveler, SegmentParams};
 use sim::{FleetRobot, FleetScan, World};
 use slam::matching::Scan2;
 use slam::nalgebra::{Matrix2, Vector2};
@@ -13,12 +13,6 @@ use slam::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Pose2};
 
 const ROBOTS: usize = 3;
 const DURATION_NS: u64 = 120_000_000_000;
-
-/// The planar pose of a 3D frame: its position and heading.
-fn planar(frame: &Isometry3<f64>) -> Pose2 {
-    let t = frame.translation.vector;
-    Pose2::new(t.x, t.y, heading_rad(&frame.rotation))
-}
 
 /// What the mapper gets from one scan, with the node frame's true pose.
 struct NodeInput {
@@ -74,15 +68,11 @@ fn gps_for(
 ) -> Option<GpsObservation> {
     let fix = scan.gps?;
     let antenna = robot.gps().antenna_in_robot_m;
-    let around = robot.odometry_between(
-        fix.stamp_ns.saturating_sub(100_000_000),
-        fix.stamp_ns + 100_000_000,
-    );
-    let at_fix = leveling::PoseTrack::new(around.to_vec())
-        .ok()?
-        .at(fix.stamp_ns)?;
-    let moved = scan.odometry_at_start * slam::nalgebra::Point3::from(antenna)
-        - at_fix * slam::nalgebra::Point3::from(antenna);
+    let at_fix = robot
+        .odometry_track(fix.stamp_ns, fix.stamp_ns)
+        .at(fix.stamp_ns)
+        .expect("the track covers the fix");
+    let moved = scan.odometry_at_start * Point3::from(antenna) - at_fix * Point3::from(antenna);
     let var = fix.sigma_horizontal_m.powi(2);
     Some(GpsObservation {
         position_m: Vector2::new(fix.enu_m.x + moved.x, fix.enu_m.y + moved.y),
@@ -121,8 +111,7 @@ fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
                 .expect("track covers the scan");
             let (bearings, ranges): (Vec<f32>, Vec<f32>) = level.scan.returns().unzip();
             let leveled_frame = |robot_pose: &Isometry3<f64>| {
-                let p = planar(&(robot_pose * mount));
-                Pose2::new(p.x, p.y, heading_rad(&robot_pose.rotation))
+                Pose2::from_isometry3(&leveling::leveled_frame(robot_pose, &mount).inverse())
             };
             let m = mount.translation.vector;
             leveled.push(NodeInput {
@@ -143,10 +132,10 @@ fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
             let f = fixed_mount.translation.vector;
             fixed.push(NodeInput {
                 robot: scan.robot,
-                odometry: planar(&(scan.odometry_at_start * fixed_mount)),
+                odometry: Pose2::from_isometry3(&(scan.odometry_at_start * fixed_mount)),
                 scan: Scan2::from_polar(&bearings, &ranges, 40.0).expect("same lengths"),
                 gps: gps_for(&scan, robot, [f.x, f.y]),
-                truth: planar(&(start * fixed_mount)),
+                truth: Pose2::from_isometry3(&(start * fixed_mount)),
             });
         }
         if !any {

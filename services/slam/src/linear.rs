@@ -232,14 +232,7 @@ fn block_columns(blocks: usize, pairs: impl Iterator<Item = (usize, usize)>) -> 
     }
     for rows in &mut columns {
         rows[1..].sort_unstable();
-        let mut unique = 1;
-        for k in 1..rows.len() {
-            if rows[k] != rows[unique - 1] {
-                rows[unique] = rows[k];
-                unique += 1;
-            }
-        }
-        rows.truncate(unique);
+        rows.dedup();
     }
     columns
 }

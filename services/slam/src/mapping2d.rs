@@ -206,8 +206,7 @@ impl Mapper2d {
         }
         let Some(chain) = self.chains[robot] else {
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
-            let anchored = self.add_gps(node, gps);
-            if anchored {
+            if self.add_gps(node, gps) {
                 self.optimize_when_anchored()?;
             }
             return Ok(Placed::Node(node));
@@ -391,7 +390,6 @@ impl Mapper2d {
         match self.optimize() {
             Ok(_) => Ok(()),
             Err(GraphError::Disconnected { .. } | GraphError::Singular) => {
-                self.stats.optimizations -= 1;
                 self.stats.deferred_optimizations += 1;
                 Ok(())
             }
@@ -400,9 +398,11 @@ impl Mapper2d {
     }
 
     fn optimize(&mut self) -> Result<OptimizeReport, GraphError> {
+        let report = self
+            .optimizer
+            .optimize(&mut self.graph, &self.params.optimize)?;
         self.stats.optimizations += 1;
-        self.optimizer
-            .optimize(&mut self.graph, &self.params.optimize)
+        Ok(report)
     }
 
     fn odometry_information(&self, step: &Pose2) -> Matrix3<f64> {
@@ -439,5 +439,62 @@ impl Mapper2d {
                     1.0 / floor[2],
                 ))
             })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::matching::synthetic::{Scene, uniform_bearings};
+    use std::f64::consts::PI;
+
+    fn scan_at(pose: &Pose2, seed: u64) -> Scan2 {
+        let bearings = uniform_bearings(361, -PI / 2.0, PI / 360.0);
+        let ranges = Scene::park().scan(pose, &bearings, 40.0, 0.01, seed);
+        Scan2::from_polar(&bearings, &ranges, 40.0).expect("same lengths")
+    }
+
+    fn fix_at(pose: &Pose2) -> GpsObservation {
+        GpsObservation {
+            position_m: Vector2::new(pose.x, pose.y),
+            covariance_m2: Matrix2::identity() * 0.25,
+            lever_arm_m: Vector2::zeros(),
+        }
+    }
+
+    #[test]
+    fn gps_anchors_a_second_robot_and_bad_fixes_are_dropped() {
+        let mut mapper = Mapper2d::new(Mapper2dParams::default());
+        let poses = |y: f64| (0..4).map(move |k| Pose2::new(-2.0 + 0.6 * k as f64, y, 0.0));
+        for (k, pose) in poses(0.0).enumerate() {
+            mapper
+                .add_robot_scan(0, pose, scan_at(&pose, k as u64), Some(fix_at(&pose)))
+                .expect("robot 0");
+        }
+        // Robot 1 starts apart, linked to robot 0 by nothing but GPS. Its first fix alone
+        // cannot anchor it: the optimization waits instead of failing.
+        let mut bad_nan = fix_at(&Pose2::IDENTITY);
+        bad_nan.position_m.x = f64::NAN;
+        let mut bad_covariance = fix_at(&Pose2::IDENTITY);
+        bad_covariance.covariance_m2 = Matrix2::new(1.0, 2.0, 2.0, 1.0);
+        let mut deferred_at_start = 0;
+        for (k, pose) in poses(-1.0).enumerate() {
+            let fix = match k {
+                1 => Some(bad_nan),
+                2 => Some(bad_covariance),
+                _ => Some(fix_at(&pose)),
+            };
+            mapper
+                .add_robot_scan(1, pose, scan_at(&pose, 10 + k as u64), fix)
+                .expect("robot 1");
+            if k == 0 {
+                deferred_at_start = mapper.stats().deferred_optimizations;
+            }
+        }
+        let stats = mapper.stats();
+        assert!(deferred_at_start > 0, "{stats:?}");
+        assert_eq!(stats.gps_edges, 4 + 2, "{stats:?}");
+        assert_eq!(mapper.node_robot(4), (1, 0));
+        mapper.finish().expect("anchored by then");
     }
 }

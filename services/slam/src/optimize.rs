@@ -278,7 +278,7 @@ impl Optimizer {
                 Method::GaussNewton => true,
                 Method::LevenbergMarquardt => {
                     // Predicted decrease of the quadratic model with this damping.
-                    let h_dx = mat_vec(&structure.pattern, &lin.values, &lin.diagonal, &step, 0.0);
+                    let h_dx = mat_vec(&structure.pattern, &lin.values, &step);
                     let damp: f64 = step
                         .iter()
                         .zip(&lin.diagonal)
@@ -433,19 +433,9 @@ fn apply_step(graph: &mut PoseGraph, s: &Structure, step: &[f64]) {
     }
 }
 
-/// (H + damping·diag) x for H given by its lower-triangle `values` in pattern order.
-fn mat_vec(
-    pattern: &SparsePattern,
-    values: &[f64],
-    diagonal: &[f64],
-    x: &[f64],
-    damping: f64,
-) -> Vec<f64> {
-    let mut y: Vec<f64> = x
-        .iter()
-        .zip(diagonal)
-        .map(|(xi, d)| damping * d * xi)
-        .collect();
+/// H x for H given by its lower-triangle `values` in pattern order.
+fn mat_vec(pattern: &SparsePattern, values: &[f64], x: &[f64]) -> Vec<f64> {
+    let mut y = vec![0.0; x.len()];
     for (&(r, c), v) in pattern.entries().iter().zip(values) {
         y[r] += v * x[c];
         if r != c {

@@ -29,6 +29,14 @@ impl Pose2 {
         Pose2 { x, y, theta }
     }
 
+    /// The planar pose of a 3D frame: its x and y, and the heading of its x axis projected
+    /// on the horizontal plane (as `leveling::heading_rad`), whatever its roll and pitch.
+    pub fn from_isometry3(frame: &nalgebra::Isometry3<f64>) -> Pose2 {
+        let x_axis = frame.rotation * nalgebra::Vector3::x();
+        let t = frame.translation.vector;
+        Pose2::new(t.x, t.y, x_axis.y.atan2(x_axis.x))
+    }
+
     /// `self ⊕ other`: `other` expressed in the frame of `self`, moved to the outer frame.
     pub fn compose(&self, other: &Pose2) -> Pose2 {
         let (s, c) = self.theta.sin_cos();
@@ -74,6 +82,21 @@ mod tests {
         (a.x - b.x).abs() < 1e-12
             && (a.y - b.y).abs() < 1e-12
             && wrap_angle(a.theta - b.theta).abs() < 1e-12
+    }
+
+    #[test]
+    fn planar_pose_of_a_tilted_frame_keeps_its_heading() {
+        use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+        // Yawed 0.7 rad, then pitched and rolled: the heading stays 0.7.
+        let frame = Isometry3::from_parts(
+            Translation3::new(1.0, -2.0, 3.0),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7)
+                * UnitQuaternion::from_euler_angles(0.2, -0.3, 0.0),
+        );
+        assert!(close(
+            &Pose2::from_isometry3(&frame),
+            &Pose2::new(1.0, -2.0, 0.7)
+        ));
     }
 
     #[test]

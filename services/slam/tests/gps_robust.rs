@@ -24,10 +24,7 @@ fn park_run(gps_robust: Robust) -> (PoseGraph, Vec<Pose2>, Vec<bool>) {
     };
     let mut rng = sim::Rng::new(42);
     let fixes = gps.fixes(&truth, 0, lap_ns, &mut rng);
-    let planar = |t: u64| {
-        let iso = truth(t);
-        Pose2::new(iso.translation.x, iso.translation.y, slam_heading(&iso))
-    };
+    let planar = |t: u64| Pose2::from_isometry3(&truth(t));
     let stamps: Vec<u64> = (0..=lap_ns / gps.period_ns)
         .map(|k| k * gps.period_ns)
         .collect();
@@ -71,11 +68,6 @@ fn park_run(gps_robust: Robust) -> (PoseGraph, Vec<Pose2>, Vec<bool>) {
         });
     }
     (graph, true_poses, multipath)
-}
-
-fn slam_heading(iso: &slam::nalgebra::Isometry3<f64>) -> f64 {
-    let x = iso.rotation * slam::nalgebra::Vector3::x();
-    x.y.atan2(x.x)
 }
 
 /// Position errors (m) after optimizing with the given GPS kernel.

@@ -288,18 +288,10 @@ pub fn idc(
         max_distance_m = (max_distance_m * params.shrink).max(params.final_max_distance_m);
         window_rad = (window_rad * params.shrink).max(params.final_rotation_window_rad);
     }
-    let v = validate(&contour, current, &pose, params);
     Ok(Match {
-        pose,
-        covariance: v.covariance,
-        quality: v.quality,
-        inlier_share: v.inlier_share,
-        conflict_share: v.conflict_share,
-        mean_residual_m: v.mean_residual_m,
-        conditioning: v.conditioning,
-        correspondences: v.correspondences,
         iterations,
         converged,
+        ..validate(&contour, current, &pose, params)
     })
 }
 

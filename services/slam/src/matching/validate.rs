@@ -33,24 +33,14 @@ use crate::Pose2;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
 
-/// Covariance and quality of a final pose.
-pub(super) struct Validation {
-    pub covariance: [[f64; 3]; 3],
-    pub quality: f64,
-    pub inlier_share: f64,
-    pub conflict_share: f64,
-    pub mean_residual_m: f64,
-    pub conditioning: f64,
-    pub correspondences: usize,
-}
-
-/// Evaluates the current scan at `pose` against the reference contour.
+/// Evaluates the current scan at `pose` against the reference contour: the match at `pose`
+/// with its covariance and quality (the caller fills in how the iteration went).
 pub(super) fn validate(
     reference: &Contour,
     current: &Scan2,
     pose: &Pose2,
     params: &IdcParams,
-) -> Validation {
+) -> Match {
     // Forward: the current scan in the reference frame gives both the covariance pairs and
     // the agreement with the reference.
     let mut fit = Fit::default();
@@ -92,7 +82,8 @@ pub(super) fn validate(
     let quality = inlier_share
         * (1.0 - conflict_share)
         * (0.5 + 0.5 * (conditioning / params.conditioning_ok).min(1.0));
-    Validation {
+    Match {
+        pose: *pose,
         covariance,
         quality,
         inlier_share,
@@ -104,6 +95,8 @@ pub(super) fn validate(
         },
         conditioning,
         correspondences: fit.pairs,
+        iterations: 0,
+        converged: false,
     }
 }
 
