@@ -1,24 +1,49 @@
-//! `levelmap demo`: the paper's Fig. 4, live. A robot at the foot of the simulated pavilion
-//! hill takes a 3D scan; levelmap levels it and draws it over what a fixed 2D scanner sees.
-//! (Once the services exist this becomes the fleet demo.)
+//! `levelmap demo`: a mapper and three simulated robots in the hilly park, each robot its own
+//! edge service talking to the mapper over Zenoh TCP on loopback. At the end it scores the
+//! map against the simulator's ground truth, and scores the same run mapped from each robot's
+//! fixed horizontal 2D scanner (the paper's baseline) for comparison.
 
-use crate::level::level_timed;
 use anyhow::{Context, Result};
 use clap::Args;
-use leveling::SegmentParams;
+use edge::{EdgeConfig, NodeBuilder, PlanarScan, SimSourceConfig, SourceConfig};
+use leveling::nalgebra::Isometry3;
+use mapper::{FleetMap, MapperConfig};
 use serde::Serialize;
-use sim::SurfaceKind;
+use sim::FleetRobot;
+use slam::Pose2;
 use std::path::PathBuf;
+use std::time::Instant;
+use wire::session::SessionConfig;
 
-/// Level a simulated scan of the hilly park and write its picture (paper Fig. 4).
+const FLEET: &str = "park";
+
+/// Run the fleet demo: a mapper and simulated robots over real Zenoh, the map over HTTP.
 #[derive(Args, Debug)]
 pub struct DemoArgs {
-    /// Folder for the scan (JSON) and the picture (SVG); created if missing.
+    /// How long the robots drive (s of simulated time).
+    #[arg(long, default_value_t = 120.0)]
+    pub duration: f64,
+    /// Robots (1 to 3: the park's loops).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+    pub robots: u8,
+    /// Simulated time per wall-clock time: 1 is real time, 0 as fast as the machine goes.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// The mapper's HTTP address.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub http: String,
+    /// The mapper's Zenoh router endpoint; robots connect to it.
+    #[arg(long, default_value = "tcp/127.0.0.1:7447")]
+    pub zenoh: String,
+    /// Folder for the mapper's store and the robots' outboxes (emptied at start).
     #[arg(long, value_name = "DIR", default_value = "levelmap-demo")]
-    pub out_dir: PathBuf,
-    /// Seed of every random draw; same seed, same scan.
-    #[arg(long, default_value_t = 1)]
+    pub dir: PathBuf,
+    /// Seed of the sensors' noise.
+    #[arg(long, default_value_t = 7)]
     pub seed: u64,
+    /// Keep serving the map after the robots finish, until Ctrl-C.
+    #[arg(long)]
+    pub serve: bool,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -26,100 +51,239 @@ pub struct DemoArgs {
 
 #[derive(Serialize)]
 struct DemoReport {
-    scan_file: String,
-    svg_file: String,
-    points: usize,
-    landmark: usize,
-    overhang: usize,
-    /// Leveled beams with a return.
-    beams: usize,
-    /// Leveled beams on the pavilion, and on the ground (hill slope or bridge deck).
-    beams_on_pavilion: usize,
-    beams_on_ground: usize,
-    /// The fixed horizontal 2D scanner 1 m above the ground, from the same pose.
-    fixed2d_returns: usize,
-    fixed2d_on_pavilion: usize,
-    fixed2d_on_ground: usize,
-    /// Segmentation + projection, median of 10 runs (ms).
-    elapsed_ms: f64,
-    /// Share of landmark points that are not ground (simulator truth).
-    landmark_precision: f64,
-}
-
-fn is_pavilion(kind: SurfaceKind) -> bool {
-    matches!(
-        kind,
-        SurfaceKind::PavilionPillar | SurfaceKind::PavilionRoof
-    )
+    api: String,
+    robots: usize,
+    nodes: usize,
+    edges: usize,
+    gps_edges: usize,
+    loop_closures: usize,
+    inter_robot_closures: usize,
+    /// RMSE of node positions against ground truth (m).
+    ate_rmse_m: f64,
+    /// The same run mapped from the fixed 2D scanners instead (m).
+    ate_rmse_fixed2d_m: f64,
+    fixed2d_loop_closures: usize,
+    node_sends: u64,
+    node_resends: u64,
+    /// Nodes left unacked in the outboxes (0 when every node reached the map).
+    outbox_pending: u64,
+    wall_s: f64,
 }
 
 pub fn run(args: &DemoArgs) -> Result<()> {
-    std::fs::create_dir_all(&args.out_dir)
-        .with_context(|| format!("{}: cannot create", args.out_dir.display()))?;
-    let scan_path = args.out_dir.join("pavilion-scan.json");
-    let svg_path = args.out_dir.join("pavilion.svg");
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?
+        .block_on(run_async(args))
+}
 
-    let (file, fixed2d) = sim::scenario::pavilion_hill_scan(args.seed);
-    scanio::sim_file::save(&scan_path, &file)?;
-    let (loaded, truth) = scanio::sim_file::into_loaded(file).map_err(anyhow::Error::msg)?;
-    let (leveled, _, elapsed_ms) = level_timed(&loaded, SegmentParams::default(), 10)?;
-    let beam_kinds: Vec<SurfaceKind> = leveled
-        .first_landmarks
-        .iter()
-        .flatten()
-        .filter_map(|&i| truth[i as usize])
-        .collect();
-    let precision = leveling::Precision::score(&leveled.classes, &leveled.first_landmarks, |i| {
-        truth[i].map(|k| k.is_ground())
+async fn run_async(args: &DemoArgs) -> Result<()> {
+    let started = Instant::now();
+    if args.dir.exists() {
+        std::fs::remove_dir_all(&args.dir)
+            .with_context(|| format!("{}: cannot empty", args.dir.display()))?;
+    }
+    std::fs::create_dir_all(&args.dir)
+        .with_context(|| format!("{}: cannot create", args.dir.display()))?;
+    let mapper = mapper::start(MapperConfig {
+        zenoh: SessionConfig::router(&args.zenoh),
+        http_listen: args.http.clone(),
+        store_path: args.dir.join("mapper.redb"),
+        datum: Some(sim::PARK_DATUM.origin),
+        ..MapperConfig::default()
+    })
+    .await?;
+    let api = format!("http://{}/api/v1/fleets/{FLEET}", mapper.http_addr);
+    if !args.json {
+        println!("mapper: Zenoh {} · HTTP {api}/summary", args.zenoh);
+    }
+    let epoch_ns = edge::service::now_ns();
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let mut robots = Vec::new();
+    for i in 0..usize::from(args.robots) {
+        let config = robot_config(args, i);
+        let source = edge::open_source(&config, epoch_ns)?;
+        let mut stop = stop_rx.clone();
+        robots.push(tokio::spawn(edge::run(config, source, async move {
+            let _ = stop.wait_for(|s| *s).await;
+        })));
+    }
+    let ctrl_c = tokio::spawn(async move {
+        if tokio::signal::ctrl_c().await.is_ok() {
+            let _ = stop_tx.send(true);
+        }
     });
-    let picture = crate::svg::fig4(&loaded.raw, &leveled, "levelmap demo: the pavilion hill");
-    std::fs::write(&svg_path, picture)
-        .with_context(|| format!("{}: cannot write", svg_path.display()))?;
-
-    let fixed_kinds: Vec<SurfaceKind> = fixed2d.iter().filter_map(|b| b.kind).collect();
+    let mut sends = (0, 0, 0);
+    for robot in robots {
+        let report = robot.await??;
+        if !args.json {
+            println!(
+                "{}: {} nodes, {} sends ({} re-sends), acked up to {:?}",
+                report.robot,
+                report.nodes,
+                report.node_sends,
+                report.node_resends,
+                report.acked_node_seq
+            );
+        }
+        sends.0 += report.node_sends;
+        sends.1 += report.node_resends;
+        sends.2 += report.outbox_pending;
+    }
+    mapper.optimize(FLEET).await?;
+    let view = mapper
+        .shared
+        .fleet(FLEET)
+        .context("no node reached the mapper")?;
+    let duration_ns = (args.duration * 1e9) as u64;
+    let truth: Vec<FleetRobot> = (0..usize::from(args.robots))
+        .map(|i| FleetRobot::new(edge::park(), i, duration_ns, args.seed).expect("park loop"))
+        .collect();
+    let leveled_truth = |robot: usize, stamp_ns: u64| {
+        let t = &truth[robot];
+        let pose = t.truth_at(stamp_ns - epoch_ns);
+        Pose2::from_isometry3(&leveling::leveled_frame(&pose, &t.scanner().mount).inverse())
+    };
+    let ate = ate_rmse(view.nodes.iter().zip(&view.poses).map(|(n, p)| {
+        let robot: usize = view.robots[n.robot].id["robot".len()..]
+            .parse()
+            .expect("robotN");
+        (*p, leveled_truth(robot, n.stamp_ns))
+    }));
+    let (ate_fixed, fixed_closures) = map_fixed2d(args)?;
     let report = DemoReport {
-        scan_file: scan_path.display().to_string(),
-        svg_file: svg_path.display().to_string(),
-        points: loaded.raw.points.len(),
-        landmark: leveled.counts.landmark,
-        overhang: leveled.counts.overhang,
-        beams: leveled.scan.return_count(),
-        beams_on_pavilion: beam_kinds.iter().filter(|k| is_pavilion(**k)).count(),
-        beams_on_ground: beam_kinds.iter().filter(|k| k.is_ground()).count(),
-        fixed2d_returns: fixed_kinds.len(),
-        fixed2d_on_pavilion: fixed_kinds.iter().filter(|k| is_pavilion(**k)).count(),
-        fixed2d_on_ground: fixed_kinds.iter().filter(|k| k.is_ground()).count(),
-        elapsed_ms,
-        landmark_precision: precision.landmark_precision(),
+        api: api.clone(),
+        robots: view.robots.len(),
+        nodes: view.poses.len(),
+        edges: view.edges.len(),
+        gps_edges: view.gps.len(),
+        loop_closures: view.stats.loop_closures,
+        inter_robot_closures: view.stats.inter_robot_closures,
+        ate_rmse_m: ate,
+        ate_rmse_fixed2d_m: ate_fixed,
+        fixed2d_loop_closures: fixed_closures,
+        node_sends: sends.0,
+        node_resends: sends.1,
+        outbox_pending: sends.2,
+        wall_s: started.elapsed().as_secs_f64(),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         println!(
-            "levelmap demo: a robot at the foot of the pavilion hill (simulated park, seed {})",
-            args.seed
+            "map: {} robots, {} nodes, {} edges ({} GPS), {} loop closures ({} between robots)",
+            report.robots,
+            report.nodes,
+            report.edges,
+            report.gps_edges,
+            report.loop_closures,
+            report.inter_robot_closures
         );
         println!(
-            "  3D scan          {} points, {} landmark, {} overhang",
-            report.points, report.landmark, report.overhang
-        );
-        println!(
-            "  leveled scan     {} beams: {} on the pavilion, {} on the ground",
-            report.beams, report.beams_on_pavilion, report.beams_on_ground
-        );
-        println!(
-            "  fixed 2D scanner {} returns: {} on the pavilion, {} on the ground (the slope)",
-            report.fixed2d_returns, report.fixed2d_on_pavilion, report.fixed2d_on_ground
-        );
-        println!(
-            "  leveling took    {:.3} ms (segmentation + projection)",
-            report.elapsed_ms
-        );
-        println!("  picture          {}", report.svg_file);
-        println!(
-            "  scan             {} (try: levelmap level {} --svg out.svg)",
-            report.scan_file, report.scan_file
+            "ATE: leveled scans {:.3} m, fixed 2D scanner {:.3} m ({:.1}x worse)",
+            ate,
+            ate_fixed,
+            ate_fixed / ate
         );
     }
-    Ok(())
+    if args.serve {
+        if !args.json {
+            println!("serving {api}/summary until Ctrl-C");
+        }
+        let _ = ctrl_c.await;
+    } else {
+        ctrl_c.abort();
+    }
+    mapper.stop().await
+}
+
+fn robot_config(args: &DemoArgs, i: usize) -> EdgeConfig {
+    EdgeConfig {
+        fleet: FLEET.into(),
+        robot: format!("robot{i}"),
+        zenoh: SessionConfig::client(&args.zenoh),
+        outbox_path: args.dir.join(format!("robot{i}-outbox.redb")),
+        speed: args.speed,
+        source: SourceConfig::Sim(SimSourceConfig {
+            loop_index: i,
+            seed: args.seed,
+            duration_s: args.duration,
+        }),
+        ..EdgeConfig::default()
+    }
+}
+
+fn ate_rmse(pairs: impl Iterator<Item = (Pose2, Pose2)>) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (p, t) in pairs {
+        sum += (p.x - t.x).powi(2) + (p.y - t.y).powi(2);
+        n += 1;
+    }
+    (sum / n.max(1) as f64).sqrt()
+}
+
+/// The same run (the simulator is deterministic per seed) from the fixed 2D scanners, mapped
+/// with the mapper's own code and parameters: the ATE and the loop closures.
+fn map_fixed2d(args: &DemoArgs) -> Result<(f64, usize)> {
+    let duration_ns = (args.duration * 1e9) as u64;
+    let defaults = MapperConfig::default();
+    let mut map = FleetMap::new(
+        FLEET,
+        defaults.mapping.clone(),
+        Some(slam::geodesy::GeoDatum {
+            origin: sim::PARK_DATUM.origin,
+        }),
+        defaults.max_range_m,
+    );
+    let mut robots: Vec<FleetRobot> = (0..usize::from(args.robots))
+        .map(|i| FleetRobot::new(edge::park(), i, duration_ns, args.seed).expect("park loop"))
+        .collect();
+    let base = EdgeConfig::default();
+    let mut builders: Vec<NodeBuilder> = (0..robots.len())
+        .map(|i| {
+            NodeBuilder::new(
+                FLEET,
+                &format!("robot{i}"),
+                base.node.clone(),
+                base.leveling,
+                0,
+            )
+        })
+        .collect();
+    let mut truth = Vec::new();
+    loop {
+        let mut any = false;
+        for (robot, builder) in robots.iter_mut().zip(&mut builders) {
+            let Some(scan) = robot.next_scan() else {
+                continue;
+            };
+            any = true;
+            let mount: Isometry3<f64> = robot.fixed_scanner().mount;
+            let stamp_ns = scan.scan.raw.columns[0].stamp_ns;
+            let planar = PlanarScan {
+                stamp_ns,
+                bearings_rad: scan.fixed2d.iter().map(|b| b.bearing_rad as f32).collect(),
+                ranges_m: scan
+                    .fixed2d
+                    .iter()
+                    .map(|b| b.range_m.unwrap_or(0.0) as f32)
+                    .collect(),
+                robot_at_start: scan.odometry_at_start,
+                sensor_in_robot: mount,
+                gps: scan.gps.map(|f| edge::sim_gps_reading(robot, &f, 0)),
+            };
+            let Some(node) = builder.offer_planar(&planar) else {
+                continue;
+            };
+            wire::validate_node(&node)?;
+            map.ingest(&node)?;
+            truth.push(Pose2::from_isometry3(&(scan.scan.truth_start_pose * mount)));
+        }
+        if !any {
+            break;
+        }
+    }
+    map.finish()?;
+    let ate = ate_rmse(map.poses().iter().copied().zip(truth));
+    Ok((ate, map.stats().loop_closures))
 }

@@ -3,6 +3,8 @@
 mod demo;
 mod level;
 mod optimize;
+mod pavilion;
+mod services;
 mod simulate;
 mod slam2d;
 mod svg;
@@ -22,8 +24,11 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     Demo(demo::DemoArgs),
+    Edge(services::EdgeArgs),
     Level(level::LevelArgs),
+    Mapper(services::MapperArgs),
     Optimize(optimize::OptimizeArgs),
+    Pavilion(pavilion::PavilionArgs),
     Simulate(simulate::SimulateArgs),
     Slam2d(slam2d::Slam2dArgs),
 }
@@ -31,6 +36,9 @@ enum Command {
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
         Command::Demo(args) => demo::run(&args),
+        Command::Edge(args) => services::run_edge(&args),
+        Command::Mapper(args) => services::run_mapper(&args),
+        Command::Pavilion(args) => pavilion::run(&args),
         Command::Level(args) => level::run(&args),
         Command::Optimize(args) => optimize::run(&args),
         Command::Simulate(args) => simulate::run(&args),

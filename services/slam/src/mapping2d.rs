@@ -148,6 +148,7 @@ pub struct Mapper2d {
     chains: Vec<Option<Chain>>,
     optimizer: Optimizer,
     stats: MapperStats,
+    last_optimization: Option<OptimizeReport>,
 }
 
 impl Mapper2d {
@@ -164,6 +165,11 @@ impl Mapper2d {
 
     pub fn stats(&self) -> MapperStats {
         self.stats
+    }
+
+    /// The report of the last optimization that ran.
+    pub fn last_optimization(&self) -> Option<&OptimizeReport> {
+        self.last_optimization.as_ref()
     }
 
     /// The current pose estimate of a scan the mapper placed.
@@ -402,6 +408,7 @@ impl Mapper2d {
             .optimizer
             .optimize(&mut self.graph, &self.params.optimize)?;
         self.stats.optimizations += 1;
+        self.last_optimization = Some(report);
         Ok(report)
     }
 

@@ -377,8 +377,14 @@ pub fn validate_node(node: &v1::Node) -> Result<(), WireError> {
             same_sender(header, g, "Node.gps.header")?;
         }
     }
-    if let Some(delta) = &node.odometry_delta_from_previous {
-        pose2d_from_wire(delta)?;
+    for pose in [
+        &node.odometry_delta_from_previous,
+        &node.scan_origin_in_robot,
+    ]
+    .into_iter()
+    .flatten()
+    {
+        pose2d_from_wire(pose)?;
     }
     Ok(())
 }
@@ -488,6 +494,11 @@ mod tests {
                 x_m: 4.9,
                 y_m: 0.2,
                 yaw_rad: 0.05,
+            }),
+            scan_origin_in_robot: Some(v1::Pose2D {
+                x_m: 0.3,
+                y_m: 0.0,
+                yaw_rad: 0.0,
             }),
         }
     }

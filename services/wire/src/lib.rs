@@ -32,6 +32,8 @@ pub use keys::{
 };
 /// Re-exported so users can encode and decode without depending on prost themselves.
 pub use prost::Message;
+#[cfg(feature = "session")]
+pub mod session;
 
 /// The wire version every [`v1::Header`] carries; receivers reject any other.
 pub const WIRE_VERSION: u32 = 1;

@@ -23,9 +23,9 @@ fn run_json(args: &[&str]) -> serde_json::Value {
 /// Paper Fig. 4 in the simulator: the leveled scan sees the pavilion and not the hill, the
 /// fixed 2D scanner sees the hill and not the pavilion; the picture is written.
 #[test]
-fn demo_shows_the_pavilion_that_a_fixed_2d_scanner_misses() {
-    let dir = temp_dir("demo");
-    let report = run_json(&["demo", "--out-dir", dir.to_str().unwrap(), "--json"]);
+fn pavilion_shows_the_pavilion_that_a_fixed_2d_scanner_misses() {
+    let dir = temp_dir("pavilion");
+    let report = run_json(&["pavilion", "--out-dir", dir.to_str().unwrap(), "--json"]);
     assert!(
         report["beams_on_pavilion"].as_u64().unwrap() >= 5,
         "{report}"

@@ -1,0 +1,77 @@
+//! The edge service's configuration (TOML). Every field has a default; `deploy/edge.toml`
+//! shows them all.
+
+use crate::node::NodeParams;
+use crate::source::SimSourceConfig;
+use leveling::SegmentParams;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use wire::session::SessionConfig;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EdgeConfig {
+    /// Fleet (site) id: `[A-Za-z0-9_-]+`.
+    pub fleet: String,
+    /// This robot's id: `[A-Za-z0-9_-]+`, unique in the fleet.
+    pub robot: String,
+    /// The Zenoh session: a client of the mapper's router by default.
+    pub zenoh: SessionConfig,
+    /// The on-disk outbox (redb file): nodes stay here until the mapper acks them.
+    pub outbox_path: PathBuf,
+    /// When to start a node.
+    pub node: NodeParams,
+    /// Segmentation thresholds (paper 3.1); see deploy/leveling.toml.
+    pub leveling: SegmentParams,
+    /// Live odometry publication rate (Hz).
+    pub odometry_rate_hz: f64,
+    /// Re-send every unacked node after this long without ack progress (ms).
+    pub resend_after_ms: u64,
+    /// Source time per wall-clock time: 1 is real time, 0 as fast as possible.
+    pub speed: f64,
+    /// At the source's end, keep running until every node is acked (or shutdown).
+    pub linger_for_acks: bool,
+    /// The measurement source.
+    pub source: SourceConfig,
+}
+
+/// The measurement source. Only the simulator is wired up so far.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "snake_case")]
+pub enum SourceConfig {
+    /// A simulated robot in the hilly park.
+    Sim(SimSourceConfig),
+}
+
+impl Default for SourceConfig {
+    fn default() -> Self {
+        SourceConfig::Sim(SimSourceConfig::default())
+    }
+}
+
+impl Default for EdgeConfig {
+    fn default() -> Self {
+        EdgeConfig {
+            fleet: "park".into(),
+            robot: "robot0".into(),
+            zenoh: SessionConfig::default(),
+            outbox_path: PathBuf::from("levelmap-edge-outbox.redb"),
+            node: NodeParams::default(),
+            leveling: SegmentParams::default(),
+            odometry_rate_hz: 10.0,
+            resend_after_ms: 1000,
+            speed: 1.0,
+            linger_for_acks: true,
+            source: SourceConfig::default(),
+        }
+    }
+}
+
+impl EdgeConfig {
+    /// Reads a TOML file; unknown keys are errors (a typo must not silently become a default).
+    pub fn load(path: &Path) -> anyhow::Result<EdgeConfig> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+    }
+}

@@ -1,0 +1,26 @@
+//! The onboard edge service of levelmap: every 3D scan is leveled (paper 2.1–3.2), a node is
+//! started every few metres or degrees, committed to an on-disk outbox and published over
+//! Zenoh until the mapper acks it; live odometry is published best effort.
+//!
+//! [`node`] and [`source`] are pure; [`outbox`] is the disk; [`service`] is the thin async shell.
+
+pub mod config;
+pub mod node;
+pub mod outbox;
+pub mod service;
+pub mod source;
+
+pub use config::{EdgeConfig, SourceConfig};
+pub use node::{GpsReading, NodeBuilder, NodeError, NodeParams, PlanarScan, SensorScan};
+pub use outbox::{Outbox, OutboxError};
+pub use service::{EdgeReport, run};
+pub use source::{SimSource, SimSourceConfig, Source, SourceEvent, park, sim_gps_reading};
+
+/// The source a config names, with simulation time 0 at `epoch_ns`.
+pub fn open_source(config: &EdgeConfig, epoch_ns: u64) -> anyhow::Result<Box<dyn Source>> {
+    match &config.source {
+        SourceConfig::Sim(sim) => SimSource::new(sim, epoch_ns, config.odometry_rate_hz)
+            .map(|s| Box::new(s) as Box<dyn Source>)
+            .ok_or_else(|| anyhow::anyhow!("sim source: the park has no loop {}", sim.loop_index)),
+    }
+}

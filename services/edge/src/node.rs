@@ -1,0 +1,242 @@
+//! From 3D scans with odometry and GPS to the nodes a robot sends (pure, no I/O): a node
+//! every few metres or degrees, its scan leveled (paper 2.1–3.2), the GPS fix carried to the
+//! scan's start.
+
+use leveling::nalgebra::{Isometry3, Point3, Vector3};
+use leveling::{DeskewError, Leveler, PoseTrack, Scan3d, SegmentParams, leveled_frame};
+use serde::{Deserialize, Serialize};
+use slam::Pose2;
+use wire::v1;
+
+/// When the robot starts a new node.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NodeParams {
+    /// A new node after this much travel since the last one (m)…
+    pub node_distance_m: f64,
+    /// …or this much rotation (deg).
+    pub node_rotation_deg: f64,
+}
+
+impl Default for NodeParams {
+    fn default() -> Self {
+        NodeParams {
+            node_distance_m: 1.0,
+            node_rotation_deg: 20.0,
+        }
+    }
+}
+
+/// One GPS fix as the source reads it, with dead reckoning at the fix's time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GpsReading {
+    pub stamp_ns: u64,
+    pub latitude_deg: f64,
+    pub longitude_deg: f64,
+    pub altitude_m: f64,
+    /// The receiver's standard deviations, horizontal and vertical (m).
+    pub sigma_horizontal_m: f64,
+    pub sigma_vertical_m: f64,
+    pub status: v1::FixStatus,
+    /// The antenna in the robot frame (m).
+    pub antenna_in_robot_m: Vector3<f64>,
+    /// The dead-reckoning pose at `stamp_ns` (odometry frame).
+    pub odometry_at_fix: Isometry3<f64>,
+}
+
+/// One 3D scan from a source, ready for leveling. Times are ns since the Unix epoch.
+#[derive(Clone, Debug)]
+pub struct SensorScan {
+    /// The scan in the sensor frame, columns stamped.
+    pub raw: Scan3d,
+    /// Dead reckoning covering the scan's columns (odometry frame).
+    pub track: PoseTrack,
+    /// The sensor's mount on the robot.
+    pub sensor_in_robot: Isometry3<f64>,
+    /// The latest GPS fix at or before the scan's start, if the receiver had one.
+    pub gps: Option<GpsReading>,
+}
+
+/// A scan of a fixed (not leveled) 2D scanner.
+#[derive(Clone, Debug)]
+pub struct PlanarScan {
+    pub stamp_ns: u64,
+    pub bearings_rad: Vec<f32>,
+    /// Range per bearing (m); 0 = no return.
+    pub ranges_m: Vec<f32>,
+    /// Dead reckoning at the scan (odometry frame).
+    pub robot_at_start: Isometry3<f64>,
+    pub sensor_in_robot: Isometry3<f64>,
+    pub gps: Option<GpsReading>,
+}
+
+/// Why a scan gave no node.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    #[error("scan has no columns")]
+    Empty,
+    #[error("dead reckoning does not cover the scan's start ({stamp_ns} ns)")]
+    NoOdometry { stamp_ns: u64 },
+    #[error("motion compensation: {0:?}")]
+    Deskew(DeskewError),
+}
+
+/// Turns scans into nodes, numbering them from `first_node_seq` without gaps.
+#[derive(Debug)]
+pub struct NodeBuilder {
+    fleet: String,
+    robot: String,
+    params: NodeParams,
+    leveler: Leveler,
+    next_node_seq: u64,
+    /// The robot's planar odometry pose at the last node.
+    last: Option<Pose2>,
+}
+
+impl NodeBuilder {
+    pub fn new(
+        fleet: &str,
+        robot: &str,
+        params: NodeParams,
+        segment: SegmentParams,
+        first_node_seq: u64,
+    ) -> NodeBuilder {
+        NodeBuilder {
+            fleet: fleet.to_owned(),
+            robot: robot.to_owned(),
+            params,
+            leveler: Leveler::new(segment),
+            next_node_seq: first_node_seq,
+            last: None,
+        }
+    }
+
+    /// The node of `scan` when the robot moved far enough since the last node (or there is
+    /// none yet); `None` otherwise, without leveling the scan.
+    pub fn offer(&mut self, scan: &SensorScan) -> Result<Option<v1::Node>, NodeError> {
+        let start_ns = scan.raw.columns.first().ok_or(NodeError::Empty)?.stamp_ns;
+        let robot_at_start = scan
+            .track
+            .at(start_ns)
+            .ok_or(NodeError::NoOdometry { stamp_ns: start_ns })?;
+        if !self.moved_enough(&robot_at_start) {
+            return Ok(None);
+        }
+        let leveled = self
+            .leveler
+            .level(&scan.raw, &scan.track, &scan.sensor_in_robot)
+            .map_err(NodeError::Deskew)?;
+        let scan_frame =
+            Pose2::from_isometry3(&leveled_frame(&robot_at_start, &scan.sensor_in_robot).inverse());
+        let wire_scan =
+            wire::leveled_scan_to_wire(&leveled.scan, &leveled.counts, self.header(start_ns));
+        Ok(Some(self.assemble(
+            start_ns,
+            &robot_at_start,
+            scan_frame,
+            wire_scan,
+            scan.gps.as_ref(),
+        )))
+    }
+
+    /// The node of a scan from a fixed 2D scanner (no leveling: its frame tilts with the
+    /// robot), by the same rule as [`Self::offer`]. For comparisons with the paper's baseline.
+    pub fn offer_planar(&mut self, scan: &PlanarScan) -> Option<v1::Node> {
+        if !self.moved_enough(&scan.robot_at_start) {
+            return None;
+        }
+        let scan_frame = Pose2::from_isometry3(&(scan.robot_at_start * scan.sensor_in_robot));
+        let wire_scan = v1::LeveledScan {
+            header: Some(self.header(scan.stamp_ns)),
+            bearing_rad: scan.bearings_rad.clone(),
+            range_m: scan.ranges_m.clone(),
+            counts: None,
+            columns: u32::try_from(scan.bearings_rad.len()).unwrap_or(u32::MAX),
+        };
+        Some(self.assemble(
+            scan.stamp_ns,
+            &scan.robot_at_start,
+            scan_frame,
+            wire_scan,
+            scan.gps.as_ref(),
+        ))
+    }
+
+    fn header(&self, stamp_ns: u64) -> v1::Header {
+        v1::Header::new(&self.fleet, &self.robot, 0, stamp_ns, 0)
+    }
+
+    fn moved_enough(&self, robot_at_start: &Isometry3<f64>) -> bool {
+        let Some(last) = self.last else {
+            return true;
+        };
+        let d = last.between(&Pose2::from_isometry3(robot_at_start));
+        d.x.hypot(d.y) >= self.params.node_distance_m
+            || d.theta.abs() >= self.params.node_rotation_deg.to_radians()
+    }
+
+    fn assemble(
+        &mut self,
+        start_ns: u64,
+        robot_at_start: &Isometry3<f64>,
+        scan_frame: Pose2,
+        scan: v1::LeveledScan,
+        gps: Option<&GpsReading>,
+    ) -> v1::Node {
+        let robot2 = Pose2::from_isometry3(robot_at_start);
+        let node = v1::Node {
+            header: Some(self.header(start_ns)),
+            node_seq: self.next_node_seq,
+            scan: Some(scan),
+            odometry: Some(wire::odometry_to_wire(
+                &leveling::TimedPose {
+                    stamp_ns: start_ns,
+                    pose: *robot_at_start,
+                },
+                self.header(start_ns),
+            )),
+            gps: gps.map(|g| gps_to_wire(g, robot_at_start, self.header(start_ns))),
+            odometry_delta_from_previous: self
+                .last
+                .map(|last| pose2_to_wire(last.between(&robot2))),
+            scan_origin_in_robot: Some(pose2_to_wire(robot2.between(&scan_frame))),
+        };
+        self.next_node_seq += 1;
+        self.last = Some(robot2);
+        node
+    }
+}
+
+pub fn pose2_to_wire(p: Pose2) -> v1::Pose2D {
+    v1::Pose2D {
+        x_m: p.x,
+        y_m: p.y,
+        yaw_rad: p.theta,
+    }
+}
+
+/// The fix on the wire, with the robot's motion from the fix to the scan's start folded into
+/// the antenna offset (see `Node.gps` in node.proto): where the antenna was at the fix's time,
+/// in the robot frame at the scan's start.
+fn gps_to_wire(g: &GpsReading, robot_at_start: &Isometry3<f64>, header: v1::Header) -> v1::GpsFix {
+    let antenna_at_fix = g.odometry_at_fix * Point3::from(g.antenna_in_robot_m);
+    let offset = robot_at_start.inverse() * antenna_at_fix;
+    let (h, v) = (g.sigma_horizontal_m.powi(2), g.sigma_vertical_m.powi(2));
+    v1::GpsFix {
+        header: Some(v1::Header {
+            stamp_ns: g.stamp_ns,
+            ..header
+        }),
+        latitude_deg: g.latitude_deg,
+        longitude_deg: g.longitude_deg,
+        altitude_m: g.altitude_m,
+        position_covariance_m2: vec![h, 0.0, 0.0, 0.0, h, 0.0, 0.0, 0.0, v],
+        status: g.status.into(),
+        satellites: 0,
+        antenna_offset_m: Some(v1::Vec3 {
+            x: offset.x,
+            y: offset.y,
+            z: offset.z,
+        }),
+    }
+}

@@ -1,0 +1,156 @@
+//! The on-disk outbox: every node stays in it, committed, from the moment it is made until the
+//! mapper's ack covers it, so neither a radio outage nor a crash of either side loses one.
+
+use redb::{Database, ReadableDatabase, ReadableTableMetadata, TableDefinition};
+use std::path::Path;
+
+/// Encoded `v1::Node`s by node_seq.
+const NODES: TableDefinition<u64, &[u8]> = TableDefinition::new("nodes");
+/// `next_node_seq` (the next number to give) and `acked` (highest node_seq acked + 1).
+const META: TableDefinition<&str, u64> = TableDefinition::new("meta");
+
+#[derive(Debug, thiserror::Error)]
+#[error("outbox: {0}")]
+pub struct OutboxError(#[from] redb::Error);
+
+macro_rules! from_redb {
+    ($($t:ty),*) => {$(
+        impl From<$t> for OutboxError {
+            fn from(e: $t) -> Self {
+                OutboxError(e.into())
+            }
+        }
+    )*};
+}
+from_redb!(
+    redb::DatabaseError,
+    redb::TransactionError,
+    redb::TableError,
+    redb::StorageError,
+    redb::CommitError
+);
+
+pub struct Outbox {
+    db: Database,
+}
+
+impl Outbox {
+    /// Opens the outbox at `path`, creating it (and its tables) if needed.
+    pub fn open(path: &Path) -> Result<Outbox, OutboxError> {
+        let db = Database::create(path)?;
+        let txn = db.begin_write()?;
+        txn.open_table(NODES)?;
+        txn.open_table(META)?;
+        txn.commit()?;
+        Ok(Outbox { db })
+    }
+
+    fn meta(&self, key: &str) -> Result<u64, OutboxError> {
+        let txn = self.db.begin_read()?;
+        let table = txn.open_table(META)?;
+        Ok(table.get(key)?.map_or(0, |v| v.value()))
+    }
+
+    /// The node_seq the next node gets: numbering survives restarts, acked nodes included.
+    pub fn next_node_seq(&self) -> Result<u64, OutboxError> {
+        self.meta("next_node_seq")
+    }
+
+    /// Nodes below this are acked.
+    pub fn acked_below(&self) -> Result<u64, OutboxError> {
+        self.meta("acked")
+    }
+
+    /// Commits node `node_seq` (which must be [`Self::next_node_seq`]).
+    pub fn push(&self, node_seq: u64, encoded: &[u8]) -> Result<(), OutboxError> {
+        let txn = self.db.begin_write()?;
+        {
+            let mut nodes = txn.open_table(NODES)?;
+            nodes.insert(node_seq, encoded)?;
+            let mut meta = txn.open_table(META)?;
+            meta.insert("next_node_seq", node_seq + 1)?;
+        }
+        txn.commit()?;
+        Ok(())
+    }
+
+    /// Drops every node up to and including `acked_node_seq`; returns how many went.
+    pub fn ack(&self, acked_node_seq: u64) -> Result<usize, OutboxError> {
+        if acked_node_seq < self.acked_below()? {
+            return Ok(0);
+        }
+        let txn = self.db.begin_write()?;
+        let removed;
+        {
+            let mut nodes = txn.open_table(NODES)?;
+            let mut gone = nodes.extract_from_if(..=acked_node_seq, |_, _| true)?;
+            let mut n = 0;
+            for entry in gone.by_ref() {
+                entry?;
+                n += 1;
+            }
+            drop(gone);
+            removed = n;
+            let mut meta = txn.open_table(META)?;
+            meta.insert("acked", acked_node_seq + 1)?;
+        }
+        txn.commit()?;
+        Ok(removed)
+    }
+
+    /// Up to `limit` unacked nodes from `from_seq` on, in order.
+    pub fn pending(&self, from_seq: u64, limit: usize) -> Result<Vec<(u64, Vec<u8>)>, OutboxError> {
+        let txn = self.db.begin_read()?;
+        let nodes = txn.open_table(NODES)?;
+        let mut out = Vec::new();
+        for entry in nodes.range(from_seq..)?.take(limit) {
+            let (k, v) = entry?;
+            out.push((k.value(), v.value().to_vec()));
+        }
+        Ok(out)
+    }
+
+    /// Nodes waiting for their ack.
+    pub fn len(&self) -> Result<u64, OutboxError> {
+        let txn = self.db.begin_read()?;
+        Ok(txn.open_table(NODES)?.len()?)
+    }
+
+    pub fn is_empty(&self) -> Result<bool, OutboxError> {
+        Ok(self.len()? == 0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nodes_stay_until_acked_and_survive_reopening() {
+        let dir = std::env::temp_dir().join(format!("levelmap-outbox-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("outbox.redb");
+        let _ = std::fs::remove_file(&path);
+        {
+            let outbox = Outbox::open(&path).unwrap();
+            assert_eq!(outbox.next_node_seq().unwrap(), 0);
+            for seq in 0..5 {
+                outbox.push(seq, &[seq as u8; 3]).unwrap();
+            }
+            assert_eq!(outbox.ack(1).unwrap(), 2);
+            // An old ack changes nothing.
+            assert_eq!(outbox.ack(0).unwrap(), 0);
+        }
+        let outbox = Outbox::open(&path).unwrap();
+        assert_eq!(outbox.next_node_seq().unwrap(), 5);
+        assert_eq!(outbox.acked_below().unwrap(), 2);
+        let pending = outbox.pending(0, 10).unwrap();
+        let seqs: Vec<u64> = pending.iter().map(|p| p.0).collect();
+        assert_eq!(seqs, [2, 3, 4]);
+        assert_eq!(pending[0].1, [2, 2, 2]);
+        assert_eq!(outbox.pending(3, 1).unwrap()[0].0, 3);
+        assert_eq!(outbox.ack(4).unwrap(), 3);
+        assert!(outbox.is_empty().unwrap());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,88 @@
+//! `levelmap mapper` and `levelmap edge`: the two services, run until Ctrl-C.
+
+use anyhow::Result;
+use clap::Args;
+use std::path::PathBuf;
+
+/// Run the mapping server: Zenoh router for the robots, durable store, HTTP API.
+#[derive(Args, Debug)]
+pub struct MapperArgs {
+    /// TOML configuration (see deploy/mapper.toml); defaults without one.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+}
+
+/// Run a robot's edge service: its source's scans leveled and published as nodes.
+#[derive(Args, Debug)]
+pub struct EdgeArgs {
+    /// TOML configuration (see deploy/edge.toml); defaults without one.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Print the final report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime> {
+    Ok(tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?)
+}
+
+fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+pub fn run_mapper(args: &MapperArgs) -> Result<()> {
+    init_logging();
+    let config = match &args.config {
+        Some(path) => mapper::MapperConfig::load(path)?,
+        None => mapper::MapperConfig::default(),
+    };
+    runtime()?.block_on(async {
+        let running = mapper::start(config.clone()).await?;
+        tracing::info!(
+            "mapper: Zenoh {:?}, HTTP http://{}/api/v1, store {}",
+            config.zenoh.listen,
+            running.http_addr,
+            config.store_path.display()
+        );
+        tokio::signal::ctrl_c().await?;
+        tracing::info!("stopping");
+        running.stop().await
+    })
+}
+
+pub fn run_edge(args: &EdgeArgs) -> Result<()> {
+    init_logging();
+    let config = match &args.config {
+        Some(path) => edge::EdgeConfig::load(path)?,
+        None => edge::EdgeConfig::default(),
+    };
+    let report = runtime()?.block_on(async {
+        let source = edge::open_source(&config, edge::service::now_ns())?;
+        edge::run(config, source, async {
+            let _ = tokio::signal::ctrl_c().await;
+        })
+        .await
+    })?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!(
+            "{}: {} nodes, {} sends ({} re-sends), acked up to {:?}, {} waiting in the outbox",
+            report.robot,
+            report.nodes,
+            report.node_sends,
+            report.node_resends,
+            report.acked_node_seq,
+            report.outbox_pending
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,399 @@
+//! The HTTP API (`/api/v1`, JSON): thin handlers over the current fleet views. Routes and
+//! their shapes are listed in the OpenAPI document served at `/api/v1/openapi.json`.
+
+use crate::server::{Work, now_ns};
+use crate::state::{FleetView, Shared};
+use axum::Router;
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use serde::Deserialize;
+use serde_json::{Value, json};
+use std::fmt::Write as _;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc;
+
+#[derive(Clone)]
+struct Api {
+    shared: Arc<Shared>,
+    work: mpsc::Sender<Work>,
+}
+
+pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>) -> Router {
+    Router::new()
+        .route("/healthz", get(healthz))
+        .route("/metrics", get(metrics))
+        .route("/api/v1/openapi.json", get(openapi))
+        .route("/api/v1/fleets", get(fleets))
+        .route("/api/v1/fleets/{fleet}/summary", get(summary))
+        .route("/api/v1/fleets/{fleet}/robots", get(robots))
+        .route(
+            "/api/v1/fleets/{fleet}/robots/{robot}/pose",
+            get(robot_pose),
+        )
+        .route(
+            "/api/v1/fleets/{fleet}/robots/{robot}/trajectory.tum",
+            get(trajectory_tum),
+        )
+        .route("/api/v1/fleets/{fleet}/graph", get(graph))
+        .route("/api/v1/fleets/{fleet}/graph.g2o", get(graph_g2o))
+        .route("/api/v1/fleets/{fleet}/nodes/{node}", get(node_detail))
+        .route("/api/v1/fleets/{fleet}/optimize", post(optimize))
+        .route("/api/v1/events", get(events))
+        .with_state(Api { shared, work })
+}
+
+type Reply = Result<Response, (StatusCode, String)>;
+
+fn not_found(what: String) -> (StatusCode, String) {
+    (StatusCode::NOT_FOUND, what)
+}
+
+fn view(api: &Api, fleet: &str) -> Result<Arc<FleetView>, (StatusCode, String)> {
+    api.shared
+        .fleet(fleet)
+        .ok_or_else(|| not_found(format!("no fleet {fleet:?} (no node received yet?)")))
+}
+
+fn json_reply(value: Value) -> Reply {
+    Ok(axum::Json(value).into_response())
+}
+
+async fn healthz() -> &'static str {
+    "ok\n"
+}
+
+async fn metrics(State(api): State<Api>) -> Response {
+    let m = &api.shared.metrics;
+    let mut out = String::new();
+    let counters = [
+        (
+            "levelmap_nodes_accepted_total",
+            "Nodes mapped and stored.",
+            &m.nodes_accepted,
+        ),
+        (
+            "levelmap_nodes_duplicate_total",
+            "Re-sent nodes taken already (re-acked).",
+            &m.nodes_duplicate,
+        ),
+        (
+            "levelmap_odometry_received_total",
+            "Live odometry messages taken.",
+            &m.odometry_received,
+        ),
+        ("levelmap_acks_sent_total", "Acks published.", &m.acks_sent),
+        (
+            "levelmap_optimizations_total",
+            "Network optimizations run.",
+            &m.optimizations,
+        ),
+    ];
+    for (name, help, value) in counters {
+        let _ = writeln!(
+            out,
+            "# HELP {name} {help}\n# TYPE {name} counter\n{name} {}",
+            value.load(Ordering::Relaxed)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "# HELP levelmap_rejected_total Messages rejected, by topic and reason.\n# TYPE levelmap_rejected_total counter"
+    );
+    for ((topic, reason), n) in m.rejected.lock().expect("metrics lock").iter() {
+        let _ = writeln!(
+            out,
+            "levelmap_rejected_total{{topic=\"{topic}\",reason=\"{reason}\"}} {n}"
+        );
+    }
+    let fleets = api.shared.fleets.read().expect("views lock").clone();
+    let _ = writeln!(
+        out,
+        "# HELP levelmap_map_nodes Nodes in a fleet's map.\n# TYPE levelmap_map_nodes gauge"
+    );
+    for (id, v) in &fleets {
+        let _ = writeln!(
+            out,
+            "levelmap_map_nodes{{fleet=\"{id}\"}} {}",
+            v.poses.len()
+        );
+    }
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response()
+}
+
+async fn fleets(State(api): State<Api>) -> Reply {
+    let fleets = api.shared.fleets.read().expect("views lock").clone();
+    let mut ids: Vec<&String> = fleets.keys().collect();
+    ids.sort();
+    json_reply(json!({ "fleets": ids }))
+}
+
+async fn summary(State(api): State<Api>, Path(fleet): Path<String>) -> Reply {
+    let v = view(&api, &fleet)?;
+    json_reply(json!({
+        "fleet": v.id,
+        "robots": v.robots.len(),
+        "nodes": v.poses.len(),
+        "edges": v.edges.len(),
+        "gps_edges": v.gps.len(),
+        "loop_closures": v.stats.loop_closures,
+        "inter_robot_closures": v.stats.inter_robot_closures,
+        "stats": v.stats,
+        "last_optimization": v.last_optimization,
+        "last_ingest_ms": v.last_ingest_ms,
+        "datum": v.datum.map(|d| d.origin),
+        "updated_ns": v.updated_ns,
+    }))
+}
+
+/// The robot's pose on the map now: live odometry since its last node, or the node itself.
+fn robot_json(api: &Api, v: &FleetView, robot: &crate::state::RobotView) -> Value {
+    let live = api
+        .shared
+        .live
+        .lock()
+        .expect("live lock")
+        .get(&(v.id.clone(), robot.id.clone()))
+        .copied();
+    let (pose, stamp_ns, last_seen_ns) = match live {
+        Some(l) => (robot.live_pose(&l.odometry), l.stamp_ns, l.received_ns),
+        None => (robot.map_pose_at_last_node, 0, 0),
+    };
+    json!({
+        "id": robot.id,
+        "pose": pose,
+        "stamp_ns": stamp_ns,
+        "last_seen_ns": last_seen_ns,
+        "nodes": robot.nodes,
+        "last_node_seq": robot.last_node_seq,
+    })
+}
+
+async fn robots(State(api): State<Api>, Path(fleet): Path<String>) -> Reply {
+    let v = view(&api, &fleet)?;
+    let robots: Vec<Value> = v.robots.iter().map(|r| robot_json(&api, &v, r)).collect();
+    json_reply(json!({ "fleet": v.id, "now_ns": now_ns(), "robots": robots }))
+}
+
+async fn robot_pose(State(api): State<Api>, Path((fleet, robot)): Path<(String, String)>) -> Reply {
+    let v = view(&api, &fleet)?;
+    let r = v
+        .robot(&robot)
+        .ok_or_else(|| not_found(format!("no robot {robot:?} in fleet {fleet:?}")))?;
+    json_reply(robot_json(&api, &v, r))
+}
+
+#[derive(Deserialize)]
+struct GraphQuery {
+    /// Include each edge's information matrix.
+    #[serde(default)]
+    information: bool,
+}
+
+async fn graph(
+    State(api): State<Api>,
+    Path(fleet): Path<String>,
+    Query(q): Query<GraphQuery>,
+) -> Reply {
+    let v = view(&api, &fleet)?;
+    let nodes: Vec<Value> = v
+        .nodes
+        .iter()
+        .zip(&v.poses)
+        .enumerate()
+        .map(|(i, (n, p))| {
+            json!({
+                "id": i,
+                "robot": v.robots[n.robot].id,
+                "node_seq": n.node_seq,
+                "stamp_ns": n.stamp_ns,
+                "pose": p,
+            })
+        })
+        .collect();
+    let edges: Vec<Value> = v
+        .edges
+        .iter()
+        .map(|e| {
+            let mut edge = json!({
+                "from": e.from,
+                "to": e.to,
+                "kind": e.kind,
+                "measurement": e.measurement,
+            });
+            if q.information {
+                edge["information"] = json!(e.information);
+            }
+            edge
+        })
+        .collect();
+    let gps: Vec<Value> = v
+        .gps
+        .iter()
+        .map(|g| {
+            let p = v.poses[g.node];
+            let antenna = p.transform_point([g.lever_arm_m.x, g.lever_arm_m.y]);
+            json!({
+                "node": g.node,
+                "position_m": [g.position_m.x, g.position_m.y],
+                "residual_m": [antenna[0] - g.position_m.x, antenna[1] - g.position_m.y],
+            })
+        })
+        .collect();
+    json_reply(json!({ "fleet": v.id, "nodes": nodes, "edges": edges, "gps": gps }))
+}
+
+async fn graph_g2o(State(api): State<Api>, Path(fleet): Path<String>) -> Reply {
+    let v = view(&api, &fleet)?;
+    let graph = slam::PoseGraph {
+        poses: v.poses.clone(),
+        edges: v.edges.clone(),
+        gps: Vec::new(),
+    };
+    let ids: Vec<i64> = (0..v.poses.len() as i64).collect();
+    Ok((
+        [(header::CONTENT_TYPE, "text/plain")],
+        graphio::posegraph::to_g2o(&graph, &ids),
+    )
+        .into_response())
+}
+
+async fn node_detail(State(api): State<Api>, Path((fleet, node)): Path<(String, usize)>) -> Reply {
+    let v = view(&api, &fleet)?;
+    let n = v
+        .nodes
+        .get(node)
+        .ok_or_else(|| not_found(format!("no node {node} in fleet {fleet:?}")))?;
+    json_reply(json!({
+        "id": node,
+        "robot": v.robots[n.robot].id,
+        "node_seq": n.node_seq,
+        "stamp_ns": n.stamp_ns,
+        "pose": v.poses[node],
+        "odometry": n.odometry,
+        "gps": n.gps.map(|g| json!({"position_m": [g.position_m.x, g.position_m.y]})),
+        "counts": n.counts.map(|c| json!({
+            "points": c.points, "invalid": c.invalid, "ground": c.ground,
+            "landmark": c.landmark, "overhang": c.overhang,
+        })),
+        "scan": { "bearing_rad": n.bearings_rad, "range_m": n.ranges_m },
+        "edges": v.edges.iter().filter(|e| e.from == node || e.to == node)
+            .map(|e| json!({"from": e.from, "to": e.to, "kind": e.kind})).collect::<Vec<_>>(),
+    }))
+}
+
+/// The robot's node poses as a TUM trajectory (`t x y z qx qy qz qw`, t in s).
+async fn trajectory_tum(
+    State(api): State<Api>,
+    Path((fleet, robot)): Path<(String, String)>,
+) -> Reply {
+    let v = view(&api, &fleet)?;
+    let r = v
+        .robots
+        .iter()
+        .position(|r| r.id == robot)
+        .ok_or_else(|| not_found(format!("no robot {robot:?} in fleet {fleet:?}")))?;
+    let mut out = String::new();
+    for (n, p) in v.nodes.iter().zip(&v.poses).filter(|(n, _)| n.robot == r) {
+        let (qz, qw) = ((p.theta / 2.0).sin(), (p.theta / 2.0).cos());
+        let _ = writeln!(
+            out,
+            "{}.{:09} {:.6} {:.6} 0 0 0 {qz:.9} {qw:.9}",
+            n.stamp_ns / 1_000_000_000,
+            n.stamp_ns % 1_000_000_000,
+            p.x,
+            p.y
+        );
+    }
+    Ok(([(header::CONTENT_TYPE, "text/plain")], out).into_response())
+}
+
+fn authorized(api: &Api, headers: &HeaderMap) -> Result<(), (StatusCode, String)> {
+    let token = &api.shared.token;
+    let given = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    if token.is_empty() {
+        return Err((
+            StatusCode::FORBIDDEN,
+            "write routes are off: no token in the mapper's config".into(),
+        ));
+    }
+    if given != Some(token.as_str()) {
+        return Err((
+            StatusCode::UNAUTHORIZED,
+            "a valid bearer token is needed".into(),
+        ));
+    }
+    Ok(())
+}
+
+async fn optimize(State(api): State<Api>, Path(fleet): Path<String>, headers: HeaderMap) -> Reply {
+    authorized(&api, &headers)?;
+    let (reply, answer) = tokio::sync::oneshot::channel();
+    api.work
+        .send(Work::Optimize { fleet, reply })
+        .map_err(|_| (StatusCode::SERVICE_UNAVAILABLE, "mapper stopping".into()))?;
+    match answer.await {
+        Ok(Ok(report)) => json_reply(report),
+        Ok(Err(e)) => Err((StatusCode::NOT_FOUND, e)),
+        Err(_) => Err((StatusCode::SERVICE_UNAVAILABLE, "mapper stopping".into())),
+    }
+}
+
+/// Server-sent events: `node` (a node mapped) and `optimized` (poses changed), as JSON.
+async fn events(State(api): State<Api>) -> impl IntoResponse {
+    let rx = api.shared.events.subscribe();
+    let stream = futures_util::stream::unfold(rx, |mut rx| async move {
+        loop {
+            match rx.recv().await {
+                Ok(text) => {
+                    return Some((
+                        Ok::<_, std::convert::Infallible>(Event::default().data(text)),
+                        rx,
+                    ));
+                }
+                Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => continue,
+                Err(tokio::sync::broadcast::error::RecvError::Closed) => return None,
+            }
+        }
+    });
+    Sse::new(stream).keep_alive(KeepAlive::default())
+}
+
+/// The JSON shape of a planar pose (`slam::Pose2`).
+fn pose_schema() -> Value {
+    json!({"type": "object", "properties": {
+        "x": {"type": "number"}, "y": {"type": "number"}, "theta": {"type": "number"}}})
+}
+
+async fn openapi() -> Reply {
+    let get_json = |summary: &str| json!({"get": {"summary": summary, "responses": {"200": {"description": "JSON"}, "404": {"description": "unknown fleet, robot or node"}}}});
+    json_reply(json!({
+        "openapi": "3.1.0",
+        "info": {"title": "levelmap mapping server", "version": env!("CARGO_PKG_VERSION")},
+        "components": {
+            "schemas": {"Pose2": pose_schema()},
+            "securitySchemes": {"bearer": {"type": "http", "scheme": "bearer"}}
+        },
+        "paths": {
+            "/healthz": {"get": {"summary": "Liveness", "responses": {"200": {"description": "ok"}}}},
+            "/metrics": {"get": {"summary": "Prometheus text: accepted, duplicate and rejected messages by reason", "responses": {"200": {"description": "text"}}}},
+            "/api/v1/fleets": get_json("Fleets with a map"),
+            "/api/v1/fleets/{fleet}/summary": get_json("Map summary: nodes, edges, closures, last optimization"),
+            "/api/v1/fleets/{fleet}/robots": get_json("Robots with live map pose and last-seen time"),
+            "/api/v1/fleets/{fleet}/robots/{robot}/pose": get_json("One robot's live map pose"),
+            "/api/v1/fleets/{fleet}/robots/{robot}/trajectory.tum": {"get": {"summary": "The robot's node poses as TUM text (evo)", "responses": {"200": {"description": "text"}}}},
+            "/api/v1/fleets/{fleet}/graph": get_json("Pose network: nodes, edges by kind (?information=true for information matrices), GPS residuals"),
+            "/api/v1/fleets/{fleet}/graph.g2o": {"get": {"summary": "Pose network as g2o text", "responses": {"200": {"description": "text"}}}},
+            "/api/v1/fleets/{fleet}/nodes/{node}": get_json("Node detail with its leveled scan"),
+            "/api/v1/fleets/{fleet}/optimize": {"post": {"summary": "Re-optimize the fleet's network now", "security": [{"bearer": []}],
+                "responses": {"200": {"description": "the optimizer's report"}, "401": {"description": "no or wrong token"}, "403": {"description": "no token configured"}}}},
+            "/api/v1/events": {"get": {"summary": "Server-sent events: node mapped, poses optimized (JSON data)", "responses": {"200": {"description": "text/event-stream"}}}}
+        }
+    }))
+}

@@ -1,0 +1,454 @@
+//! The mapping server: Zenoh in, one worker thread mapping every fleet, the store, acks out,
+//! the HTTP API beside it.
+//!
+//! A node goes: Zenoh callback → channel → worker: decode and check → fleet and sequence →
+//! map → store commit → ack → new view for HTTP → event. Live odometry is handled in its
+//! Zenoh callback (no mapping work), so teleoperation sees it at once.
+
+use crate::config::MapperConfig;
+use crate::fleet::{FleetMap, IngestError, Sequence};
+use crate::state::{FleetView, LiveOdometry, Metrics, Shared};
+use crate::store::Store;
+use anyhow::{Context, Result};
+use serde_json::json;
+use slam::Pose2;
+use slam::geodesy::GeoDatum;
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::mpsc;
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use wire::{Message, Topic, WireError, v1};
+use zenoh::Wait;
+
+pub fn now_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}
+
+/// The counter label of a wire error.
+pub fn reason(e: &WireError) -> &'static str {
+    match e {
+        WireError::Decode { .. } => "malformed",
+        WireError::Version { .. } => "version",
+        WireError::Missing { .. } => "missing_field",
+        WireError::InvalidId { .. } => "invalid_id",
+        WireError::InvalidKey { .. } => "invalid_key",
+        WireError::InvalidValue { .. } => "invalid_value",
+        WireError::Invalid { .. } => "inconsistent",
+    }
+}
+
+/// Work for the mapping worker.
+pub enum Work {
+    Node {
+        key: String,
+        payload: Vec<u8>,
+    },
+    /// Re-optimize a fleet now; the reply is the report as JSON.
+    Optimize {
+        fleet: String,
+        reply: tokio::sync::oneshot::Sender<Result<serde_json::Value, String>>,
+    },
+}
+
+/// A running mapper: its HTTP address and the handle to stop it.
+pub struct Running {
+    pub http_addr: std::net::SocketAddr,
+    pub shared: Arc<Shared>,
+    session: zenoh::Session,
+    http: tokio::task::JoinHandle<()>,
+    worker: Option<std::thread::JoinHandle<()>>,
+    work: mpsc::Sender<Work>,
+}
+
+impl Running {
+    /// Re-optimizes a fleet's network now; the optimizer's report as JSON.
+    pub async fn optimize(&self, fleet: &str) -> Result<serde_json::Value> {
+        let (reply, answer) = tokio::sync::oneshot::channel();
+        self.work
+            .send(Work::Optimize {
+                fleet: fleet.to_owned(),
+                reply,
+            })
+            .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
+        answer
+            .await?
+            .map_err(|e| anyhow::anyhow!("optimizing fleet {fleet}: {e}"))
+    }
+
+    /// Stops accepting, lets the worker finish what it holds, closes the session.
+    pub async fn stop(mut self) -> Result<()> {
+        self.http.abort();
+        drop(self.work);
+        let worker = self.worker.take();
+        session_close(&self.session).await?;
+        if let Some(w) = worker {
+            tokio::task::spawn_blocking(move || w.join())
+                .await?
+                .map_err(|_| anyhow::anyhow!("the mapping worker panicked"))?;
+        }
+        Ok(())
+    }
+}
+
+async fn session_close(session: &zenoh::Session) -> Result<()> {
+    session.close().await.map_err(anyhow::Error::from_boxed)
+}
+
+/// Starts the mapper: restores the store, opens Zenoh and the HTTP listener.
+pub async fn start(config: MapperConfig) -> Result<Running> {
+    for fleet in &config.fleets {
+        wire::validate_id("fleet", fleet)?;
+    }
+    let store = Store::open(&config.store_path)
+        .with_context(|| format!("{}: cannot open the store", config.store_path.display()))?;
+    let shared = Arc::new(Shared::new(config.token.clone(), now_ns()));
+    let fleets = restore(&config, &store, &shared)?;
+
+    let session = config.zenoh.open().await?;
+    let (work_tx, work_rx) = mpsc::channel::<Work>();
+    let mut subscribers = Vec::new();
+    for fleet in ["*"] {
+        let node_keys = format!("{}/{fleet}/robots/*/{}", wire::KEY_ROOT, Topic::Node);
+        let tx = work_tx.clone();
+        subscribers.push(
+            session
+                .declare_subscriber(node_keys)
+                .callback(move |sample| {
+                    let _ = tx.send(Work::Node {
+                        key: sample.key_expr().as_str().to_owned(),
+                        payload: sample.payload().to_bytes().into_owned(),
+                    });
+                })
+                .await
+                .map_err(anyhow::Error::from_boxed)?,
+        );
+        let odom_keys = format!("{}/{fleet}/robots/*/{}", wire::KEY_ROOT, Topic::Odom);
+        let live = shared.clone();
+        let known: Vec<String> = config.fleets.clone();
+        subscribers.push(
+            session
+                .declare_subscriber(odom_keys)
+                .callback(move |sample| {
+                    on_odometry(
+                        &live,
+                        &known,
+                        sample.key_expr().as_str(),
+                        &sample.payload().to_bytes(),
+                    )
+                })
+                .await
+                .map_err(anyhow::Error::from_boxed)?,
+        );
+    }
+
+    let worker = {
+        let shared = shared.clone();
+        let session = session.clone();
+        let config = config.clone();
+        std::thread::Builder::new()
+            .name("levelmap-mapping".into())
+            .spawn(move || {
+                // The subscribers live as long as the worker.
+                let _subscribers = subscribers;
+                worker(config, store, fleets, shared, session, work_rx)
+            })?
+    };
+
+    let listener = tokio::net::TcpListener::bind(&config.http_listen)
+        .await
+        .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
+    let http_addr = listener.local_addr()?;
+    let app = crate::api::router(shared.clone(), work_tx.clone());
+    let http = tokio::spawn(async move {
+        if let Err(e) = axum::serve(listener, app).await {
+            tracing::error!("HTTP server: {e}");
+        }
+    });
+    Ok(Running {
+        http_addr,
+        shared,
+        session,
+        http,
+        worker: Some(worker),
+        work: work_tx,
+    })
+}
+
+fn new_fleet(config: &MapperConfig, id: &str) -> FleetMap {
+    FleetMap::new(
+        id,
+        config.mapping.clone(),
+        config.datum.map(|origin| GeoDatum { origin }),
+        config.max_range_m,
+    )
+}
+
+/// Replays the store; checks the edges it rebuilt against the stored ones.
+fn restore(
+    config: &MapperConfig,
+    store: &Store,
+    shared: &Shared,
+) -> Result<HashMap<String, FleetMap>> {
+    let mut fleets = HashMap::new();
+    for stored in store.load()? {
+        let started = Instant::now();
+        let mut map = new_fleet(config, &stored.id);
+        for bytes in &stored.nodes {
+            let node = wire::decode_node(bytes)
+                .with_context(|| format!("store: a node of fleet {} is unreadable", stored.id))?;
+            map.ingest(&node)
+                .with_context(|| format!("store: replaying fleet {}", stored.id))?;
+        }
+        let rebuilt: Vec<Vec<u8>> = map
+            .graph()
+            .edges
+            .iter()
+            .map(|e| serde_json::to_vec(e).expect("edges serialize"))
+            .collect();
+        anyhow::ensure!(
+            rebuilt == stored.edges,
+            "store: fleet {} replays to {} edges that differ from the {} stored",
+            stored.id,
+            rebuilt.len(),
+            stored.edges.len()
+        );
+        tracing::info!(
+            fleet = %stored.id,
+            nodes = stored.nodes.len(),
+            edges = stored.edges.len(),
+            "restored in {:.0} ms",
+            started.elapsed().as_secs_f64() * 1e3
+        );
+        shared.publish_view(FleetView::of(&map, 0.0, now_ns()));
+        fleets.insert(stored.id.clone(), map);
+    }
+    Ok(fleets)
+}
+
+fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]) {
+    let metrics = &shared.metrics;
+    let Ok(parsed) = wire::parse_robot_key(key) else {
+        metrics.reject("odom", "invalid_key");
+        return;
+    };
+    if !fleets.iter().any(|f| f == parsed.fleet) {
+        metrics.reject("odom", "unknown_fleet");
+        return;
+    }
+    let odometry = match wire::decode_odometry(payload) {
+        Ok(o) => o,
+        Err(e) => {
+            metrics.reject("odom", reason(&e));
+            return;
+        }
+    };
+    let header = odometry.header.as_ref().expect("validated");
+    if header.fleet_id != parsed.fleet || header.robot_id != parsed.robot {
+        metrics.reject("odom", "key_mismatch");
+        return;
+    }
+    let pose = wire::odometry_from_wire(&odometry).expect("validated");
+    Metrics::bump(&metrics.odometry_received);
+    let live = LiveOdometry {
+        odometry: Pose2::from_isometry3(&pose.pose),
+        stamp_ns: pose.stamp_ns,
+        received_ns: now_ns(),
+    };
+    shared
+        .live
+        .lock()
+        .expect("live lock")
+        .insert((parsed.fleet.to_owned(), parsed.robot.to_owned()), live);
+}
+
+fn worker(
+    config: MapperConfig,
+    store: Store,
+    mut fleets: HashMap<String, FleetMap>,
+    shared: Arc<Shared>,
+    session: zenoh::Session,
+    work: mpsc::Receiver<Work>,
+) {
+    let mut edges_stored: HashMap<String, usize> = fleets
+        .iter()
+        .map(|(id, map)| (id.clone(), map.graph().edges.len()))
+        .collect();
+    for job in work {
+        match job {
+            Work::Node { key, payload } => {
+                let ctx = NodeContext {
+                    config: &config,
+                    store: &store,
+                    shared: &shared,
+                    session: &session,
+                };
+                ctx.on_node(&mut fleets, &mut edges_stored, &key, &payload);
+            }
+            Work::Optimize { fleet, reply } => {
+                let result = match fleets.get_mut(&fleet) {
+                    None => Err(format!("no fleet {fleet}")),
+                    Some(map) => match map.finish() {
+                        Ok(report) => {
+                            Metrics::bump(&shared.metrics.optimizations);
+                            shared.publish_view(FleetView::of(map, 0.0, now_ns()));
+                            Ok(serde_json::to_value(report).expect("report serializes"))
+                        }
+                        Err(e) => Err(e.to_string()),
+                    },
+                };
+                let _ = reply.send(result);
+            }
+        }
+    }
+}
+
+struct NodeContext<'a> {
+    config: &'a MapperConfig,
+    store: &'a Store,
+    shared: &'a Shared,
+    session: &'a zenoh::Session,
+}
+
+impl NodeContext<'_> {
+    fn reject(&self, reason: &'static str, key: &str, detail: &dyn std::fmt::Display) {
+        self.shared.metrics.reject("node", reason);
+        tracing::warn!(key, reason, "node rejected: {detail}");
+    }
+
+    fn ack(&self, fleet: &str, robot: &str, acked: u64) {
+        let ack = v1::Ack {
+            header: Some(v1::Header::new(fleet, robot, 0, now_ns(), now_ns())),
+            acked_node_seq: acked,
+        };
+        let Ok(key) = wire::ack_key(fleet, robot) else {
+            return;
+        };
+        match self.session.put(key, ack.encode_to_vec()).wait() {
+            Ok(()) => Metrics::bump(&self.shared.metrics.acks_sent),
+            Err(e) => tracing::warn!(fleet, robot, "ack not sent: {e}"),
+        }
+    }
+
+    fn on_node(
+        &self,
+        fleets: &mut HashMap<String, FleetMap>,
+        edges_stored: &mut HashMap<String, usize>,
+        key: &str,
+        payload: &[u8],
+    ) {
+        let started = Instant::now();
+        let Ok(parsed) = wire::parse_robot_key(key) else {
+            return self.reject("invalid_key", key, &"not a levelmap node key");
+        };
+        let (fleet, robot) = (parsed.fleet.to_owned(), parsed.robot.to_owned());
+        if !self.config.fleets.contains(&fleet) {
+            return self.reject(
+                "unknown_fleet",
+                key,
+                &format!("fleet {fleet} is not served"),
+            );
+        }
+        let node = match wire::decode_node(payload) {
+            Ok(n) => n,
+            Err(e) => return self.reject(reason(&e), key, &e),
+        };
+        let header = node.header.as_ref().expect("validated");
+        if header.fleet_id != fleet || header.robot_id != robot {
+            return self.reject(
+                "key_mismatch",
+                key,
+                &format!("header says {}/{}", header.fleet_id, header.robot_id),
+            );
+        }
+        let map = fleets
+            .entry(fleet.clone())
+            .or_insert_with(|| new_fleet(self.config, &fleet));
+        match map.sequence(&robot, node.node_seq) {
+            Sequence::Next => {}
+            Sequence::Duplicate => {
+                Metrics::bump(&self.shared.metrics.nodes_duplicate);
+                let last = map.robots()[map.robot_index(&robot).expect("known")].last_node_seq;
+                return self.ack(&fleet, &robot, last);
+            }
+            Sequence::Gap { expected } => {
+                self.reject(
+                    "out_of_order",
+                    key,
+                    &format!("node {} before {expected}", node.node_seq),
+                );
+                if let Some(r) = map.robot_index(&robot) {
+                    self.ack(&fleet, &robot, map.robots()[r].last_node_seq);
+                }
+                return;
+            }
+        }
+        let arrival = map.nodes().len() as u64;
+        let ingested = match map.ingest(&node) {
+            Ok(i) => i,
+            Err(IngestError::Graph(e)) => {
+                // The network refused the node (nothing was kept of it in the store).
+                tracing::error!(key, "node not mapped: {e}");
+                self.shared.metrics.reject("node", "graph");
+                return;
+            }
+            Err(e) => return self.reject("invalid_value", key, &e),
+        };
+        let stored = edges_stored.entry(fleet.clone()).or_default();
+        let new_edges: Vec<Vec<u8>> = map.graph().edges[*stored..]
+            .iter()
+            .map(|e| serde_json::to_vec(e).expect("edges serialize"))
+            .collect();
+        if let Err(e) = self
+            .store
+            .commit_node(&fleet, arrival, payload, *stored as u64, &new_edges)
+        {
+            // Not durable, so not acked: the robot keeps it and re-sends; the map holds it
+            // already, so stop taking this fleet's nodes rather than diverge from the store.
+            tracing::error!(key, "store commit failed, the mapper must restart: {e}");
+            self.shared.metrics.reject("node", "store");
+            fleets.remove(&fleet);
+            return;
+        }
+        *stored += new_edges.len();
+        Metrics::bump(&self.shared.metrics.nodes_accepted);
+        self.ack(&fleet, &robot, node.node_seq);
+        if ingested.optimized {
+            Metrics::bump(&self.shared.metrics.optimizations);
+        }
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        self.shared.publish_view(FleetView::of(map, ms, now_ns()));
+        let pose = map.poses()[ingested.node];
+        self.shared.event(&json!({
+            "type": "node",
+            "fleet": fleet,
+            "robot": robot,
+            "node": ingested.node,
+            "node_seq": node.node_seq,
+            "pose": pose,
+            "optimized": ingested.optimized,
+        }));
+        if ingested.optimized {
+            self.publish_poses(map);
+        }
+    }
+
+    /// Corrected poses of every robot's last node on `levelmap/{fleet}/map/poses` (JSON).
+    fn publish_poses(&self, map: &FleetMap) {
+        let poses: Vec<serde_json::Value> = map
+            .robots()
+            .iter()
+            .filter_map(|r| {
+                let &last = r.nodes.last()?;
+                Some(json!({"robot": r.id, "node_seq": r.last_node_seq, "pose": map.poses()[last]}))
+            })
+            .collect();
+        let body = json!({"fleet": map.id(), "poses": poses});
+        if let Ok(key) = wire::map_key(map.id(), "poses") {
+            let _ = self.session.put(key, body.to_string()).wait();
+        }
+        self.shared
+            .event(&json!({"type": "optimized", "fleet": map.id()}));
+    }
+}

@@ -1,0 +1,171 @@
+//! What the HTTP side reads: per fleet, an immutable view replaced after every accepted node
+//! (readers never wait on the mapping), live odometry, counters and the event stream.
+
+use crate::fleet::{FleetMap, NodeRecord};
+use serde::Serialize;
+use slam::geodesy::GeoDatum;
+use slam::{GpsEdge, MapperStats, OptimizeReport, Pose2, RelativeEdge};
+use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, RwLock};
+use tokio::sync::broadcast;
+
+/// A robot as the map knows it.
+#[derive(Clone, Debug, Serialize)]
+pub struct RobotView {
+    pub id: String,
+    pub nodes: usize,
+    pub last_node_seq: u64,
+    /// The robot frame's map pose at its last node, and its odometry pose there: live odometry
+    /// since then, composed onto the first, gives the live map pose.
+    pub map_pose_at_last_node: Pose2,
+    pub odometry_at_last_node: Pose2,
+}
+
+impl RobotView {
+    /// The map pose of the robot at odometry pose `odometry`.
+    pub fn live_pose(&self, odometry: &Pose2) -> Pose2 {
+        self.map_pose_at_last_node
+            .compose(&self.odometry_at_last_node.between(odometry))
+    }
+}
+
+/// One fleet's map at one moment.
+#[derive(Debug)]
+pub struct FleetView {
+    pub id: String,
+    pub datum: Option<GeoDatum>,
+    pub robots: Vec<RobotView>,
+    pub nodes: Vec<Arc<NodeRecord>>,
+    pub poses: Vec<Pose2>,
+    pub edges: Vec<RelativeEdge>,
+    pub gps: Vec<GpsEdge>,
+    pub stats: MapperStats,
+    pub last_optimization: Option<OptimizeReport>,
+    /// Time the last accepted node took to map (ms), and when the view was made.
+    pub last_ingest_ms: f64,
+    pub updated_ns: u64,
+}
+
+impl FleetView {
+    pub fn of(map: &FleetMap, last_ingest_ms: f64, updated_ns: u64) -> FleetView {
+        let poses = map.poses().to_vec();
+        let robots = map
+            .robots()
+            .iter()
+            .map(|r| {
+                let last = *r.nodes.last().expect("a robot has a node");
+                let record = &map.nodes()[last];
+                RobotView {
+                    id: r.id.clone(),
+                    nodes: r.nodes.len(),
+                    last_node_seq: r.last_node_seq,
+                    map_pose_at_last_node: poses[last].compose(&record.scan_origin.inverse()),
+                    odometry_at_last_node: record.robot_odometry,
+                }
+            })
+            .collect();
+        FleetView {
+            id: map.id().to_owned(),
+            datum: map.datum().copied(),
+            robots,
+            nodes: map.nodes().to_vec(),
+            poses,
+            edges: map.graph().edges.clone(),
+            gps: map.graph().gps.clone(),
+            stats: map.stats(),
+            last_optimization: map.last_optimization().copied(),
+            last_ingest_ms,
+            updated_ns,
+        }
+    }
+
+    pub fn robot(&self, id: &str) -> Option<&RobotView> {
+        self.robots.iter().find(|r| r.id == id)
+    }
+}
+
+/// A robot's latest odometry.
+#[derive(Clone, Copy, Debug)]
+pub struct LiveOdometry {
+    pub odometry: Pose2,
+    pub stamp_ns: u64,
+    pub received_ns: u64,
+}
+
+/// Counters for `/metrics`.
+#[derive(Debug, Default)]
+pub struct Metrics {
+    pub nodes_accepted: AtomicU64,
+    pub nodes_duplicate: AtomicU64,
+    pub odometry_received: AtomicU64,
+    pub acks_sent: AtomicU64,
+    pub optimizations: AtomicU64,
+    /// Rejections by (topic, reason).
+    pub rejected: Mutex<BTreeMap<(&'static str, &'static str), u64>>,
+}
+
+impl Metrics {
+    pub fn reject(&self, topic: &'static str, reason: &'static str) {
+        *self
+            .rejected
+            .lock()
+            .expect("metrics lock")
+            .entry((topic, reason))
+            .or_default() += 1;
+    }
+
+    pub fn rejected(&self, topic: &str, reason: &str) -> u64 {
+        self.rejected
+            .lock()
+            .expect("metrics lock")
+            .get(&(topic, reason))
+            .copied()
+            .unwrap_or(0)
+    }
+
+    pub fn bump(counter: &AtomicU64) {
+        counter.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// Everything the HTTP side shares with the mapping worker and the Zenoh callbacks.
+#[derive(Debug)]
+pub struct Shared {
+    pub fleets: RwLock<HashMap<String, Arc<FleetView>>>,
+    pub live: Mutex<HashMap<(String, String), LiveOdometry>>,
+    pub metrics: Metrics,
+    /// Events as JSON text (see `docs/api.md`).
+    pub events: broadcast::Sender<String>,
+    pub token: String,
+    pub started_ns: u64,
+}
+
+impl Shared {
+    pub fn new(token: String, started_ns: u64) -> Shared {
+        Shared {
+            fleets: RwLock::default(),
+            live: Mutex::default(),
+            metrics: Metrics::default(),
+            events: broadcast::channel(1024).0,
+            token,
+            started_ns,
+        }
+    }
+
+    pub fn fleet(&self, id: &str) -> Option<Arc<FleetView>> {
+        self.fleets.read().expect("views lock").get(id).cloned()
+    }
+
+    pub fn publish_view(&self, view: FleetView) {
+        self.fleets
+            .write()
+            .expect("views lock")
+            .insert(view.id.clone(), Arc::new(view));
+    }
+
+    /// Sends an event to the stream's subscribers (none listening is fine).
+    pub fn event(&self, event: &serde_json::Value) {
+        let _ = self.events.send(event.to_string());
+    }
+}

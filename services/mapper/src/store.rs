@@ -1,0 +1,110 @@
+//! The durable store (redb, embedded): every accepted node, exactly as received, with the
+//! edges it added, committed in one transaction before the node is acked. A restart replays
+//! the nodes in their arrival order through the same deterministic mapper, which restores the
+//! graph exactly; the stored edges check that it did.
+
+use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
+use std::path::Path;
+
+/// (fleet, arrival index) → encoded `v1::Node`.
+const NODES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("nodes");
+/// (fleet, edge index) → the edge as JSON (`slam::RelativeEdge`).
+const EDGES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("edges");
+
+#[derive(Debug, thiserror::Error)]
+#[error("store: {0}")]
+pub struct StoreError(#[from] redb::Error);
+
+macro_rules! from_redb {
+    ($($t:ty),*) => {$(
+        impl From<$t> for StoreError {
+            fn from(e: $t) -> Self {
+                StoreError(e.into())
+            }
+        }
+    )*};
+}
+from_redb!(
+    redb::DatabaseError,
+    redb::TransactionError,
+    redb::TableError,
+    redb::StorageError,
+    redb::CommitError
+);
+
+pub struct Store {
+    db: Database,
+}
+
+/// One fleet as stored.
+#[derive(Debug, Default)]
+pub struct StoredFleet {
+    pub id: String,
+    /// Encoded nodes in arrival order.
+    pub nodes: Vec<Vec<u8>>,
+    /// Edges as JSON, in order.
+    pub edges: Vec<Vec<u8>>,
+}
+
+impl Store {
+    pub fn open(path: &Path) -> Result<Store, StoreError> {
+        let db = Database::create(path)?;
+        let txn = db.begin_write()?;
+        txn.open_table(NODES)?;
+        txn.open_table(EDGES)?;
+        txn.commit()?;
+        Ok(Store { db })
+    }
+
+    /// Commits node number `arrival` of `fleet` with the edges it added (numbered from
+    /// `first_edge`): durable when this returns.
+    pub fn commit_node(
+        &self,
+        fleet: &str,
+        arrival: u64,
+        node: &[u8],
+        first_edge: u64,
+        edges: &[Vec<u8>],
+    ) -> Result<(), StoreError> {
+        let txn = self.db.begin_write()?;
+        {
+            let mut nodes = txn.open_table(NODES)?;
+            nodes.insert((fleet, arrival), node)?;
+            let mut table = txn.open_table(EDGES)?;
+            for (k, edge) in edges.iter().enumerate() {
+                table.insert((fleet, first_edge + k as u64), edge.as_slice())?;
+            }
+        }
+        txn.commit()?;
+        Ok(())
+    }
+
+    /// Every fleet, its nodes in arrival order.
+    pub fn load(&self) -> Result<Vec<StoredFleet>, StoreError> {
+        let txn = self.db.begin_read()?;
+        let mut fleets: Vec<StoredFleet> = Vec::new();
+        let fleet_of = |id: &str, fleets: &mut Vec<StoredFleet>| -> usize {
+            match fleets.iter().position(|f| f.id == id) {
+                Some(i) => i,
+                None => {
+                    fleets.push(StoredFleet {
+                        id: id.to_owned(),
+                        ..Default::default()
+                    });
+                    fleets.len() - 1
+                }
+            }
+        };
+        for entry in txn.open_table(NODES)?.iter()? {
+            let (k, v) = entry?;
+            let i = fleet_of(k.value().0, &mut fleets);
+            fleets[i].nodes.push(v.value().to_vec());
+        }
+        for entry in txn.open_table(EDGES)?.iter()? {
+            let (k, v) = entry?;
+            let i = fleet_of(k.value().0, &mut fleets);
+            fleets[i].edges.push(v.value().to_vec());
+        }
+        Ok(fleets)
+    }
+}

@@ -1,0 +1,76 @@
+//! The Zenoh session of a levelmap service: mode and endpoints from the service's config file.
+
+use serde::{Deserialize, Serialize};
+
+/// Where a service's Zenoh session listens and connects. Mirrors Zenoh's own config keys
+/// (`mode`, `listen/endpoints`, `connect/endpoints`, `scouting/multicast/enabled`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SessionConfig {
+    /// `router`, `peer` or `client`.
+    pub mode: String,
+    /// Endpoints to listen on, e.g. `tcp/0.0.0.0:7447`.
+    pub listen: Vec<String>,
+    /// Endpoints to connect to, e.g. `tcp/mapper.local:7447`.
+    pub connect: Vec<String>,
+    /// Multicast scouting (off by default: robots name their mapper).
+    pub multicast_scouting: bool,
+}
+
+impl Default for SessionConfig {
+    /// A client connecting to a mapper on this machine.
+    fn default() -> Self {
+        SessionConfig {
+            mode: "client".into(),
+            listen: Vec::new(),
+            connect: vec!["tcp/127.0.0.1:7447".into()],
+            multicast_scouting: false,
+        }
+    }
+}
+
+impl SessionConfig {
+    /// A router listening on `endpoint` (the mapper's default).
+    pub fn router(endpoint: &str) -> SessionConfig {
+        SessionConfig {
+            mode: "router".into(),
+            listen: vec![endpoint.into()],
+            connect: Vec::new(),
+            multicast_scouting: false,
+        }
+    }
+
+    /// A client of the router at `endpoint` (a robot's default).
+    pub fn client(endpoint: &str) -> SessionConfig {
+        SessionConfig {
+            connect: vec![endpoint.into()],
+            ..SessionConfig::default()
+        }
+    }
+
+    pub fn to_zenoh(&self) -> anyhow::Result<zenoh::Config> {
+        let mut config = zenoh::Config::default();
+        let values = [
+            ("mode", serde_json::to_string(&self.mode)?),
+            ("listen/endpoints", serde_json::to_string(&self.listen)?),
+            ("connect/endpoints", serde_json::to_string(&self.connect)?),
+            (
+                "scouting/multicast/enabled",
+                serde_json::to_string(&self.multicast_scouting)?,
+            ),
+        ];
+        for (key, value) in values {
+            config
+                .insert_json5(key, &value)
+                .map_err(|e| anyhow::anyhow!("zenoh config {key} = {value}: {e}"))?;
+        }
+        Ok(config)
+    }
+
+    /// Opens the session.
+    pub async fn open(&self) -> anyhow::Result<zenoh::Session> {
+        zenoh::open(self.to_zenoh()?)
+            .await
+            .map_err(|e| anyhow::anyhow!("zenoh session ({} mode): {e}", self.mode))
+    }
+}
