@@ -1,10 +1,19 @@
 //! Readers and writers for the file formats of 2D SLAM: pose graphs (g2o, TORO) and laser
 //! logs (CARMEN), and the Kümmerle et al. relations used to score maps. The only crate that
 //! reads these files; the algorithms in `slam` stay free of I/O.
+//!
+//! The map products (DESIGN §3 "Map") are encoded here too, to bytes or text and never to a
+//! file, so the command line and the HTTP API serve the same bytes: the occupancy grid as
+//! PNG and as PGM + YAML for ROS map_server ([`gridmap`]), nodes and trajectories as
+//! GeoJSON ([`geojson`]), trajectories as TUM text ([`trajectory`]), the graph as g2o
+//! ([`posegraph::to_g2o`]).
 
 pub mod carmen;
+pub mod geojson;
+pub mod gridmap;
 pub mod posegraph;
 pub mod relations;
+pub mod trajectory;
 
 use std::path::PathBuf;
 
@@ -29,4 +38,25 @@ pub enum FileError {
     /// The file as a whole is unusable (empty, no element of the expected kind, …).
     #[error("{}: {message}", path.display())]
     Invalid { path: PathBuf, message: String },
+}
+
+/// Why a map product could not be encoded. Never a panic, whatever the input's fields hold.
+#[derive(Debug, thiserror::Error)]
+pub enum EncodeError {
+    /// The grid has no cell, or its `cells` do not match `width × height`.
+    #[error("grid of {width} × {height} cells holds {cells} cell values")]
+    BadGrid {
+        width: usize,
+        height: usize,
+        cells: usize,
+    },
+    /// The grid is wider or higher than an image can be (2³¹ − 1 pixels for PNG).
+    #[error("grid of {width} × {height} cells is too large for an image")]
+    GridTooLarge { width: usize, height: usize },
+    /// Pose `index` (in input order) has a NaN or infinite component.
+    #[error("pose {index} is not finite")]
+    NonFinitePose { index: usize },
+    /// The PNG encoder failed.
+    #[error("PNG encoding: {0}")]
+    Png(String),
 }

@@ -3,10 +3,10 @@
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use graphio::carmen;
+use graphio::{carmen, gridmap};
 use serde::Serialize;
-use slam::{Mapper2d, Mapper2dParams, MapperStats};
-use std::path::PathBuf;
+use slam::{GridParams, Mapper2d, Mapper2dParams, MapperStats, OccupancyGrid};
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Build a 2D map from a CARMEN laser log (.clf, .clf.bz2, .log, .log.gz).
@@ -18,16 +18,20 @@ pub struct Slam2dArgs {
     /// relation_rot_error_mean (poses at every relation timestamp).
     #[arg(long, value_name = "FILE")]
     pub relations: Option<PathBuf>,
-    /// Draw the map (scans at optimized node poses) as PNG.
+    /// Write the occupancy grid (node scans at optimized poses) as PNG: free white,
+    /// occupied black, unknown grey, north up.
     #[arg(long, value_name = "OUT.png")]
     pub png: Option<PathBuf>,
+    /// Write the occupancy grid as ROS map_server reads it: OUT.pgm and OUT.yaml beside it.
+    #[arg(long, value_name = "OUT.pgm")]
+    pub pgm: Option<PathBuf>,
     /// Write every scan's optimized pose as a TUM trajectory (`t x y z qx qy qz qw`, as evo
     /// reads it).
     #[arg(long, value_name = "OUT.tum")]
     pub trajectory: Option<PathBuf>,
-    /// Map resolution of the PNG (m per pixel).
-    #[arg(long, default_value_t = 0.05)]
-    pub resolution_m: f64,
+    /// Cell size of the occupancy grid (m); default slam::GridParams' (0.1).
+    #[arg(long, value_name = "M")]
+    pub resolution_m: Option<f64>,
     /// TOML file with a [mapper] table overriding the mapper's parameters (slam::Mapper2dParams).
     #[arg(long, value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
@@ -93,7 +97,6 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
     }
     let report = mapper.finish()?;
     let elapsed_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let graph = mapper.graph();
     let pose_of_scan = |k: usize| mapper.pose_of(placed[k]);
 
     let metric = match &args.relations {
@@ -112,29 +115,28 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         }
     };
     if let Some(out) = &args.trajectory {
-        let mut text = String::with_capacity(log.scans.len() * 64);
-        for (k, scan) in log.scans.iter().enumerate() {
-            let p = pose_of_scan(k);
-            let (s, c) = (0.5 * p.theta).sin_cos();
-            text.push_str(&format!(
-                "{:.6} {:.6} {:.6} 0 0 0 {s:.9} {c:.9}\n",
-                scan.stamp_s, p.x, p.y
-            ));
-        }
-        std::fs::write(out, text).with_context(|| format!("{}: cannot write", out.display()))?;
+        let stamped = log.scans.iter().enumerate();
+        let text = graphio::trajectory::to_tum(stamped.map(|(k, s)| (s.stamp_s, pose_of_scan(k))))?;
+        write(out, text.as_bytes())?;
     }
-    if let Some(out) = &args.png {
-        let points: Vec<[f64; 2]> = (0..graph.poses.len())
-            .flat_map(|n| {
-                mapper
-                    .node_scan(n)
-                    .points()
-                    .iter()
-                    .map(move |p| graph.poses[n].transform_point(*p))
-            })
-            .collect();
-        let path: Vec<[f64; 2]> = graph.poses.iter().map(|p| [p.x, p.y]).collect();
-        write_png(out, &points, &path, args.resolution_m)?;
+    if args.png.is_some() || args.pgm.is_some() {
+        let mut params = GridParams::default();
+        if let Some(r) = args.resolution_m {
+            params.resolution_m = r;
+        }
+        let grid = OccupancyGrid::from_scans(mapper.node_scans_at_poses(), &params)?;
+        if let Some(out) = &args.png {
+            write(out, &gridmap::to_png(&grid)?)?;
+        }
+        if let Some(out) = &args.pgm {
+            let yaml_path = out.with_extension("yaml");
+            let image = out.file_name().map_or_else(
+                || out.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            );
+            write(out, &gridmap::to_pgm(&grid)?)?;
+            write(&yaml_path, gridmap::to_map_yaml(&grid, &image).as_bytes())?;
+        }
     }
     let stats = mapper.stats();
     let r = Report {
@@ -165,43 +167,6 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
     Ok(())
 }
 
-/// Scan points (black) and the node path (blue) on white, x east → right, y north → up.
-fn write_png(
-    out: &PathBuf,
-    points: &[[f64; 2]],
-    path: &[[f64; 2]],
-    resolution_m: f64,
-) -> Result<()> {
-    let all = points.iter().chain(path);
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in all {
-        for d in 0..2 {
-            lo[d] = lo[d].min(p[d]);
-            hi[d] = hi[d].max(p[d]);
-        }
-    }
-    let resolution = resolution_m.max(((hi[0] - lo[0]).max(hi[1] - lo[1]) / 4000.0).max(1e-3));
-    let (w, h) = (
-        ((hi[0] - lo[0]) / resolution) as usize + 3,
-        ((hi[1] - lo[1]) / resolution) as usize + 3,
-    );
-    let mut rgb = vec![255u8; w * h * 3];
-    let mut put = |p: &[f64; 2], color: [u8; 3]| {
-        let (x, y) = (
-            ((p[0] - lo[0]) / resolution) as usize + 1,
-            ((hi[1] - p[1]) / resolution) as usize + 1,
-        );
-        if x < w && y < h {
-            rgb[(y * w + x) * 3..(y * w + x) * 3 + 3].copy_from_slice(&color);
-        }
-    };
-    points.iter().for_each(|p| put(p, [20, 20, 20]));
-    path.iter().for_each(|p| put(p, [30, 90, 220]));
-    let file =
-        std::fs::File::create(out).with_context(|| format!("{}: cannot create", out.display()))?;
-    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
-    encoder.set_color(png::ColorType::Rgb);
-    encoder.set_depth(png::BitDepth::Eight);
-    encoder.write_header()?.write_image_data(&rgb)?;
-    Ok(())
+fn write(out: &Path, bytes: &[u8]) -> Result<()> {
+    std::fs::write(out, bytes).with_context(|| format!("{}: cannot write", out.display()))
 }

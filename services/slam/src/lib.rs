@@ -4,6 +4,7 @@
 //! paper's linear solution). Pure library: no I/O, no async.
 
 pub mod geodesy;
+pub mod grid;
 pub mod init;
 pub mod linear;
 pub mod mapping2d;
@@ -13,6 +14,7 @@ pub mod optimize;
 pub mod robust;
 pub mod se2;
 
+pub use grid::{CellState, GridError, GridParams, OccupancyGrid};
 pub use init::{Init, InitError, initialize};
 pub use mapping2d::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Placed};
 pub use nalgebra;

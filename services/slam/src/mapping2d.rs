@@ -185,6 +185,12 @@ impl Mapper2d {
         &self.node_scans[node]
     }
 
+    /// Every node's scan at the node's current pose estimate, by node index: the
+    /// scan-based map, as [`crate::grid::OccupancyGrid::from_scans`] takes it.
+    pub fn node_scans_at_poses(&self) -> impl Iterator<Item = (Pose2, &Scan2)> + '_ {
+        self.graph.poses.iter().copied().zip(&self.node_scans)
+    }
+
     /// The robot of node `node` and the node's place in its chain.
     pub fn node_robot(&self, node: usize) -> (usize, usize) {
         self.node_robot[node]

@@ -1,0 +1,195 @@
+//! The occupancy grid as images: PNG (for the dashboard and the command line) and PGM + YAML
+//! exactly as ROS map_server's `map_saver` writes them, so `map_server` (ROS 1) and
+//! `nav2_map_server` load levelmap maps unchanged.
+//!
+//! Both images are trinary, with map_saver's grey levels: free 254, occupied 0, unknown 205
+//! (the tri-state of [`OccupancyGrid::state`]). Rows go from the top of the map (largest y,
+//! north) down, as image rows do; the grid's row 0 is its bottom row.
+
+use crate::EncodeError;
+use slam::grid::{CellState, OccupancyGrid};
+use std::fmt::Write as _;
+
+/// Grey level of a free cell.
+pub const FREE: u8 = 254;
+/// Grey level of an occupied cell.
+pub const OCCUPIED: u8 = 0;
+/// Grey level of an unknown cell: map_server reads (255 − 205)/255 = 0.196, not below
+/// `free_thresh`, not above `occupied_thresh`.
+pub const UNKNOWN: u8 = 205;
+
+/// `occupied_thresh` and `free_thresh` of the YAML, map_saver's constants: they classify
+/// the three grey levels above back into the same three states.
+pub const OCCUPIED_THRESH: f64 = 0.65;
+pub const FREE_THRESH: f64 = 0.196;
+
+/// The grid's pixels, one grey byte a cell, top row (largest y) first.
+pub fn trinary_pixels(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
+    let (w, h) = (grid.width, grid.height);
+    if w == 0 || h == 0 || w.checked_mul(h) != Some(grid.cells.len()) {
+        return Err(EncodeError::BadGrid {
+            width: w,
+            height: h,
+            cells: grid.cells.len(),
+        });
+    }
+    let mut pixels = Vec::with_capacity(w * h);
+    for row in grid.cells.chunks_exact(w).rev() {
+        pixels.extend(row.iter().map(|&c| match grid.classify(c) {
+            CellState::Free => FREE,
+            CellState::Occupied => OCCUPIED,
+            CellState::Unknown => UNKNOWN,
+        }));
+    }
+    Ok(pixels)
+}
+
+/// The grid as an 8-bit greyscale PNG, north up.
+pub fn to_png(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
+    let pixels = trinary_pixels(grid)?;
+    let too_large = || EncodeError::GridTooLarge {
+        width: grid.width,
+        height: grid.height,
+    };
+    let w = u32::try_from(grid.width).map_err(|_| too_large())?;
+    let h = u32::try_from(grid.height).map_err(|_| too_large())?;
+    let mut out = Vec::with_capacity(pixels.len() / 8 + 64);
+    let mut encoder = png::Encoder::new(&mut out, w, h);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(png::BitDepth::Eight);
+    // Trinary maps are long runs of three values: the default filter and compression
+    // already make them small.
+    encoder
+        .write_header()
+        .and_then(|mut writer| writer.write_image_data(&pixels))
+        .map_err(|e| EncodeError::Png(e.to_string()))?;
+    Ok(out)
+}
+
+/// The grid as binary PGM (P5), byte for byte as map_saver writes it: its comment line
+/// with the resolution, then width, height, 255, and the pixels top row first.
+pub fn to_pgm(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
+    let pixels = trinary_pixels(grid)?;
+    let header = format!(
+        "P5\n# CREATOR: map_saver.cpp {:.3} m/pix\n{} {}\n255\n",
+        grid.resolution_m, grid.width, grid.height
+    );
+    let mut out = Vec::with_capacity(header.len() + pixels.len());
+    out.extend_from_slice(header.as_bytes());
+    out.extend_from_slice(&pixels);
+    Ok(out)
+}
+
+/// The map_server YAML of the PGM named `image` (relative to the YAML file, as map_saver
+/// writes it), with map_saver's fields and number format. The origin is the grid's
+/// lower-left corner, with yaw 0 (the grid is axis-aligned with the map frame).
+pub fn to_map_yaml(grid: &OccupancyGrid, image: &str) -> String {
+    let mut s = String::with_capacity(160);
+    let _ = writeln!(s, "image: {}", yaml_scalar(image));
+    let _ = writeln!(s, "resolution: {:.6}", grid.resolution_m);
+    let _ = writeln!(
+        s,
+        "origin: [{:.6}, {:.6}, {:.6}]",
+        grid.origin_m[0], grid.origin_m[1], 0.0
+    );
+    let _ = writeln!(s, "negate: 0");
+    let _ = writeln!(s, "occupied_thresh: {OCCUPIED_THRESH}");
+    let _ = writeln!(s, "free_thresh: {FREE_THRESH}");
+    s.push('\n');
+    s
+}
+
+/// `name` as a YAML plain scalar when that is safe (map_saver writes it bare), else
+/// double-quoted, so a file name with `: ` or `#` cannot break the YAML.
+fn yaml_scalar(name: &str) -> String {
+    let plain = !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_alphanumeric() || "._-/+~".contains(c))
+        && !name.starts_with(['-', '~']);
+    if plain {
+        return name.to_string();
+    }
+    let mut q = String::with_capacity(name.len() + 2);
+    q.push('"');
+    for c in name.chars() {
+        match c {
+            '"' => q.push_str("\\\""),
+            '\\' => q.push_str("\\\\"),
+            c if c.is_control() => {
+                let _ = write!(q, "\\u{:04x}", u32::from(c));
+            }
+            c => q.push(c),
+        }
+    }
+    q.push('"');
+    q
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 3 wide, 2 high: bottom row free, unknown, occupied; top row never seen, 50 %, 10 %.
+    fn small() -> OccupancyGrid {
+        OccupancyGrid {
+            resolution_m: 0.05,
+            origin_m: [-1.5, -0.25],
+            width: 3,
+            height: 2,
+            cells: vec![0, -1, 100, -1, 50, 10],
+            occupied_percent: 65,
+            free_percent: 35,
+        }
+    }
+
+    #[test]
+    fn pgm_is_map_saver_bytes_top_row_first() {
+        let pgm = to_pgm(&small()).unwrap();
+        let header = b"P5\n# CREATOR: map_saver.cpp 0.050 m/pix\n3 2\n255\n";
+        assert_eq!(&pgm[..header.len()], header);
+        assert_eq!(&pgm[header.len()..], &[205, 205, 254, 254, 205, 0]);
+    }
+
+    #[test]
+    fn png_decodes_to_the_grid_north_up() {
+        let png = to_png(&small()).unwrap();
+        let mut reader = png::Decoder::new(std::io::Cursor::new(png))
+            .read_info()
+            .unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        assert_eq!((info.width, info.height), (3, 2));
+        assert_eq!(info.color_type, png::ColorType::Grayscale);
+        assert_eq!(info.bit_depth, png::BitDepth::Eight);
+        assert_eq!(&buf[..info.buffer_size()], &[205, 205, 254, 254, 205, 0]);
+    }
+
+    #[test]
+    fn yaml_has_map_saver_fields() {
+        let yaml = to_map_yaml(&small(), "site.pgm");
+        assert_eq!(
+            yaml,
+            "image: site.pgm\nresolution: 0.050000\norigin: [-1.500000, -0.250000, 0.000000]\n\
+             negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n\n"
+        );
+        assert!(to_map_yaml(&small(), "my map: v2.pgm").starts_with("image: \"my map: v2.pgm\"\n"));
+        // The grey levels classify back as map_server does: p = (255 − v)/255.
+        let p = |v: u8| f64::from(255 - v) / 255.0;
+        assert!(p(OCCUPIED) > OCCUPIED_THRESH && p(FREE) < FREE_THRESH);
+        assert!((FREE_THRESH..=OCCUPIED_THRESH).contains(&p(UNKNOWN)));
+    }
+
+    #[test]
+    fn malformed_grids_are_errors() {
+        let mut g = small();
+        g.cells.pop();
+        assert!(matches!(
+            to_png(&g),
+            Err(EncodeError::BadGrid { cells: 5, .. })
+        ));
+        g.width = 0;
+        g.cells.clear();
+        assert!(matches!(to_pgm(&g), Err(EncodeError::BadGrid { .. })));
+    }
+}
