@@ -29,8 +29,18 @@ fn map_fleet(inputs: Vec<NodeInput>) -> (MapperStats, f64) {
     let defaults = Mapper2dParams::default();
     let mut mapper = Mapper2d::new(Mapper2dParams {
         node_distance_m: 1.0,
-        // Gyro and wheel dead reckoning drifts about 1 % of the distance here.
-        odometry_sigma_xy_per_m: 0.02,
+        // The simulator's dead reckoning (sim::DeadReckoning::default(): a fibre-optic-class
+        // gyro, bias ~10°/h, and wheels with 0.5 % scale error) errs by 0.001–0.04 m and
+        // about 0.01° over the 4.8 m between scans: far better than the wheel odometry the
+        // defaults are for, and no worse than a sparse scan match.
+        odometry_sigma_xy_m: 0.01,
+        odometry_sigma_xy_per_m: 0.01,
+        odometry_sigma_theta_rad: 0.002,
+        odometry_sigma_theta_per_rad: 0.01,
+        // With odometry this good, a match that contradicts it is wrong (a fixed scanner's
+        // beam on a slope), and an accepted match is fused with it.
+        match_odometry_max_chi2: 16.0,
+        fuse_odometry: true,
         // Leveled scans of a park are sparse: a few dozen returns.
         idc: slam::matching::IdcParams {
             min_correspondences: 10,
@@ -81,9 +91,11 @@ fn gps_for(
     })
 }
 
-/// Measured (120 s, seed 7): leveled ATE 0.155 m with 4 inter-robot closures, fixed 2D
-/// 0.391 m. The bounds below guard that; the demo's targets (≤ 0.10 m, fixed 2D ≥ 3× worse)
-/// are not reached yet.
+/// Measured (120 s, seed 7): leveled ATE 0.138 m with 4 inter-robot closures, fixed 2D
+/// 0.413 m (3.0×; before the odometry model and check: 0.155 and 0.391 m). The bounds below
+/// guard that. The demo's ATE target (≤ 0.10 m) is out of reach of one GPS fix per 4 s scan:
+/// with these fixes and exact relative edges (every sequential and closure edge set to
+/// the truth) the ATE is still 0.126 m.
 #[test]
 fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
     let world = World::park();
@@ -147,9 +159,9 @@ fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
     eprintln!("leveled: ATE {ate:.3} m, {stats:?}");
     eprintln!("fixed 2D: ATE {ate_fixed:.3} m, {stats_fixed:?}");
     assert!(stats.inter_robot_closures >= 1, "{stats:?}");
-    assert!(ate <= 0.20, "leveled ATE {ate:.3} m");
+    assert!(ate <= 0.15, "leveled ATE {ate:.3} m");
     assert!(
-        ate_fixed >= 2.0 * ate,
+        ate_fixed >= 2.7 * ate,
         "fixed {ate_fixed:.3} m, leveled {ate:.3} m"
     );
 }

@@ -17,7 +17,7 @@
 //! right one that arrives after much drift still pulls the map. (DCS was measured on ACES:
 //! it discarded the right closures too, and the relation error tripled.)
 
-use crate::matching::{IdcParams, QualityGate, Scan2, accept, idc};
+use crate::matching::{IdcParams, Match, QualityGate, Scan2, accept, idc};
 use crate::network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge, is_information};
 use crate::optimize::{OptimizeParams, OptimizeReport, Optimizer};
 use crate::robust::Robust;
@@ -42,6 +42,13 @@ pub struct Mapper2dParams {
     /// is optimistic on clean data.
     pub match_min_sigma_xy_m: f64,
     pub match_min_sigma_theta_rad: f64,
+    /// A match between nodes of one chain is rejected when it disagrees with odometry: the
+    /// squared Mahalanobis distance between the two (odometry and match covariances
+    /// summed) above this. Infinite: no check.
+    pub match_odometry_max_chi2: f64,
+    /// Keep the odometry edge beside an accepted match between successive nodes (odometry
+    /// and scan matching fused), rather than the match alone.
+    pub fuse_odometry: bool,
     /// Loop-closure candidates: earlier nodes within this distance (m) of the new node, plus
     /// `loop_search_growth` times the path travelled between them (drift grows with it)…
     pub loop_search_radius_m: f64,
@@ -72,6 +79,8 @@ impl Default for Mapper2dParams {
             odometry_sigma_theta_per_rad: 0.1,
             match_min_sigma_xy_m: 0.01,
             match_min_sigma_theta_rad: 0.2f64.to_radians(),
+            match_odometry_max_chi2: f64::INFINITY,
+            fuse_odometry: false,
             loop_search_radius_m: 3.0,
             loop_search_growth: 0.2,
             loop_min_node_gap: 20,
@@ -144,6 +153,7 @@ pub struct Mapper2d {
     node_robot: Vec<(usize, usize)>,
     /// Path length the node's robot travelled up to the node (m).
     node_path_m: Vec<f64>,
+
     /// Each robot's chain, by robot index.
     chains: Vec<Option<Chain>>,
     optimizer: Optimizer,
@@ -217,8 +227,10 @@ impl Mapper2d {
             self.chains.resize(robot + 1, None);
         }
         let Some(chain) = self.chains[robot] else {
+            // A robot's first node may already see another robot's map.
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
-            if self.add_gps(node, gps) {
+            let closed = self.close_loops(node) > 0;
+            if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored()?;
             }
             return Ok(Placed::Node(node));
@@ -230,7 +242,7 @@ impl Mapper2d {
         // Match against the last node from the odometry guess.
         let matched = idc(&self.node_scans[last], &scan, step, &self.params.idc)
             .ok()
-            .filter(|m| accept(m, &self.params.gate));
+            .filter(|m| accept(m, &self.params.gate) && self.agrees_with_odometry(m, &step));
         if !moved {
             let offset = matched.map_or(step, |m| m.pose);
             return Ok(Placed::Attached { node: last, offset });
@@ -238,32 +250,32 @@ impl Mapper2d {
         let estimate = self.graph.poses[last].compose(&matched.as_ref().map_or(step, |m| m.pose));
         let path = self.node_path_m[last] + step.x.hypot(step.y);
         let node = self.push_node(robot, estimate, odometry, path, scan);
-        // The scan match when the gate accepts it, else odometry: where both exist, the
-        // match is far more precise and odometry would only pull it off (its errors are not
-        // independent white noise).
-        match matched {
-            Some(m) => {
-                self.stats.sequential_matches += 1;
-                self.graph.edges.push(RelativeEdge {
-                    from: last,
-                    to: node,
-                    measurement: m.pose,
-                    information: self.match_information(&m.covariance),
-                    kind: EdgeKind::ScanMatch,
-                    robust: Robust::None,
-                });
-            }
-            None => {
-                self.stats.sequential_rejected += 1;
-                self.graph.edges.push(RelativeEdge {
-                    from: last,
-                    to: node,
-                    measurement: step,
-                    information: self.odometry_information(&step),
-                    kind: EdgeKind::Odometry,
-                    robust: Robust::None,
-                });
-            }
+        // The scan match when the gate accepts it, else odometry. Where both exist the match
+        // alone is kept unless `fuse_odometry`: with wheel odometry the match is far more
+        // precise and odometry would only pull it off (its errors are not independent white
+        // noise); with a good gyro the two are comparable and both count.
+        if let Some(m) = &matched {
+            self.stats.sequential_matches += 1;
+            self.graph.edges.push(RelativeEdge {
+                from: last,
+                to: node,
+                measurement: m.pose,
+                information: self.match_information(&m.covariance),
+                kind: EdgeKind::ScanMatch,
+                robust: Robust::None,
+            });
+        } else {
+            self.stats.sequential_rejected += 1;
+        }
+        if matched.is_none() || self.params.fuse_odometry {
+            self.graph.edges.push(RelativeEdge {
+                from: last,
+                to: node,
+                measurement: step,
+                information: self.odometry_information(&step),
+                kind: EdgeKind::Odometry,
+                robust: Robust::None,
+            });
         }
         let closed = self.close_loops(node) > 0;
         if self.add_gps(node, gps) || closed {
@@ -298,6 +310,29 @@ impl Mapper2d {
         self.node_scans.push(scan);
         self.stats.nodes += 1;
         node
+    }
+
+    /// Whether match `m` of two nodes of one chain agrees with their odometry `step` (see
+    /// `match_odometry_max_chi2`).
+    fn agrees_with_odometry(&self, m: &Match, step: &Pose2) -> bool {
+        let limit = self.params.match_odometry_max_chi2;
+        if limit == f64::INFINITY {
+            return true;
+        }
+        let Some(odometry) = self.odometry_information(step).try_inverse() else {
+            return false;
+        };
+        let Some(matched) = self.match_information(&m.covariance).try_inverse() else {
+            return false;
+        };
+        let e = nalgebra::Vector3::new(
+            m.pose.x - step.x,
+            m.pose.y - step.y,
+            wrap_angle(m.pose.theta - step.theta),
+        );
+        (odometry + matched)
+            .try_inverse()
+            .is_some_and(|i| (e.transpose() * i * e)[(0, 0)] <= limit)
     }
 
     /// Adds the GPS edge of `node`'s fix; returns whether there was one.
@@ -476,6 +511,43 @@ mod tests {
     }
 
     #[test]
+    fn a_match_that_contradicts_good_odometry_is_rejected() {
+        let params = Mapper2dParams {
+            odometry_sigma_xy_m: 0.01,
+            odometry_sigma_xy_per_m: 0.01,
+            odometry_sigma_theta_rad: 0.002,
+            match_odometry_max_chi2: 16.0,
+            fuse_odometry: true,
+            ..Mapper2dParams::default()
+        };
+        let truth = [Pose2::new(-2.0, 0.0, 0.0), Pose2::new(-1.4, 0.0, 0.0)];
+        // Right odometry: the match agrees and is fused with it.
+        let mut mapper = Mapper2d::new(params.clone());
+        for (k, pose) in truth.iter().enumerate() {
+            mapper
+                .add_scan(*pose, scan_at(pose, k as u64))
+                .expect("add");
+        }
+        let stats = mapper.stats();
+        assert_eq!(
+            (stats.sequential_matches, stats.sequential_rejected),
+            (1, 0)
+        );
+        assert_eq!(mapper.graph().edges.len(), 2, "match and odometry");
+        // Odometry 0.3 m off (σ 0.016 m): the match, right as it is, counts as wrong.
+        let mut mapper = Mapper2d::new(params);
+        let odometry = [truth[0], Pose2::new(-1.1, 0.0, 0.0)];
+        for (k, (pose, odo)) in truth.iter().zip(&odometry).enumerate() {
+            mapper.add_scan(*odo, scan_at(pose, k as u64)).expect("add");
+        }
+        let stats = mapper.stats();
+        assert_eq!(
+            (stats.sequential_matches, stats.sequential_rejected),
+            (0, 1)
+        );
+    }
+
+    #[test]
     fn gps_anchors_a_second_robot_and_bad_fixes_are_dropped() {
         let mut mapper = Mapper2d::new(Mapper2dParams::default());
         let poses = |y: f64| (0..4).map(move |k| Pose2::new(-2.0 + 0.6 * k as f64, y, 0.0));
@@ -484,14 +556,15 @@ mod tests {
                 .add_robot_scan(0, pose, scan_at(&pose, k as u64), Some(fix_at(&pose)))
                 .expect("robot 0");
         }
-        // Robot 1 starts apart, linked to robot 0 by nothing but GPS. Its first fix alone
-        // cannot anchor it: the optimization waits instead of failing.
+        // Robot 1 starts 4 m apart (beyond the inter-robot search radius), linked to robot 0
+        // by nothing but GPS. Its first fix alone cannot anchor it: the optimization waits
+        // instead of failing.
         let mut bad_nan = fix_at(&Pose2::IDENTITY);
         bad_nan.position_m.x = f64::NAN;
         let mut bad_covariance = fix_at(&Pose2::IDENTITY);
         bad_covariance.covariance_m2 = Matrix2::new(1.0, 2.0, 2.0, 1.0);
         let mut deferred_at_start = 0;
-        for (k, pose) in poses(-1.0).enumerate() {
+        for (k, pose) in poses(-4.0).enumerate() {
             let fix = match k {
                 1 => Some(bad_nan),
                 2 => Some(bad_covariance),
