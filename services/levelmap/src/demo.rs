@@ -90,6 +90,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         http_listen: args.http.clone(),
         store_path: args.dir.join("mapper.redb"),
         datum: Some(sim::PARK_DATUM.origin),
+        mapping: sim_mapping_params(),
         ..MapperConfig::default()
     })
     .await?;
@@ -197,6 +198,11 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
     mapper.stop().await
 }
 
+/// The simulated robots' dead reckoning is precise (a fibre-optic-class gyro).
+fn sim_mapping_params() -> slam::Mapper2dParams {
+    slam::Mapper2dParams::precise_dead_reckoning()
+}
+
 fn robot_config(args: &DemoArgs, i: usize) -> EdgeConfig {
     EdgeConfig {
         fleet: FLEET.into(),
@@ -229,7 +235,7 @@ fn map_fixed2d(args: &DemoArgs) -> Result<(f64, usize)> {
     let defaults = MapperConfig::default();
     let mut map = FleetMap::new(
         FLEET,
-        defaults.mapping.clone(),
+        sim_mapping_params(),
         Some(slam::geodesy::GeoDatum {
             origin: sim::PARK_DATUM.origin,
         }),

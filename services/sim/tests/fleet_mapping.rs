@@ -26,27 +26,10 @@ struct NodeInput {
 /// Runs the fleet and maps it with one scan kind; returns the mapper's stats and the ATE
 /// (RMSE of node positions against the truth, m).
 fn map_fleet(inputs: Vec<NodeInput>) -> (MapperStats, f64) {
-    let defaults = Mapper2dParams::default();
+    // The simulator's dead reckoning is precise (see the constructor's doc).
     let mut mapper = Mapper2d::new(Mapper2dParams {
         node_distance_m: 1.0,
-        // The simulator's dead reckoning (sim::DeadReckoning::default(): a fibre-optic-class
-        // gyro, bias ~10°/h, and wheels with 0.5 % scale error) errs by 0.001–0.04 m and
-        // about 0.01° over the 4.8 m between scans: far better than the wheel odometry the
-        // defaults are for, and no worse than a sparse scan match.
-        odometry_sigma_xy_m: 0.01,
-        odometry_sigma_xy_per_m: 0.01,
-        odometry_sigma_theta_rad: 0.002,
-        odometry_sigma_theta_per_rad: 0.01,
-        // With odometry this good, a match that contradicts it is wrong (a fixed scanner's
-        // beam on a slope), and an accepted match is fused with it.
-        match_odometry_max_chi2: 16.0,
-        fuse_odometry: true,
-        // Leveled scans of a park are sparse: a few dozen returns.
-        idc: slam::matching::IdcParams {
-            min_correspondences: 10,
-            ..defaults.idc.clone()
-        },
-        ..defaults
+        ..Mapper2dParams::precise_dead_reckoning()
     });
     let mut truth = Vec::new();
     for input in inputs {
