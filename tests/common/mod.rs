@@ -1,0 +1,300 @@
+//! Shared by the end-to-end tests: free ports, a minimal HTTP client (the tests look at the
+//! system only through its HTTP API), service processes with their config files, a TCP relay
+//! that can cut a robot's link.
+
+#![allow(dead_code)]
+
+use serde_json::Value;
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// A port nobody listens on right now.
+pub fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+/// A fresh folder under the target's temp dir.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("levelmap-e2e-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+/// GET `path` from `addr`: (status, body); `None` when nothing answers.
+pub fn http_get(addr: &str, path: &str) -> Option<(u16, String)> {
+    let mut stream = TcpStream::connect(addr).ok()?;
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .ok()?;
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .ok()?;
+    let mut raw = Vec::new();
+    stream.read_to_end(&mut raw).ok()?;
+    let text = String::from_utf8_lossy(&raw).into_owned();
+    let (head, body) = text.split_once("\r\n\r\n")?;
+    let status = head.split_whitespace().nth(1)?.parse().ok()?;
+    let body = if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
+        dechunk(body)
+    } else {
+        body.to_owned()
+    };
+    Some((status, body))
+}
+
+fn dechunk(mut body: &str) -> String {
+    let mut out = String::new();
+    while let Some((size, rest)) = body.split_once("\r\n") {
+        let Ok(n) = usize::from_str_radix(size.trim(), 16) else {
+            break;
+        };
+        if n == 0 || rest.len() < n {
+            break;
+        }
+        out.push_str(&rest[..n]);
+        body = rest[n..].trim_start_matches("\r\n");
+    }
+    out
+}
+
+/// GET a JSON document, 200 expected.
+pub fn get_json(addr: &str, path: &str) -> Option<Value> {
+    match http_get(addr, path)? {
+        (200, body) => serde_json::from_str(&body).ok(),
+        _ => None,
+    }
+}
+
+/// Polls `f` until it gives `Some` or `timeout` passes.
+pub fn wait_for<T>(timeout: Duration, mut f: impl FnMut() -> Option<T>) -> Option<T> {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(v) = f() {
+            return Some(v);
+        }
+        if Instant::now() > deadline {
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// The value of a Prometheus sample line `name{labels} value` (labels as written).
+pub fn metric(text: &str, series: &str) -> u64 {
+    text.lines()
+        .find_map(|l| l.strip_prefix(series)?.trim().parse().ok())
+        .unwrap_or(0)
+}
+
+/// Node sequence numbers of `robot` in the fleet's graph, in map order.
+pub fn node_seqs(http: &str, fleet: &str, robot: &str) -> Vec<u64> {
+    get_json(http, &format!("/api/v1/fleets/{fleet}/graph"))
+        .map(|g| {
+            g["nodes"]
+                .as_array()
+                .expect("nodes")
+                .iter()
+                .filter(|n| n["robot"] == robot)
+                .map(|n| n["node_seq"].as_u64().expect("node_seq"))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+pub fn levelmap() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_levelmap"))
+}
+
+/// A mapper process on its own ports and store.
+pub struct MapperProcess {
+    pub http: String,
+    pub zenoh: String,
+    pub config: PathBuf,
+    child: Child,
+}
+
+impl MapperProcess {
+    pub fn start(dir: &Path) -> MapperProcess {
+        let (http, zenoh) = (
+            format!("127.0.0.1:{}", free_port()),
+            format!("tcp/127.0.0.1:{}", free_port()),
+        );
+        let config = dir.join("mapper.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "http_listen = {http:?}\nstore_path = {:?}\n[zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\n",
+                dir.join("mapper.redb")
+            ),
+        )
+        .expect("mapper config");
+        Self::spawn(http, zenoh, config)
+    }
+
+    fn spawn(http: String, zenoh: String, config: PathBuf) -> MapperProcess {
+        let child = levelmap()
+            .args(["mapper", "--config"])
+            .arg(&config)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("levelmap mapper starts");
+        let up = wait_for(Duration::from_secs(30), || http_get(&http, "/healthz"));
+        assert!(up.is_some(), "the mapper's /healthz did not answer");
+        MapperProcess {
+            http,
+            zenoh,
+            config,
+            child,
+        }
+    }
+
+    /// SIGKILL: no chance to flush or close anything.
+    pub fn kill(mut self) -> (String, String, PathBuf) {
+        self.child.kill().expect("SIGKILL");
+        self.child.wait().expect("reaped");
+        (self.http.clone(), self.zenoh.clone(), self.config.clone())
+    }
+
+    /// The same mapper (ports, store) started again.
+    pub fn restart((http, zenoh, config): (String, String, PathBuf)) -> MapperProcess {
+        Self::spawn(http, zenoh, config)
+    }
+}
+
+impl Drop for MapperProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A simulated robot's edge service process (`--json` report on stdout).
+pub fn spawn_edge(dir: &Path, robot: usize, connect: &str, duration_s: f64, speed: f64) -> Child {
+    let config = dir.join(format!("robot{robot}.toml"));
+    std::fs::write(
+        &config,
+        format!(
+            "robot = \"robot{robot}\"\noutbox_path = {:?}\nspeed = {speed}\nresend_after_ms = 500\n\
+             [zenoh]\nconnect = [{connect:?}]\n[source.sim]\nloop_index = {robot}\nduration_s = {duration_s}\n",
+            dir.join(format!("robot{robot}-outbox.redb"))
+        ),
+    )
+    .expect("edge config");
+    levelmap()
+        .args(["edge", "--json", "--config"])
+        .arg(&config)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("levelmap edge starts")
+}
+
+/// Waits for an edge process (at most `timeout`) and returns its JSON report.
+pub fn edge_report(mut child: Child, timeout: Duration) -> Value {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(status) = child.try_wait().expect("edge status") {
+            assert!(status.success(), "edge exited with {status}");
+            let mut out = String::new();
+            child
+                .stdout
+                .take()
+                .expect("stdout")
+                .read_to_string(&mut out)
+                .expect("report");
+            return serde_json::from_str(&out).expect("JSON report");
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("edge still running after {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// A TCP relay in front of the mapper's Zenoh endpoint: `cut` drops every connection and
+/// refuses new ones until `restore`, like a radio link going down.
+pub struct Relay {
+    pub endpoint: String,
+    up: Arc<AtomicBool>,
+}
+
+impl Relay {
+    pub fn start(target: &str) -> Relay {
+        let target = target.trim_start_matches("tcp/").to_owned();
+        let listener = TcpListener::bind("127.0.0.1:0").expect("relay port");
+        let endpoint = format!("tcp/{}", listener.local_addr().expect("addr"));
+        let up = Arc::new(AtomicBool::new(true));
+        let flag = up.clone();
+        std::thread::spawn(move || {
+            for client in listener.incoming() {
+                let Ok(client) = client else { continue };
+                if !flag.load(Ordering::SeqCst) {
+                    continue; // dropped: refused
+                }
+                let Ok(server) = TcpStream::connect(&target) else {
+                    continue;
+                };
+                for (from, to) in [
+                    (client.try_clone(), server.try_clone()),
+                    (server.try_clone(), client.try_clone()),
+                ] {
+                    let (Ok(mut from), Ok(mut to)) = (from, to) else {
+                        continue;
+                    };
+                    let flag = flag.clone();
+                    std::thread::spawn(move || {
+                        let _ = from.set_read_timeout(Some(Duration::from_millis(100)));
+                        let mut buf = [0u8; 16384];
+                        loop {
+                            if !flag.load(Ordering::SeqCst) {
+                                break;
+                            }
+                            match from.read(&mut buf) {
+                                Ok(0) => break,
+                                Ok(n) => {
+                                    if to.write_all(&buf[..n]).is_err() {
+                                        break;
+                                    }
+                                }
+                                Err(e)
+                                    if matches!(
+                                        e.kind(),
+                                        std::io::ErrorKind::WouldBlock
+                                            | std::io::ErrorKind::TimedOut
+                                    ) => {}
+                                Err(_) => break,
+                            }
+                        }
+                        let _ = from.shutdown(std::net::Shutdown::Both);
+                        let _ = to.shutdown(std::net::Shutdown::Both);
+                    });
+                }
+            }
+        });
+        Relay { endpoint, up }
+    }
+
+    pub fn cut(&self) {
+        self.up.store(false, Ordering::SeqCst);
+    }
+
+    pub fn restore(&self) {
+        self.up.store(true, Ordering::SeqCst);
+    }
+}
