@@ -283,6 +283,7 @@ fn map_fixed2d(args: &DemoArgs) -> Result<(f64, usize)> {
             };
             wire::validate_node(&node)?;
             map.ingest(&node)?;
+            map.optimize_pending()?;
             truth.push(Pose2::from_isometry3(&(scan.scan.truth_start_pose * mount)));
         }
         if !any {

@@ -62,8 +62,15 @@ fn json_reply(value: Value) -> Reply {
     Ok(axum::Json(value).into_response())
 }
 
-async fn healthz() -> &'static str {
-    "ok\n"
+async fn healthz(State(api): State<Api>) -> (StatusCode, &'static str) {
+    if api.shared.healthy.load(Ordering::Relaxed) {
+        (StatusCode::OK, "ok\n")
+    } else {
+        (
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the store failed: restart the mapper\n",
+        )
+    }
 }
 
 async fn metrics(State(api): State<Api>) -> Response {

@@ -63,12 +63,10 @@ pub struct RobotRecord {
     pub nodes: Vec<usize>,
 }
 
-/// What one node did to the map.
+/// Where a node went in the map.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ingested {
     pub node: usize,
-    /// The network was re-optimized.
-    pub optimized: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -108,10 +106,12 @@ impl FleetMap {
         datum: Option<GeoDatum>,
         max_range_m: f32,
     ) -> FleetMap {
-        // Robots decide where nodes are: every node sent becomes a network node.
+        // Robots decide where nodes are: every node sent becomes a network node. The owner
+        // decides when to solve (`optimize_pending`).
         let params = Mapper2dParams {
             node_distance_m: 0.0,
             node_rotation_rad: 0.0,
+            defer_optimization: true,
             ..params
         };
         FleetMap {
@@ -230,7 +230,6 @@ impl FleetMap {
                 self.robots.len() - 1
             }
         };
-        let optimizations = self.mapper.stats().optimizations;
         let placed = self.mapper.add_robot_scan(robot, scan_frame, scan, gps)?;
         let slam::Placed::Node(index) = placed else {
             unreachable!("node distance 0: every scan is a node")
@@ -250,10 +249,7 @@ impl FleetMap {
             bearings_rad: scan_msg.bearing_rad.clone(),
             ranges_m: scan_msg.range_m.clone(),
         }));
-        Ok(Ingested {
-            node: index,
-            optimized: self.mapper.stats().optimizations > optimizations,
-        })
+        Ok(Ingested { node: index })
     }
 
     /// A fix as a GPS observation of the node's scan frame; `None` for a fix without
@@ -289,7 +285,13 @@ impl FleetMap {
         })
     }
 
-    /// Optimizes one last time (e.g. before a final export).
+    /// Solves the network if the nodes added since the last solve call for it (a loop
+    /// closure, a GPS fix); returns whether it ran.
+    pub fn optimize_pending(&mut self) -> Result<bool, IngestError> {
+        Ok(self.mapper.optimize_pending()?)
+    }
+
+    /// Optimizes now (e.g. before a final export).
     pub fn finish(&mut self) -> Result<OptimizeReport, IngestError> {
         Ok(self.mapper.finish()?)
     }

@@ -195,11 +195,15 @@ fn restore(
     for stored in store.load()? {
         let started = Instant::now();
         let mut map = new_fleet(config, &stored.id);
-        for bytes in &stored.nodes {
+        let mut solves = stored.solves.iter().peekable();
+        for (arrival, bytes) in stored.nodes.iter().enumerate() {
             let node = wire::decode_node(bytes)
                 .with_context(|| format!("store: a node of fleet {} is unreadable", stored.id))?;
             map.ingest(&node)
                 .with_context(|| format!("store: replaying fleet {}", stored.id))?;
+            if solves.next_if_eq(&&(arrival as u64)).is_some() {
+                map.optimize_pending()?;
+            }
         }
         let rebuilt: Vec<Vec<u8>> = map
             .graph()
@@ -263,6 +267,22 @@ fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]) {
         .insert((parsed.fleet.to_owned(), parsed.robot.to_owned()), live);
 }
 
+/// Most messages taken into one batch (one solve, one store commit).
+const MAX_BATCH: usize = 512;
+
+/// A node mapped in this batch, not yet committed.
+struct Accepted {
+    fleet: String,
+    robot: String,
+    node_seq: u64,
+    node: usize,
+    arrival: u64,
+    payload: Vec<u8>,
+}
+
+/// Takes what arrived, maps every node, solves each touched fleet once, commits it all in one
+/// transaction, then acks and publishes: under load, nodes batch up instead of queueing
+/// behind one solve each.
 fn worker(
     config: MapperConfig,
     store: Store,
@@ -275,38 +295,140 @@ fn worker(
         .iter()
         .map(|(id, map)| (id.clone(), map.graph().edges.len()))
         .collect();
-    for job in work {
-        match job {
-            Work::Node { key, payload } => {
-                let ctx = NodeContext {
-                    config: &config,
-                    store: &store,
-                    shared: &shared,
-                    session: &session,
-                };
-                ctx.on_node(&mut fleets, &mut edges_stored, &key, &payload);
+    let ctx = NodeContext {
+        config: &config,
+        shared: &shared,
+        session: &session,
+    };
+    let mut store_failed = false;
+    while let Ok(first) = work.recv() {
+        let started = Instant::now();
+        let mut batch = vec![first];
+        while batch.len() < MAX_BATCH {
+            match work.try_recv() {
+                Ok(w) => batch.push(w),
+                Err(_) => break,
             }
-            Work::Optimize { fleet, reply } => {
-                let result = match fleets.get_mut(&fleet) {
-                    None => Err(format!("no fleet {fleet}")),
-                    Some(map) => match map.finish() {
-                        Ok(report) => {
-                            Metrics::bump(&shared.metrics.optimizations);
-                            shared.publish_view(FleetView::of(map, 0.0, now_ns()));
-                            Ok(serde_json::to_value(report).expect("report serializes"))
-                        }
-                        Err(e) => Err(e.to_string()),
-                    },
-                };
-                let _ = reply.send(result);
+        }
+        let mut accepted = Vec::new();
+        let mut reacks = Vec::new();
+        let mut requests = Vec::new();
+        for job in batch {
+            match job {
+                Work::Node { key, payload } if !store_failed => {
+                    accepted.extend(ctx.on_node(&mut fleets, &key, payload, &mut reacks));
+                }
+                Work::Node { key, .. } => ctx.reject("store", &key, &"the store failed"),
+                Work::Optimize { fleet, reply } => requests.push((fleet, reply)),
             }
+        }
+        // Solve each fleet that got nodes once, then commit nodes, edges and solves together.
+        let mut touched: Vec<&str> = accepted.iter().map(|a| a.fleet.as_str()).collect();
+        touched.sort_unstable();
+        touched.dedup();
+        let mut batches = Vec::new();
+        let mut solved = Vec::new();
+        for &fleet in &touched {
+            let map = fleets.get_mut(fleet).expect("a fleet that took nodes");
+            let ran = match map.optimize_pending() {
+                Ok(ran) => ran,
+                Err(e) => {
+                    tracing::error!(fleet, "optimization failed: {e}");
+                    false
+                }
+            };
+            if ran {
+                Metrics::bump(&shared.metrics.optimizations);
+                solved.push(fleet.to_owned());
+            }
+            let stored = edges_stored.entry(fleet.to_owned()).or_default();
+            let edges: Vec<Vec<u8>> = map.graph().edges[*stored..]
+                .iter()
+                .map(|e| serde_json::to_vec(e).expect("edges serialize"))
+                .collect();
+            let nodes: Vec<(u64, &[u8])> = accepted
+                .iter()
+                .filter(|a| a.fleet == fleet)
+                .map(|a| (a.arrival, a.payload.as_slice()))
+                .collect();
+            batches.push(crate::store::FleetBatch {
+                fleet,
+                solved_after: ran.then(|| nodes.last().expect("nodes").0),
+                nodes,
+                first_edge: *stored as u64,
+                edges,
+            });
+        }
+        if !batches.is_empty() {
+            if let Err(e) = store.commit(&batches) {
+                // Not durable, so not acked: the robots keep these nodes and re-send them to
+                // the restarted mapper. This one stops taking nodes rather than diverge from
+                // its store.
+                tracing::error!("store commit failed; restart the mapper: {e}");
+                store_failed = true;
+                shared
+                    .healthy
+                    .store(false, std::sync::atomic::Ordering::Relaxed);
+                continue;
+            }
+            for b in &batches {
+                *edges_stored.get_mut(b.fleet).expect("counted above") += b.edges.len();
+            }
+        }
+        drop(batches);
+        // Ack each robot's highest node, publish the new views and events.
+        let mut acks: HashMap<(&str, &str), u64> = HashMap::new();
+        for (fleet, robot) in &reacks {
+            let map = &fleets[fleet];
+            if let Some(r) = map.robot_index(robot) {
+                acks.insert((fleet, robot), map.robots()[r].last_node_seq);
+            }
+        }
+        for a in &accepted {
+            Metrics::bump(&shared.metrics.nodes_accepted);
+            let seq = acks.entry((&a.fleet, &a.robot)).or_default();
+            *seq = (*seq).max(a.node_seq);
+        }
+        for ((fleet, robot), seq) in acks {
+            ctx.ack(fleet, robot, seq);
+        }
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        for &fleet in &touched {
+            shared.publish_view(FleetView::of(&fleets[fleet], ms, now_ns()));
+        }
+        for a in &accepted {
+            let map = &fleets[&a.fleet];
+            shared.event(&json!({
+                "type": "node",
+                "fleet": a.fleet,
+                "robot": a.robot,
+                "node": a.node,
+                "node_seq": a.node_seq,
+                "pose": map.poses()[a.node],
+            }));
+        }
+        for fleet in &solved {
+            ctx.publish_poses(&fleets[fleet]);
+        }
+        for (fleet, reply) in requests {
+            let result = match fleets.get_mut(&fleet) {
+                None => Err(format!("no fleet {fleet}")),
+                Some(map) => match map.finish() {
+                    Ok(report) => {
+                        Metrics::bump(&shared.metrics.optimizations);
+                        shared.publish_view(FleetView::of(map, 0.0, now_ns()));
+                        Ok(serde_json::to_value(report).expect("report serializes"))
+                    }
+                    Err(e) => Err(e.to_string()),
+                },
+            };
+            let _ = reply.send(result);
         }
     }
 }
 
 struct NodeContext<'a> {
     config: &'a MapperConfig,
-    store: &'a Store,
     shared: &'a Shared,
     session: &'a zenoh::Session,
 }
@@ -331,36 +453,42 @@ impl NodeContext<'_> {
         }
     }
 
+    /// Checks and maps one node; `None` when it was rejected or a duplicate (re-acked).
     fn on_node(
         &self,
         fleets: &mut HashMap<String, FleetMap>,
-        edges_stored: &mut HashMap<String, usize>,
         key: &str,
-        payload: &[u8],
-    ) {
-        let started = Instant::now();
+        payload: Vec<u8>,
+        reacks: &mut Vec<(String, String)>,
+    ) -> Option<Accepted> {
         let Ok(parsed) = wire::parse_robot_key(key) else {
-            return self.reject("invalid_key", key, &"not a levelmap node key");
+            self.reject("invalid_key", key, &"not a levelmap node key");
+            return None;
         };
         let (fleet, robot) = (parsed.fleet.to_owned(), parsed.robot.to_owned());
         if !self.config.fleets.contains(&fleet) {
-            return self.reject(
+            self.reject(
                 "unknown_fleet",
                 key,
                 &format!("fleet {fleet} is not served"),
             );
+            return None;
         }
-        let node = match wire::decode_node(payload) {
+        let node = match wire::decode_node(&payload) {
             Ok(n) => n,
-            Err(e) => return self.reject(reason(&e), key, &e),
+            Err(e) => {
+                self.reject(reason(&e), key, &e);
+                return None;
+            }
         };
         let header = node.header.as_ref().expect("validated");
         if header.fleet_id != fleet || header.robot_id != robot {
-            return self.reject(
+            self.reject(
                 "key_mismatch",
                 key,
                 &format!("header says {}/{}", header.fleet_id, header.robot_id),
             );
+            return None;
         }
         let map = fleets
             .entry(fleet.clone())
@@ -368,9 +496,10 @@ impl NodeContext<'_> {
         match map.sequence(&robot, node.node_seq) {
             Sequence::Next => {}
             Sequence::Duplicate => {
+                // Taken already: its ack was lost, so ack again once this batch is durable.
                 Metrics::bump(&self.shared.metrics.nodes_duplicate);
-                let last = map.robots()[map.robot_index(&robot).expect("known")].last_node_seq;
-                return self.ack(&fleet, &robot, last);
+                reacks.push((fleet, robot));
+                return None;
             }
             Sequence::Gap { expected } => {
                 self.reject(
@@ -378,59 +507,30 @@ impl NodeContext<'_> {
                     key,
                     &format!("node {} before {expected}", node.node_seq),
                 );
-                if let Some(r) = map.robot_index(&robot) {
-                    self.ack(&fleet, &robot, map.robots()[r].last_node_seq);
-                }
-                return;
+                // The ack tells the robot where to re-send from.
+                reacks.push((fleet, robot));
+                return None;
             }
         }
         let arrival = map.nodes().len() as u64;
-        let ingested = match map.ingest(&node) {
-            Ok(i) => i,
+        match map.ingest(&node) {
+            Ok(ingested) => Some(Accepted {
+                fleet,
+                robot,
+                node_seq: node.node_seq,
+                node: ingested.node,
+                arrival,
+                payload,
+            }),
             Err(IngestError::Graph(e)) => {
-                // The network refused the node (nothing was kept of it in the store).
                 tracing::error!(key, "node not mapped: {e}");
                 self.shared.metrics.reject("node", "graph");
-                return;
+                None
             }
-            Err(e) => return self.reject("invalid_value", key, &e),
-        };
-        let stored = edges_stored.entry(fleet.clone()).or_default();
-        let new_edges: Vec<Vec<u8>> = map.graph().edges[*stored..]
-            .iter()
-            .map(|e| serde_json::to_vec(e).expect("edges serialize"))
-            .collect();
-        if let Err(e) = self
-            .store
-            .commit_node(&fleet, arrival, payload, *stored as u64, &new_edges)
-        {
-            // Not durable, so not acked: the robot keeps it and re-sends; the map holds it
-            // already, so stop taking this fleet's nodes rather than diverge from the store.
-            tracing::error!(key, "store commit failed, the mapper must restart: {e}");
-            self.shared.metrics.reject("node", "store");
-            fleets.remove(&fleet);
-            return;
-        }
-        *stored += new_edges.len();
-        Metrics::bump(&self.shared.metrics.nodes_accepted);
-        self.ack(&fleet, &robot, node.node_seq);
-        if ingested.optimized {
-            Metrics::bump(&self.shared.metrics.optimizations);
-        }
-        let ms = started.elapsed().as_secs_f64() * 1e3;
-        self.shared.publish_view(FleetView::of(map, ms, now_ns()));
-        let pose = map.poses()[ingested.node];
-        self.shared.event(&json!({
-            "type": "node",
-            "fleet": fleet,
-            "robot": robot,
-            "node": ingested.node,
-            "node_seq": node.node_seq,
-            "pose": pose,
-            "optimized": ingested.optimized,
-        }));
-        if ingested.optimized {
-            self.publish_poses(map);
+            Err(e) => {
+                self.reject("invalid_value", key, &e);
+                None
+            }
         }
     }
 

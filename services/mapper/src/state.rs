@@ -139,6 +139,8 @@ pub struct Shared {
     pub events: broadcast::Sender<String>,
     pub token: String,
     pub started_ns: u64,
+    /// False once the store failed: `/healthz` reports it, so a supervisor restarts us.
+    pub healthy: std::sync::atomic::AtomicBool,
 }
 
 impl Shared {
@@ -150,6 +152,7 @@ impl Shared {
             events: broadcast::channel(1024).0,
             token,
             started_ns,
+            healthy: std::sync::atomic::AtomicBool::new(true),
         }
     }
 

@@ -10,6 +10,9 @@ use std::path::Path;
 const NODES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("nodes");
 /// (fleet, edge index) → the edge as JSON (`slam::RelativeEdge`).
 const EDGES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("edges");
+/// (fleet, arrival index) of each node after which the network was optimized: a replay
+/// optimizes at the same points, so it finds the same loop closures.
+const SOLVES: TableDefinition<(&str, u64), ()> = TableDefinition::new("solves");
 
 #[derive(Debug, thiserror::Error)]
 #[error("store: {0}")]
@@ -44,6 +47,21 @@ pub struct StoredFleet {
     pub nodes: Vec<Vec<u8>>,
     /// Edges as JSON, in order.
     pub edges: Vec<Vec<u8>>,
+    /// Arrival indices after which the network was optimized, ascending.
+    pub solves: Vec<u64>,
+}
+
+/// What one batch of work adds to a fleet.
+#[derive(Debug, Default)]
+pub struct FleetBatch<'a> {
+    pub fleet: &'a str,
+    /// (arrival index, encoded node).
+    pub nodes: Vec<(u64, &'a [u8])>,
+    /// Index of the first new edge, and the new edges as JSON.
+    pub first_edge: u64,
+    pub edges: Vec<Vec<u8>>,
+    /// The network was optimized after the node of this arrival index.
+    pub solved_after: Option<u64>,
 }
 
 impl Store {
@@ -52,27 +70,29 @@ impl Store {
         let txn = db.begin_write()?;
         txn.open_table(NODES)?;
         txn.open_table(EDGES)?;
+        txn.open_table(SOLVES)?;
         txn.commit()?;
         Ok(Store { db })
     }
 
-    /// Commits node number `arrival` of `fleet` with the edges it added (numbered from
-    /// `first_edge`): durable when this returns.
-    pub fn commit_node(
-        &self,
-        fleet: &str,
-        arrival: u64,
-        node: &[u8],
-        first_edge: u64,
-        edges: &[Vec<u8>],
-    ) -> Result<(), StoreError> {
+    /// Commits a batch (nodes, the edges they added, the solve after them) in one
+    /// transaction: durable when this returns.
+    pub fn commit(&self, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
         let txn = self.db.begin_write()?;
         {
             let mut nodes = txn.open_table(NODES)?;
-            nodes.insert((fleet, arrival), node)?;
-            let mut table = txn.open_table(EDGES)?;
-            for (k, edge) in edges.iter().enumerate() {
-                table.insert((fleet, first_edge + k as u64), edge.as_slice())?;
+            let mut edges = txn.open_table(EDGES)?;
+            let mut solves = txn.open_table(SOLVES)?;
+            for batch in batches {
+                for &(arrival, bytes) in &batch.nodes {
+                    nodes.insert((batch.fleet, arrival), bytes)?;
+                }
+                for (k, edge) in batch.edges.iter().enumerate() {
+                    edges.insert((batch.fleet, batch.first_edge + k as u64), edge.as_slice())?;
+                }
+                if let Some(arrival) = batch.solved_after {
+                    solves.insert((batch.fleet, arrival), ())?;
+                }
             }
         }
         txn.commit()?;
@@ -104,6 +124,12 @@ impl Store {
             let (k, v) = entry?;
             let i = fleet_of(k.value().0, &mut fleets);
             fleets[i].edges.push(v.value().to_vec());
+        }
+        for entry in txn.open_table(SOLVES)?.iter()? {
+            let (k, _) = entry?;
+            let (fleet, arrival) = k.value();
+            let i = fleet_of(fleet, &mut fleets);
+            fleets[i].solves.push(arrival);
         }
         Ok(fleets)
     }

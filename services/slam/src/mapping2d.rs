@@ -49,6 +49,9 @@ pub struct Mapper2dParams {
     /// Keep the odometry edge beside an accepted match between successive nodes (odometry
     /// and scan matching fused), rather than the match alone.
     pub fuse_odometry: bool,
+    /// Do not optimize while adding scans; the caller runs [`Mapper2d::optimize_pending`]
+    /// (a server batching the nodes that arrived together into one solve).
+    pub defer_optimization: bool,
     /// Loop-closure candidates: earlier nodes within this distance (m) of the new node, plus
     /// `loop_search_growth` times the path travelled between them (drift grows with it)…
     pub loop_search_radius_m: f64,
@@ -81,6 +84,7 @@ impl Default for Mapper2dParams {
             match_min_sigma_theta_rad: 0.2f64.to_radians(),
             match_odometry_max_chi2: f64::INFINITY,
             fuse_odometry: false,
+            defer_optimization: false,
             loop_search_radius_m: 3.0,
             loop_search_growth: 0.2,
             loop_min_node_gap: 20,
@@ -184,6 +188,7 @@ pub struct Mapper2d {
     optimizer: Optimizer,
     stats: MapperStats,
     last_optimization: Option<OptimizeReport>,
+    optimization_pending: bool,
 }
 
 impl Mapper2d {
@@ -457,13 +462,31 @@ impl Mapper2d {
         added
     }
 
-    /// Optimizes unless a part of the network is not anchored yet.
+    /// Optimizes now, or marks it pending with `defer_optimization`.
     fn optimize_when_anchored(&mut self) -> Result<(), GraphError> {
+        if self.params.defer_optimization {
+            self.optimization_pending = true;
+            return Ok(());
+        }
+        self.optimize_anchored().map(drop)
+    }
+
+    /// Runs the optimization that scans added since the last one called for (with
+    /// `defer_optimization`); returns whether one ran.
+    pub fn optimize_pending(&mut self) -> Result<bool, GraphError> {
+        if !std::mem::take(&mut self.optimization_pending) {
+            return Ok(false);
+        }
+        self.optimize_anchored()
+    }
+
+    /// Optimizes unless a part of the network is not anchored yet; returns whether it ran.
+    fn optimize_anchored(&mut self) -> Result<bool, GraphError> {
         match self.optimize() {
-            Ok(_) => Ok(()),
+            Ok(_) => Ok(true),
             Err(GraphError::Disconnected { .. } | GraphError::Singular) => {
                 self.stats.deferred_optimizations += 1;
-                Ok(())
+                Ok(false)
             }
             Err(e) => Err(e),
         }
