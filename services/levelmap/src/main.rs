@@ -1,5 +1,6 @@
 //! `levelmap`: the command line of the levelmap outdoor SLAM system.
 
+mod bench_fleet;
 mod demo;
 mod level;
 mod optimize;
@@ -23,6 +24,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    BenchFleet(bench_fleet::BenchFleetArgs),
     Demo(demo::DemoArgs),
     Edge(services::EdgeArgs),
     Level(level::LevelArgs),
@@ -35,6 +37,7 @@ enum Command {
 
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
+        Command::BenchFleet(args) => bench_fleet::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Edge(args) => services::run_edge(&args),
         Command::Mapper(args) => services::run_mapper(&args),

@@ -1,0 +1,495 @@
+//! `levelmap bench-fleet`: many robots against one mapper on this machine, over real Zenoh TCP
+//! on loopback, measured from outside through HTTP: how long a published node takes to become
+//! visible on the API's event stream, and how fast robot pose queries are answered meanwhile.
+
+use anyhow::{Context, Result};
+use clap::Args;
+use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
+use mapper::MapperConfig;
+use serde::Serialize;
+use slam::geodesy::Geodetic;
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use wire::session::SessionConfig;
+use wire::{Message, v1};
+
+const FLEET: &str = "park";
+
+/// Load-test the mapper: N simulated robots publishing nodes and odometry over Zenoh, with
+/// pose queries over HTTP at the same time.
+#[derive(Args, Debug)]
+pub struct BenchFleetArgs {
+    /// Robots publishing.
+    #[arg(long, default_value_t = 100)]
+    pub robots: usize,
+    /// How long they publish (s).
+    #[arg(long, default_value_t = 30.0)]
+    pub duration: f64,
+    /// Nodes per robot per second.
+    #[arg(long, default_value_t = 1.0)]
+    pub node_rate: f64,
+    /// Odometry messages per robot per second.
+    #[arg(long, default_value_t = 10.0)]
+    pub odometry_rate: f64,
+    /// HTTP pose queries per second, spread over `--connections` keep-alive connections.
+    #[arg(long, default_value_t = 2000.0)]
+    pub query_rate: f64,
+    #[arg(long, default_value_t = 4)]
+    pub connections: usize,
+    /// Zenoh client sessions the robots share (robots are grouped onto them).
+    #[arg(long, default_value_t = 10)]
+    pub sessions: usize,
+    /// The mapper's Zenoh endpoint and HTTP address (port 0: any free one).
+    #[arg(long, default_value = "tcp/127.0.0.1:7448")]
+    pub zenoh: String,
+    #[arg(long, default_value = "127.0.0.1:0")]
+    pub http: String,
+    /// Folder for the mapper's store (emptied at start).
+    #[arg(long, default_value = "levelmap-bench-fleet")]
+    pub dir: std::path::PathBuf,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Serialize, Default)]
+struct Percentiles {
+    count: usize,
+    p50_ms: f64,
+    p90_ms: f64,
+    p99_ms: f64,
+    max_ms: f64,
+}
+
+impl Percentiles {
+    fn of(mut ms: Vec<f64>) -> Percentiles {
+        if ms.is_empty() {
+            return Percentiles::default();
+        }
+        ms.sort_by(f64::total_cmp);
+        let at = |q: f64| ms[((ms.len() - 1) as f64 * q).round() as usize];
+        Percentiles {
+            count: ms.len(),
+            p50_ms: at(0.5),
+            p90_ms: at(0.9),
+            p99_ms: at(0.99),
+            max_ms: *ms.last().expect("non-empty"),
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct BenchReport {
+    robots: usize,
+    duration_s: f64,
+    cores: usize,
+    nodes_published: usize,
+    nodes_visible: usize,
+    odometry_published: u64,
+    /// From a node's publication to its event on `/api/v1/events` (HTTP).
+    publish_to_http: Percentiles,
+    /// `GET /api/v1/fleets/park/robots/{robot}/pose`, keep-alive connections, during the load.
+    pose_queries: Percentiles,
+    pose_query_rate_achieved: f64,
+    pose_query_errors: u64,
+    map_nodes: usize,
+    map_edges: usize,
+    optimizations: u64,
+}
+
+/// The nodes of the park's three loops, each a node per scan, to be replayed.
+fn node_pool(per_loop: usize) -> Vec<Vec<v1::Node>> {
+    (0..3)
+        .map(|loop_index| {
+            let config = SimSourceConfig {
+                loop_index,
+                seed: 7,
+                duration_s: per_loop as f64 * 4.0,
+            };
+            let mut source = SimSource::new(&config, 0, 10.0).expect("park loop");
+            let mut builder =
+                NodeBuilder::new(FLEET, "r", Default::default(), Default::default(), 0);
+            let mut nodes = Vec::new();
+            while nodes.len() < per_loop {
+                let Some(event) = source.next_event() else {
+                    break;
+                };
+                if let SourceEvent::Scan(scan) = event {
+                    nodes.extend(builder.offer(&scan).expect("the simulator's scans level"));
+                }
+            }
+            nodes
+        })
+        .collect()
+}
+
+/// Node `k` of a robot: a pool node moved `east_m` east (odometry and GPS), renamed, restamped.
+fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u64) -> v1::Node {
+    let mut node = template.clone();
+    node.node_seq = k;
+    for h in [
+        node.header.as_mut(),
+        node.scan.as_mut().and_then(|s| s.header.as_mut()),
+        node.odometry.as_mut().and_then(|o| o.header.as_mut()),
+        node.gps.as_mut().and_then(|g| g.header.as_mut()),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        h.robot_id = robot.to_owned();
+        h.stamp_ns = stamp_ns;
+        h.sent_ns = stamp_ns;
+    }
+    if let Some(o) = node.odometry.as_mut() {
+        if let Some(p) = o.pose.as_mut() {
+            p.x_m += east_m;
+        }
+        if let Some(p) = o.pose2d.as_mut() {
+            p.x_m += east_m;
+        }
+    }
+    if let Some(g) = node.gps.as_mut() {
+        let datum = sim::PARK_DATUM;
+        let mut enu = datum.geodetic_to_enu(&Geodetic {
+            latitude_deg: g.latitude_deg,
+            longitude_deg: g.longitude_deg,
+            height_m: g.altitude_m,
+        });
+        enu.x += east_m;
+        let moved = datum.enu_to_geodetic(&enu);
+        g.latitude_deg = moved.latitude_deg;
+        g.longitude_deg = moved.longitude_deg;
+        g.altitude_m = moved.height_m;
+    }
+    if k == 0 {
+        node.odometry_delta_from_previous = None;
+    }
+    node
+}
+
+pub fn run(args: &BenchFleetArgs) -> Result<()> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?
+        .block_on(run_async(args))
+}
+
+async fn run_async(args: &BenchFleetArgs) -> Result<()> {
+    anyhow::ensure!(
+        args.robots > 0 && args.sessions > 0,
+        "need robots and sessions"
+    );
+    let nodes_per_robot = (args.duration * args.node_rate).ceil().max(1.0) as usize;
+    if !args.json {
+        eprintln!("simulating the park's loops for {nodes_per_robot} nodes each…");
+    }
+    let pool = tokio::task::spawn_blocking(move || node_pool(nodes_per_robot)).await?;
+
+    if args.dir.exists() {
+        std::fs::remove_dir_all(&args.dir)?;
+    }
+    std::fs::create_dir_all(&args.dir)?;
+    let mapper = mapper::start(MapperConfig {
+        zenoh: SessionConfig::router(&args.zenoh),
+        http_listen: args.http.clone(),
+        store_path: args.dir.join("mapper.redb"),
+        datum: Some(sim::PARK_DATUM.origin),
+        mapping: slam::Mapper2dParams::precise_dead_reckoning(),
+        ..MapperConfig::default()
+    })
+    .await?;
+    let http = mapper.http_addr.to_string();
+
+    // The event stream, timestamped on receipt.
+    let seen: Arc<Mutex<HashMap<(String, u64), Instant>>> = Arc::default();
+    let stop = Arc::new(AtomicBool::new(false));
+    let sse = {
+        let (http, seen, stop) = (http.clone(), seen.clone(), stop.clone());
+        std::thread::spawn(move || follow_events(&http, &seen, &stop))
+    };
+
+    // Robots on shared client sessions, publishers matched before the clock starts.
+    let mut sessions = Vec::new();
+    for _ in 0..args.sessions.min(args.robots) {
+        sessions.push(SessionConfig::client(&args.zenoh).open().await?);
+    }
+    let mut publishers = Vec::new();
+    for r in 0..args.robots {
+        let session = &sessions[r % sessions.len()];
+        let robot = format!("robot{r}");
+        let node = session
+            .declare_publisher(wire::node_key(FLEET, &robot)?)
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
+        let odom = session
+            .declare_publisher(wire::odom_key(FLEET, &robot)?)
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
+        publishers.push((robot, node, odom));
+    }
+    for (_, node, _) in &publishers {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !node
+            .matching_status()
+            .await
+            .map_err(anyhow::Error::from_boxed)?
+            .matching()
+        {
+            anyhow::ensure!(
+                Instant::now() < deadline,
+                "the mapper's subscriber never matched"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+
+    // Pose queries, during the whole run.
+    let queries = {
+        let per_connection = args.query_rate / args.connections.max(1) as f64;
+        (0..args.connections)
+            .map(|c| {
+                let (http, stop) = (http.clone(), stop.clone());
+                let robots = args.robots;
+                std::thread::spawn(move || query_poses(&http, robots, per_connection, c, &stop))
+            })
+            .collect::<Vec<_>>()
+    };
+
+    if !args.json {
+        eprintln!(
+            "{} robots publishing for {} s: {} nodes/s, {} odometry/s…",
+            args.robots,
+            args.duration,
+            args.robots as f64 * args.node_rate,
+            args.robots as f64 * args.odometry_rate
+        );
+    }
+    let sent: Arc<Mutex<HashMap<(String, u64), Instant>>> = Arc::default();
+    let started = Instant::now();
+    let epoch = edge::service::now_ns();
+    let tick = Duration::from_secs_f64(1.0 / args.odometry_rate.max(args.node_rate));
+    let node_every = (args.odometry_rate.max(args.node_rate) / args.node_rate).round() as u64;
+    let mut odometry_published = 0u64;
+    let mut interval = tokio::time::interval(tick);
+    let mut step = 0u64;
+    let mut published = 0usize;
+    while started.elapsed().as_secs_f64() < args.duration {
+        interval.tick().await;
+        let k = step / node_every.max(1);
+        let node_turn = step % node_every.max(1);
+        for (r, (robot, node_pub, odom_pub)) in publishers.iter().enumerate() {
+            let template_list = &pool[r % 3];
+            let Some(template) = template_list.get(k as usize) else {
+                continue;
+            };
+            let east = (r / 3) as f64 * 500.0;
+            let stamp = epoch + started.elapsed().as_nanos() as u64;
+            // Robots take turns within the node period, as real ones would not be in step.
+            if node_turn == (r as u64 % node_every.max(1)) && (k as usize) < nodes_per_robot {
+                let node = robot_node(template, robot, k, east, stamp);
+                sent.lock()
+                    .expect("sent")
+                    .insert((robot.clone(), k), Instant::now());
+                node_pub
+                    .put(node.encode_to_vec())
+                    .await
+                    .map_err(anyhow::Error::from_boxed)?;
+                published += 1;
+            }
+            let mut odometry = template.odometry.clone().expect("odometry");
+            if let Some(h) = odometry.header.as_mut() {
+                h.robot_id = robot.clone();
+                h.stamp_ns = stamp;
+                h.seq = step;
+            }
+            if let Some(p) = odometry.pose.as_mut() {
+                p.x_m += east;
+            }
+            if odom_pub.put(odometry.encode_to_vec()).await.is_ok() {
+                odometry_published += 1;
+            }
+        }
+        step += 1;
+    }
+    // Let the last nodes through.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while seen.lock().expect("seen").len() < published && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    stop.store(true, Ordering::SeqCst);
+    let mut query_ms = Vec::new();
+    let mut query_errors = 0;
+    let query_time = started.elapsed().as_secs_f64();
+    for q in queries {
+        let (ms, errors) = q.join().map_err(|_| anyhow::anyhow!("query thread"))?;
+        query_ms.extend(ms);
+        query_errors += errors;
+    }
+    let latencies: Vec<f64> = {
+        let sent = sent.lock().expect("sent");
+        let seen = seen.lock().expect("seen");
+        sent.iter()
+            .filter_map(|(key, t0)| {
+                Some(seen.get(key)?.saturating_duration_since(*t0).as_secs_f64() * 1e3)
+            })
+            .collect()
+    };
+    let view = mapper
+        .shared
+        .fleet(FLEET)
+        .context("no node reached the mapper")?;
+    let report = BenchReport {
+        robots: args.robots,
+        duration_s: args.duration,
+        cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        nodes_published: published,
+        nodes_visible: latencies.len(),
+        odometry_published,
+        publish_to_http: Percentiles::of(latencies),
+        pose_query_rate_achieved: query_ms.len() as f64 / query_time,
+        pose_queries: Percentiles::of(query_ms),
+        pose_query_errors: query_errors,
+        map_nodes: view.poses.len(),
+        map_edges: view.edges.len(),
+        optimizations: mapper.shared.metrics.optimizations.load(Ordering::Relaxed),
+    };
+    for s in sessions {
+        s.close().await.map_err(anyhow::Error::from_boxed)?;
+    }
+    drop(sse);
+    mapper.stop().await?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        let (p, q) = (&report.publish_to_http, &report.pose_queries);
+        println!(
+            "{} robots, {} nodes published, {} visible: publish → HTTP p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms",
+            report.robots,
+            report.nodes_published,
+            report.nodes_visible,
+            p.p50_ms,
+            p.p99_ms,
+            p.max_ms
+        );
+        println!(
+            "pose queries: {} at {:.0}/s, p50 {:.2} ms, p99 {:.2} ms ({} errors)",
+            q.count, report.pose_query_rate_achieved, q.p50_ms, q.p99_ms, report.pose_query_errors
+        );
+    }
+    Ok(())
+}
+
+/// Reads `/api/v1/events` and notes when each node event arrives.
+fn follow_events(http: &str, seen: &Mutex<HashMap<(String, u64), Instant>>, stop: &AtomicBool) {
+    let Ok(mut stream) = TcpStream::connect(http) else {
+        return;
+    };
+    let _ = stream.set_read_timeout(Some(Duration::from_millis(200)));
+    let _ = write!(
+        stream,
+        "GET /api/v1/events HTTP/1.1\r\nHost: {http}\r\nAccept: text/event-stream\r\n\r\n"
+    );
+    let mut reader = BufReader::new(stream);
+    let mut line = String::new();
+    while !stop.load(Ordering::SeqCst) {
+        line.clear();
+        match reader.read_line(&mut line) {
+            Ok(0) => return,
+            Ok(_) => {}
+            Err(_) => continue,
+        }
+        let Some(data) = line.trim_end().strip_prefix("data: ") else {
+            continue;
+        };
+        let Ok(event) = serde_json::from_str::<serde_json::Value>(data) else {
+            continue;
+        };
+        if event["type"] == "node" {
+            let robot = event["robot"].as_str().unwrap_or_default().to_owned();
+            let seq = event["node_seq"].as_u64().unwrap_or_default();
+            seen.lock()
+                .expect("seen")
+                .entry((robot, seq))
+                .or_insert_with(Instant::now);
+        }
+    }
+}
+
+/// GETs robot poses at `rate` per second on one keep-alive connection; returns latencies
+/// (ms) and errors.
+fn query_poses(
+    http: &str,
+    robots: usize,
+    rate: f64,
+    connection: usize,
+    stop: &AtomicBool,
+) -> (Vec<f64>, u64) {
+    let (mut latencies, mut errors) = (Vec::new(), 0u64);
+    let period = Duration::from_secs_f64(1.0 / rate.max(1.0));
+    let mut stream: Option<BufReader<TcpStream>> = None;
+    let started = Instant::now();
+    let mut k = 0u64;
+    while !stop.load(Ordering::SeqCst) {
+        let due = started + period * (k as u32);
+        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+        let robot = (k as usize * 7 + connection) % robots;
+        k += 1;
+        let path = format!("/api/v1/fleets/{FLEET}/robots/robot{robot}/pose");
+        let t0 = Instant::now();
+        match get_keep_alive(&mut stream, http, &path) {
+            Ok(200) => latencies.push(t0.elapsed().as_secs_f64() * 1e3),
+            // 404 until the robot's first node is in: not a latency sample.
+            Ok(404) => {}
+            _ => {
+                errors += 1;
+                stream = None;
+            }
+        }
+    }
+    (latencies, errors)
+}
+
+fn get_keep_alive(
+    stream: &mut Option<BufReader<TcpStream>>,
+    http: &str,
+    path: &str,
+) -> std::io::Result<u16> {
+    if stream.is_none() {
+        let s = TcpStream::connect(http)?;
+        s.set_nodelay(true)?;
+        *stream = Some(BufReader::new(s));
+    }
+    let reader = stream.as_mut().expect("connected");
+    write!(
+        reader.get_mut(),
+        "GET {path} HTTP/1.1\r\nHost: {http}\r\n\r\n"
+    )?;
+    let mut line = String::new();
+    reader.read_line(&mut line)?;
+    let status: u16 = line
+        .split_whitespace()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .ok_or_else(|| std::io::Error::other("no status"))?;
+    let mut length = 0usize;
+    loop {
+        line.clear();
+        reader.read_line(&mut line)?;
+        let l = line.trim_end();
+        if l.is_empty() {
+            break;
+        }
+        if let Some(v) = l.to_ascii_lowercase().strip_prefix("content-length:") {
+            length = v.trim().parse().unwrap_or(0);
+        }
+    }
+    let mut body = vec![0u8; length];
+    reader.read_exact(&mut body)?;
+    Ok(status)
+}
