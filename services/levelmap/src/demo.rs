@@ -290,7 +290,7 @@ fn map_fixed2d(args: &DemoArgs) -> Result<(f64, usize)> {
             break;
         }
     }
-    map.finish()?;
+    map.optimize_now()?;
     let ate = ate_rmse(map.poses().iter().copied().zip(truth));
     Ok((ate, map.stats().loop_closures))
 }

@@ -25,6 +25,9 @@ pub struct MapperConfig {
     pub datum: Option<Geodetic>,
     /// Beams beyond this range are not used (m).
     pub max_range_m: f32,
+    /// Solve a fleet's network at most this often (ms); nodes arriving between solves are
+    /// placed by scan matching and odometry at once and corrected at the next solve.
+    pub solve_interval_ms: u64,
     /// The pose network and scan matching.
     pub mapping: Mapper2dParams,
 }
@@ -39,6 +42,7 @@ impl Default for MapperConfig {
             token: String::new(),
             datum: None,
             max_range_m: 40.0,
+            solve_interval_ms: 500,
             mapping: fleet_mapping_params(),
         }
     }

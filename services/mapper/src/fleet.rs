@@ -291,8 +291,9 @@ impl FleetMap {
         Ok(self.mapper.optimize_pending()?)
     }
 
-    /// Optimizes now (e.g. before a final export).
-    pub fn finish(&mut self) -> Result<OptimizeReport, IngestError> {
-        Ok(self.mapper.finish()?)
+    /// Solves the network now, pending or not (an operator's request, a final export);
+    /// returns whether it ran (not while a part of the network is unanchored).
+    pub fn optimize_now(&mut self) -> Result<bool, IngestError> {
+        Ok(self.mapper.optimize_now()?)
     }
 }

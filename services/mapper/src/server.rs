@@ -15,8 +15,9 @@ use slam::Pose2;
 use slam::geodesy::GeoDatum;
 use std::collections::HashMap;
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::sync::mpsc;
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use wire::{Message, Topic, WireError, v1};
 use zenoh::Wait;
 
@@ -202,7 +203,7 @@ fn restore(
             map.ingest(&node)
                 .with_context(|| format!("store: replaying fleet {}", stored.id))?;
             if solves.next_if_eq(&&(arrival as u64)).is_some() {
-                map.optimize_pending()?;
+                map.optimize_now()?;
             }
         }
         let rebuilt: Vec<Vec<u8>> = map
@@ -301,10 +302,18 @@ fn worker(
         session: &session,
     };
     let mut store_failed = false;
-    while let Ok(first) = work.recv() {
+    let mut last_solve: HashMap<String, Instant> = HashMap::new();
+    loop {
+        // Wake up for a solve that is due even when nothing arrives.
+        let first = match work.recv_timeout(Duration::from_millis(config.solve_interval_ms.max(10)))
+        {
+            Ok(w) => Some(w),
+            Err(mpsc::RecvTimeoutError::Timeout) => None,
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        };
         let started = Instant::now();
-        let mut batch = vec![first];
-        while batch.len() < MAX_BATCH {
+        let mut batch: Vec<Work> = first.into_iter().collect();
+        while !batch.is_empty() && batch.len() < MAX_BATCH {
             match work.try_recv() {
                 Ok(w) => batch.push(w),
                 Err(_) => break,
@@ -327,20 +336,8 @@ fn worker(
         touched.sort_unstable();
         touched.dedup();
         let mut batches = Vec::new();
-        let mut solved = Vec::new();
         for &fleet in &touched {
-            let map = fleets.get_mut(fleet).expect("a fleet that took nodes");
-            let ran = match map.optimize_pending() {
-                Ok(ran) => ran,
-                Err(e) => {
-                    tracing::error!(fleet, "optimization failed: {e}");
-                    false
-                }
-            };
-            if ran {
-                Metrics::bump(&shared.metrics.optimizations);
-                solved.push(fleet.to_owned());
-            }
+            let map = &fleets[fleet];
             let stored = edges_stored.entry(fleet.to_owned()).or_default();
             let edges: Vec<Vec<u8>> = map.graph().edges[*stored..]
                 .iter()
@@ -353,7 +350,7 @@ fn worker(
                 .collect();
             batches.push(crate::store::FleetBatch {
                 fleet,
-                solved_after: ran.then(|| nodes.last().expect("nodes").0),
+                solved_after: None,
                 nodes,
                 first_edge: *stored as u64,
                 edges,
@@ -366,9 +363,7 @@ fn worker(
                 // its store.
                 tracing::error!("store commit failed; restart the mapper: {e}");
                 store_failed = true;
-                shared
-                    .healthy
-                    .store(false, std::sync::atomic::Ordering::Relaxed);
+                shared.healthy.store(false, Ordering::Relaxed);
                 continue;
             }
             for b in &batches {
@@ -407,17 +402,72 @@ fn worker(
                 "pose": map.poses()[a.node],
             }));
         }
-        for fleet in &solved {
-            ctx.publish_poses(&fleets[fleet]);
+        // Solve after the batch is visible, at most every solve interval per fleet: nodes
+        // arriving meanwhile wait for one solve at most, not for one each. The solve point is
+        // committed before the next node is mapped, so a replay solves at the same place.
+        let interval = Duration::from_millis(config.solve_interval_ms);
+        for (id, map) in fleets.iter_mut() {
+            if last_solve
+                .get(id)
+                .is_some_and(|t: &Instant| t.elapsed() < interval)
+            {
+                continue;
+            }
+            let solve_started = Instant::now();
+            match map.optimize_pending() {
+                Ok(false) => continue,
+                Ok(true) => {}
+                Err(e) => {
+                    tracing::error!(fleet = %id, "optimization failed: {e}");
+                    continue;
+                }
+            }
+            last_solve.insert(id.clone(), Instant::now());
+            Metrics::bump(&shared.metrics.optimizations);
+            let marker = crate::store::FleetBatch {
+                fleet: id,
+                solved_after: Some(map.nodes().len() as u64 - 1),
+                ..Default::default()
+            };
+            if let Err(e) = store.commit(&[marker]) {
+                tracing::error!("store commit failed; restart the mapper: {e}");
+                store_failed = true;
+                shared.healthy.store(false, Ordering::Relaxed);
+                break;
+            }
+            let ms = solve_started.elapsed().as_secs_f64() * 1e3;
+            shared.publish_view(FleetView::of(map, ms, now_ns()));
+            ctx.publish_poses(map);
         }
         for (fleet, reply) in requests {
             let result = match fleets.get_mut(&fleet) {
                 None => Err(format!("no fleet {fleet}")),
-                Some(map) => match map.finish() {
-                    Ok(report) => {
-                        Metrics::bump(&shared.metrics.optimizations);
-                        shared.publish_view(FleetView::of(map, 0.0, now_ns()));
-                        Ok(serde_json::to_value(report).expect("report serializes"))
+                Some(map) => match map.optimize_now() {
+                    Ok(ran) => {
+                        let marker = crate::store::FleetBatch {
+                            fleet: &fleet,
+                            solved_after: Some(map.nodes().len() as u64 - 1),
+                            ..Default::default()
+                        };
+                        match (ran, store_failed) {
+                            (false, _) => Err("part of the network is not anchored yet".into()),
+                            (true, true) => Err("the store failed".into()),
+                            (true, false) => match store.commit(&[marker]) {
+                                Err(e) => {
+                                    tracing::error!("store commit failed; restart the mapper: {e}");
+                                    store_failed = true;
+                                    shared.healthy.store(false, Ordering::Relaxed);
+                                    Err(e.to_string())
+                                }
+                                Ok(()) => {
+                                    Metrics::bump(&shared.metrics.optimizations);
+                                    shared.publish_view(FleetView::of(map, 0.0, now_ns()));
+                                    ctx.publish_poses(map);
+                                    Ok(serde_json::to_value(map.last_optimization())
+                                        .expect("report serializes"))
+                                }
+                            },
+                        }
                     }
                     Err(e) => Err(e.to_string()),
                 },

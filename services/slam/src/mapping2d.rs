@@ -480,6 +480,13 @@ impl Mapper2d {
         self.optimize_anchored()
     }
 
+    /// Optimizes now, pending or not, unless a part of the network is not anchored yet;
+    /// returns whether it ran.
+    pub fn optimize_now(&mut self) -> Result<bool, GraphError> {
+        self.optimization_pending = false;
+        self.optimize_anchored()
+    }
+
     /// Optimizes unless a part of the network is not anchored yet; returns whether it ran.
     fn optimize_anchored(&mut self) -> Result<bool, GraphError> {
         match self.optimize() {
