@@ -7,25 +7,9 @@
 mod common;
 
 use common::*;
-use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
 use std::time::Duration;
+use wire::Message;
 use wire::session::SessionConfig;
-use wire::{Message, v1};
-
-/// The first `n` nodes of a simulated robot.
-fn real_nodes(n: usize) -> Vec<v1::Node> {
-    let mut source = SimSource::new(&SimSourceConfig::default(), 1_700_000_000_000_000_000, 10.0)
-        .expect("loop 0");
-    let mut builder = NodeBuilder::new("park", "robot0", Default::default(), Default::default(), 0);
-    let mut nodes = Vec::new();
-    while nodes.len() < n {
-        match source.next_event().expect("enough scans") {
-            SourceEvent::Scan(scan) => nodes.extend(builder.offer(&scan).expect("levels")),
-            SourceEvent::Odometry(_) => {}
-        }
-    }
-    nodes
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_messages_are_counted_and_rejected_and_nothing_accepted_is_lost() {

@@ -4,6 +4,7 @@
 
 #![allow(dead_code)]
 
+use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
 use serde_json::Value;
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -297,4 +298,19 @@ impl Relay {
     pub fn restore(&self) {
         self.up.store(true, Ordering::SeqCst);
     }
+}
+
+/// The first `n` nodes of a simulated robot.
+pub fn real_nodes(n: usize) -> Vec<wire::v1::Node> {
+    let mut source = SimSource::new(&SimSourceConfig::default(), 1_700_000_000_000_000_000, 10.0)
+        .expect("loop 0");
+    let mut builder = NodeBuilder::new("park", "robot0", Default::default(), Default::default(), 0);
+    let mut nodes = Vec::new();
+    while nodes.len() < n {
+        match source.next_event().expect("enough scans") {
+            SourceEvent::Scan(scan) => nodes.extend(builder.offer(&scan).expect("levels")),
+            SourceEvent::Odometry(_) => {}
+        }
+    }
+    nodes
 }

@@ -38,6 +38,10 @@ pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>) -> Router {
             "/api/v1/fleets/{fleet}/robots/{robot}/trajectory.tum",
             get(trajectory_tum),
         )
+        .route("/api/v1/fleets/{fleet}/map.png", get(map_png))
+        .route("/api/v1/fleets/{fleet}/map.pgm", get(map_pgm))
+        .route("/api/v1/fleets/{fleet}/map.yaml", get(map_yaml))
+        .route("/api/v1/fleets/{fleet}/map.geojson", get(map_geojson))
         .route("/api/v1/fleets/{fleet}/graph", get(graph))
         .route("/api/v1/fleets/{fleet}/graph.g2o", get(graph_g2o))
         .route("/api/v1/fleets/{fleet}/nodes/{node}", get(node_detail))
@@ -292,7 +296,7 @@ async fn node_detail(State(api): State<Api>, Path((fleet, node)): Path<(String, 
     }))
 }
 
-/// The robot's node poses as a TUM trajectory (`t x y z qx qy qz qw`, t in s).
+/// The robot's node poses as a TUM trajectory (`t x y z qx qy qz qw`, t in s), as evo reads it.
 async fn trajectory_tum(
     State(api): State<Api>,
     Path((fleet, robot)): Path<(String, String)>,
@@ -303,19 +307,115 @@ async fn trajectory_tum(
         .iter()
         .position(|r| r.id == robot)
         .ok_or_else(|| not_found(format!("no robot {robot:?} in fleet {fleet:?}")))?;
-    let mut out = String::new();
-    for (n, p) in v.nodes.iter().zip(&v.poses).filter(|(n, _)| n.robot == r) {
-        let (qz, qw) = ((p.theta / 2.0).sin(), (p.theta / 2.0).cos());
-        let _ = writeln!(
-            out,
-            "{}.{:09} {:.6} {:.6} 0 0 0 {qz:.9} {qw:.9}",
-            n.stamp_ns / 1_000_000_000,
-            n.stamp_ns % 1_000_000_000,
-            p.x,
-            p.y
-        );
-    }
-    Ok(([(header::CONTENT_TYPE, "text/plain")], out).into_response())
+    let poses = v
+        .nodes
+        .iter()
+        .zip(&v.poses)
+        .filter(|(n, _)| n.robot == r)
+        .map(|(n, p)| (n.stamp_ns as f64 * 1e-9, *p));
+    let text = graphio::trajectory::to_tum(poses).map_err(internal)?;
+    Ok(([(header::CONTENT_TYPE, "text/plain")], text).into_response())
+}
+
+fn internal(e: impl std::fmt::Display) -> (StatusCode, String) {
+    (StatusCode::INTERNAL_SERVER_ERROR, e.to_string())
+}
+
+#[derive(Deserialize)]
+struct GridQuery {
+    /// Cell size (m); the grid's default when absent.
+    resolution_m: Option<f64>,
+}
+
+/// The occupancy grid of the fleet's leveled scans at their optimized poses (CPU work: off the
+/// async threads).
+async fn grid(
+    v: Arc<FleetView>,
+    q: GridQuery,
+) -> Result<slam::OccupancyGrid, (StatusCode, String)> {
+    tokio::task::spawn_blocking(move || {
+        let scans: Vec<slam::matching::Scan2> = v
+            .nodes
+            .iter()
+            .map(|n| {
+                let (b, r): (Vec<f32>, Vec<f32>) = n
+                    .bearings_rad
+                    .iter()
+                    .zip(&n.ranges_m)
+                    .filter(|(_, r)| **r > 0.0)
+                    .map(|(b, r)| (*b, *r))
+                    .unzip();
+                slam::matching::Scan2::from_polar(&b, &r, f32::MAX).expect("pairs")
+            })
+            .collect();
+        let mut params = slam::GridParams::default();
+        if let Some(res) = q.resolution_m {
+            params.resolution_m = res;
+        }
+        slam::OccupancyGrid::from_scans(v.poses.iter().copied().zip(&scans), &params)
+            .map_err(|e| (StatusCode::UNPROCESSABLE_ENTITY, e.to_string()))
+    })
+    .await
+    .map_err(internal)?
+}
+
+async fn map_png(
+    State(api): State<Api>,
+    Path(fleet): Path<String>,
+    Query(q): Query<GridQuery>,
+) -> Reply {
+    let g = grid(view(&api, &fleet)?, q).await?;
+    let png = graphio::gridmap::to_png(&g).map_err(internal)?;
+    Ok(([(header::CONTENT_TYPE, "image/png")], png).into_response())
+}
+
+async fn map_pgm(
+    State(api): State<Api>,
+    Path(fleet): Path<String>,
+    Query(q): Query<GridQuery>,
+) -> Reply {
+    let g = grid(view(&api, &fleet)?, q).await?;
+    let pgm = graphio::gridmap::to_pgm(&g).map_err(internal)?;
+    Ok(([(header::CONTENT_TYPE, "image/x-portable-graymap")], pgm).into_response())
+}
+
+/// The map_server YAML beside `map.pgm` (same query, same grid).
+async fn map_yaml(
+    State(api): State<Api>,
+    Path(fleet): Path<String>,
+    Query(q): Query<GridQuery>,
+) -> Reply {
+    let g = grid(view(&api, &fleet)?, q).await?;
+    let yaml = graphio::gridmap::to_map_yaml(&g, "map.pgm");
+    Ok(([(header::CONTENT_TYPE, "application/yaml")], yaml).into_response())
+}
+
+/// Nodes and per-robot trajectories in WGS84 (needs the map's GPS datum).
+async fn map_geojson(State(api): State<Api>, Path(fleet): Path<String>) -> Reply {
+    let v = view(&api, &fleet)?;
+    let datum = v.datum.ok_or_else(|| {
+        not_found(format!(
+            "fleet {fleet:?} has no GPS datum yet: no fix, none configured"
+        ))
+    })?;
+    let nodes: Vec<graphio::geojson::GeoNode> = v
+        .nodes
+        .iter()
+        .zip(&v.poses)
+        .enumerate()
+        .map(|(i, (n, p))| graphio::geojson::GeoNode {
+            robot: &v.robots[n.robot].id,
+            node: i,
+            seq: Some(n.node_seq),
+            pose: *p,
+        })
+        .collect();
+    let geojson = graphio::geojson::to_geojson(&datum, &nodes).map_err(internal)?;
+    Ok((
+        [(header::CONTENT_TYPE, "application/geo+json")],
+        geojson.to_string(),
+    )
+        .into_response())
 }
 
 fn authorized(api: &Api, headers: &HeaderMap) -> Result<(), (StatusCode, String)> {
@@ -396,6 +496,10 @@ async fn openapi() -> Reply {
             "/api/v1/fleets/{fleet}/robots/{robot}/pose": get_json("One robot's live map pose"),
             "/api/v1/fleets/{fleet}/robots/{robot}/trajectory.tum": {"get": {"summary": "The robot's node poses as TUM text (evo)", "responses": {"200": {"description": "text"}}}},
             "/api/v1/fleets/{fleet}/graph": get_json("Pose network: nodes, edges by kind (?information=true for information matrices), GPS residuals"),
+            "/api/v1/fleets/{fleet}/map.png": {"get": {"summary": "Occupancy grid as PNG (free 254, occupied 0, unknown 205); ?resolution_m=", "responses": {"200": {"description": "image/png"}}}},
+            "/api/v1/fleets/{fleet}/map.pgm": {"get": {"summary": "Occupancy grid as PGM for ROS map_server (with map.yaml)", "responses": {"200": {"description": "image/x-portable-graymap"}}}},
+            "/api/v1/fleets/{fleet}/map.yaml": {"get": {"summary": "map_server YAML for map.pgm", "responses": {"200": {"description": "application/yaml"}}}},
+            "/api/v1/fleets/{fleet}/map.geojson": {"get": {"summary": "Nodes and trajectories in WGS84 (RFC 7946)", "responses": {"200": {"description": "application/geo+json"}, "404": {"description": "no datum yet"}}}},
             "/api/v1/fleets/{fleet}/graph.g2o": {"get": {"summary": "Pose network as g2o text", "responses": {"200": {"description": "text"}}}},
             "/api/v1/fleets/{fleet}/nodes/{node}": get_json("Node detail with its leveled scan"),
             "/api/v1/fleets/{fleet}/optimize": {"post": {"summary": "Re-optimize the fleet's network now", "security": [{"bearer": []}],

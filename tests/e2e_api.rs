@@ -1,0 +1,139 @@
+//! The HTTP API over a real mapper fed real nodes over Zenoh: every route answers in the
+//! format users' tools read (JSON, TUM, g2o, PNG, PGM + YAML for map_server, GeoJSON), and
+//! write routes need the token.
+
+mod common;
+
+use common::*;
+use std::time::Duration;
+use wire::Message;
+use wire::session::SessionConfig;
+
+const TOKEN: &str = "s3cret";
+
+/// POST with an optional bearer token: the status.
+fn http_post(addr: &str, path: &str, token: Option<&str>) -> u16 {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(addr).expect("connect");
+    let auth = token.map_or(String::new(), |t| format!("Authorization: Bearer {t}\r\n"));
+    write!(
+        stream,
+        "POST {path} HTTP/1.1\r\nHost: {addr}\r\n{auth}Content-Length: 0\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut out = String::new();
+    stream.read_to_string(&mut out).unwrap();
+    out.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_route_answers_in_its_format() {
+    let dir = temp_dir("api");
+    let zenoh = format!("tcp/127.0.0.1:{}", free_port());
+    let mapper = mapper::start(mapper::MapperConfig {
+        zenoh: SessionConfig::router(&zenoh),
+        http_listen: "127.0.0.1:0".into(),
+        store_path: dir.join("mapper.redb"),
+        token: TOKEN.into(),
+        ..Default::default()
+    })
+    .await
+    .expect("mapper starts");
+    let http = mapper.http_addr.to_string();
+    let session = SessionConfig::client(&zenoh).open().await.expect("client");
+    let key = wire::node_key("park", "robot0").unwrap();
+    let nodes = real_nodes(3);
+    // Re-sent until all are in, as the edge does.
+    loop {
+        for n in &nodes {
+            session.put(key.clone(), n.encode_to_vec()).await.unwrap();
+        }
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let h = http.clone();
+        let seqs = tokio::task::spawn_blocking(move || node_seqs(&h, "park", "robot0"))
+            .await
+            .unwrap();
+        if seqs.len() == 3 {
+            break;
+        }
+    }
+    let h = http.clone();
+    tokio::task::spawn_blocking(move || check_routes(&h))
+        .await
+        .unwrap();
+    session.close().await.unwrap();
+    mapper.stop().await.unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+fn check_routes(http: &str) {
+    let base = "/api/v1/fleets/park";
+    let get = |path: &str| {
+        let (status, body) = http_get(http, path).unwrap_or_else(|| panic!("{path}: no answer"));
+        assert_eq!(status, 200, "{path}: {body}");
+        body
+    };
+    let json = |path: &str| -> serde_json::Value {
+        serde_json::from_str(&get(path)).unwrap_or_else(|e| panic!("{path}: {e}"))
+    };
+
+    let summary = json(&format!("{base}/summary"));
+    assert_eq!(summary["nodes"], 3);
+    assert_eq!(summary["robots"], 1);
+    let robots = json(&format!("{base}/robots"));
+    assert_eq!(robots["robots"][0]["id"], "robot0");
+    let pose = json(&format!("{base}/robots/robot0/pose"));
+    assert!(pose["pose"]["x"].is_number(), "{pose}");
+    let graph = json(&format!("{base}/graph?information=true"));
+    assert_eq!(graph["nodes"].as_array().unwrap().len(), 3);
+    assert_eq!(graph["edges"].as_array().unwrap().len(), 2, "{graph}");
+    assert!(graph["edges"][0]["information"].is_array());
+    let node = json(&format!("{base}/nodes/1"));
+    assert_eq!(node["node_seq"], 1);
+    assert!(!node["scan"]["range_m"].as_array().unwrap().is_empty());
+    assert_eq!(http_get(http, &format!("{base}/nodes/99")).unwrap().0, 404);
+    assert_eq!(
+        http_get(http, "/api/v1/fleets/nowhere/summary").unwrap().0,
+        404
+    );
+
+    // TUM: a comment line, then `t x y z qx qy qz qw` per node.
+    let tum = get(&format!("{base}/robots/robot0/trajectory.tum"));
+    let rows: Vec<&str> = tum.lines().filter(|l| !l.starts_with('#')).collect();
+    assert_eq!(rows.len(), 3);
+    assert!(rows.iter().all(|r| r.split_whitespace().count() == 8));
+    // g2o: three vertices, two edges.
+    let g2o = get(&format!("{base}/graph.g2o"));
+    assert_eq!(
+        g2o.lines().filter(|l| l.starts_with("VERTEX_SE2")).count(),
+        3
+    );
+    assert_eq!(g2o.lines().filter(|l| l.starts_with("EDGE_SE2")).count(), 2);
+    // The grid as map_server reads it: PGM (P5) and a YAML naming it.
+    let yaml = get(&format!("{base}/map.yaml"));
+    assert!(
+        yaml.contains("image: map.pgm") && yaml.contains("resolution:"),
+        "{yaml}"
+    );
+    let pgm = http_get(http, &format!("{base}/map.pgm")).unwrap();
+    assert_eq!(pgm.0, 200);
+    assert!(pgm.1.starts_with("P5"), "PGM header");
+    let png = http_get(http, &format!("{base}/map.png")).unwrap();
+    assert_eq!(png.0, 200);
+    assert!(png.1.as_bytes().starts_with(b"\x89PNG") || png.1.contains("PNG"));
+    // GeoJSON in WGS84 near the simulated park's datum (lon 9.71, lat 52.39).
+    let geo = json(&format!("{base}/map.geojson"));
+    assert_eq!(geo["type"], "FeatureCollection");
+    let c = &geo["features"][0]["geometry"]["coordinates"];
+    assert!((c[0].as_f64().unwrap() - 9.71).abs() < 0.01, "{c}");
+    assert!((c[1].as_f64().unwrap() - 52.39).abs() < 0.01, "{c}");
+    // OpenAPI names the routes; metrics are Prometheus text.
+    let openapi = json("/api/v1/openapi.json");
+    assert!(openapi["paths"][&format!("/api/v1/fleets/{{fleet}}/summary")].is_object());
+    assert!(get("/metrics").contains("levelmap_nodes_accepted_total 3"));
+    // Write routes need the token.
+    let optimize = format!("{base}/optimize");
+    assert_eq!(http_post(http, &optimize, None), 401);
+    assert_eq!(http_post(http, &optimize, Some("wrong")), 401);
+    assert_eq!(http_post(http, &optimize, Some(TOKEN)), 200);
+}
