@@ -110,6 +110,8 @@ pub async fn run(
             produced = rx.recv(), if !source_done => match produced {
                 Some(Produced::Node) => {
                     report.nodes += 1;
+                    // The ack timer runs from the newest send, not from the last ack.
+                    last_progress = Instant::now();
                     next_to_send = send_pending(&outbox, &node_pub, next_to_send, &mut header_seq, &mut report).await?;
                 }
                 Some(Produced::Odometry(mut odometry)) => {
