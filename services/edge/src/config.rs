@@ -75,3 +75,14 @@ impl EdgeConfig {
         toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_deploy_file_states_the_defaults() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/edge.toml");
+        assert_eq!(EdgeConfig::load(&path).unwrap(), EdgeConfig::default());
+    }
+}

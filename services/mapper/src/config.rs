@@ -70,3 +70,20 @@ impl MapperConfig {
         toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_deploy_file_states_the_defaults() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/mapper.toml");
+        assert_eq!(MapperConfig::load(&path).unwrap(), MapperConfig::default());
+    }
+
+    #[test]
+    fn an_unknown_key_is_an_error() {
+        let e = toml::from_str::<MapperConfig>("http_listn = \"x\"").unwrap_err();
+        assert!(e.to_string().contains("http_listn"), "{e}");
+    }
+}
