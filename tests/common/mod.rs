@@ -186,12 +186,18 @@ impl Drop for MapperProcess {
 
 /// A simulated robot's edge service process (`--json` report on stdout).
 pub fn spawn_edge(dir: &Path, robot: usize, connect: &str, duration_s: f64, speed: f64) -> Child {
+    let source = format!("[source.sim]\nloop_index = {robot}\nduration_s = {duration_s}\n");
+    spawn_edge_with(dir, robot, connect, speed, &source)
+}
+
+/// An edge service process with the given `[source.…]` table.
+pub fn spawn_edge_with(dir: &Path, robot: usize, connect: &str, speed: f64, source: &str) -> Child {
     let config = dir.join(format!("robot{robot}.toml"));
     std::fs::write(
         &config,
         format!(
             "robot = \"robot{robot}\"\noutbox_path = {:?}\nspeed = {speed}\nresend_after_ms = 500\n\
-             [zenoh]\nconnect = [{connect:?}]\n[source.sim]\nloop_index = {robot}\nduration_s = {duration_s}\n",
+             [zenoh]\nconnect = [{connect:?}]\n{source}",
             dir.join(format!("robot{robot}-outbox.redb"))
         ),
     )

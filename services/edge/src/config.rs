@@ -2,7 +2,7 @@
 //! shows them all.
 
 use crate::node::NodeParams;
-use crate::source::SimSourceConfig;
+use crate::source::{FilesSourceConfig, SimSourceConfig};
 use leveling::SegmentParams;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -35,12 +35,14 @@ pub struct EdgeConfig {
     pub source: SourceConfig,
 }
 
-/// The measurement source. Only the simulator is wired up so far.
+/// The measurement source.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "snake_case")]
 pub enum SourceConfig {
     /// A simulated robot in the hilly park.
     Sim(SimSourceConfig),
+    /// Scan files in a folder (KITTI, 3DTK, simulator JSON).
+    Files(FilesSourceConfig),
 }
 
 impl Default for SourceConfig {

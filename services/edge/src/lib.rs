@@ -14,7 +14,10 @@ pub use config::{EdgeConfig, SourceConfig};
 pub use node::{GpsReading, NodeBuilder, NodeError, NodeParams, PlanarScan, SensorScan};
 pub use outbox::{Outbox, OutboxError};
 pub use service::{EdgeReport, run};
-pub use source::{SimSource, SimSourceConfig, Source, SourceEvent, park, sim_gps_reading};
+pub use source::{
+    FilesSource, FilesSourceConfig, SimSource, SimSourceConfig, Source, SourceEvent, park,
+    sim_gps_reading,
+};
 
 /// The source a config names, with simulation time 0 at `epoch_ns`.
 pub fn open_source(config: &EdgeConfig, epoch_ns: u64) -> anyhow::Result<Box<dyn Source>> {
@@ -22,5 +25,6 @@ pub fn open_source(config: &EdgeConfig, epoch_ns: u64) -> anyhow::Result<Box<dyn
         SourceConfig::Sim(sim) => SimSource::new(sim, epoch_ns, config.odometry_rate_hz)
             .map(|s| Box::new(s) as Box<dyn Source>)
             .ok_or_else(|| anyhow::anyhow!("sim source: the park has no loop {}", sim.loop_index)),
+        SourceConfig::Files(files) => Ok(Box::new(FilesSource::new(files, epoch_ns)?)),
     }
 }
