@@ -44,6 +44,9 @@ fn no_node_is_lost_when_a_robot_is_cut_off_for_a_while() {
     );
     let other = edge_report(direct, Duration::from_secs(120));
     assert_eq!(seqs(1).len() as u64, other["nodes"].as_u64().unwrap());
+    // Robots get their corrected poses back after the mapper's solves.
+    assert!(other["map_pose_updates"].as_u64().unwrap() > 0, "{other}");
+    assert!(other["map_pose"]["x"].is_number(), "{other}");
     drop(mapper);
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -38,6 +38,10 @@ pub struct EdgeReport {
     pub outbox_pending: u64,
     /// Scans the leveling could not use (logged).
     pub scan_errors: u64,
+    /// Corrected poses the mapper sent back after its solves, and the latest: this robot's
+    /// last node on the map.
+    pub map_pose_updates: u64,
+    pub map_pose: Option<slam::Pose2>,
 }
 
 enum Produced {
@@ -82,6 +86,10 @@ pub async fn run(
         .map_err(anyhow::Error::from_boxed)?;
     let acks = session
         .declare_subscriber(ack_key)
+        .await
+        .map_err(anyhow::Error::from_boxed)?;
+    let map_poses = session
+        .declare_subscriber(wire::map_key(&config.fleet, "poses")?)
         .await
         .map_err(anyhow::Error::from_boxed)?;
 
@@ -143,6 +151,19 @@ pub async fn run(
                         next_to_send = next_to_send.max(seq + 1);
                     }
                     Err(e) => tracing::warn!(robot = %config.robot, "bad ack: {e}"),
+                }
+            }
+            sample = map_poses.recv_async() => {
+                let Ok(sample) = sample else { break };
+                // The mapper's corrected pose of this robot's last node (JSON).
+                let body: serde_json::Value = serde_json::from_slice(&sample.payload().to_bytes())
+                    .unwrap_or_default();
+                let mine = body["poses"].as_array().and_then(|poses| {
+                    poses.iter().find(|p| p["robot"] == config.robot.as_str()).cloned()
+                });
+                if let Some(p) = mine {
+                    report.map_pose_updates += 1;
+                    report.map_pose = serde_json::from_value(p["pose"].clone()).ok();
                 }
             }
             _ = tick.tick() => {

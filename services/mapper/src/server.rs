@@ -256,17 +256,44 @@ fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]) {
     }
     let pose = wire::odometry_from_wire(&odometry).expect("validated");
     Metrics::bump(&metrics.odometry_received);
-    let live = LiveOdometry {
-        odometry: Pose2::from_isometry3(&pose.pose),
-        stamp_ns: pose.stamp_ns,
-        received_ns: now_ns(),
+    let now = now_ns();
+    let odometry = Pose2::from_isometry3(&pose.pose);
+    // A `pose` event on the stream at most POSE_EVENT_PERIOD_NS apart per robot.
+    let due = {
+        let mut live = shared.live.lock().expect("live lock");
+        let key = (parsed.fleet.to_owned(), parsed.robot.to_owned());
+        let last_event = live.get(&key).map_or(0, |p| p.evented_ns);
+        let due = now.saturating_sub(last_event) >= POSE_EVENT_PERIOD_NS;
+        let evented_ns = if due { now } else { last_event };
+        live.insert(
+            key,
+            LiveOdometry {
+                odometry,
+                stamp_ns: pose.stamp_ns,
+                received_ns: now,
+                evented_ns,
+            },
+        );
+        due
     };
-    shared
-        .live
-        .lock()
-        .expect("live lock")
-        .insert((parsed.fleet.to_owned(), parsed.robot.to_owned()), live);
+    let map_pose = || {
+        let view = shared.fleet(parsed.fleet)?;
+        Some(view.robot(parsed.robot)?.live_pose(&odometry))
+    };
+    if let Some(map_pose) = due.then(map_pose).flatten() {
+        shared.event(&json!({
+            "type": "pose",
+            "fleet": parsed.fleet,
+            "robot": parsed.robot,
+            "pose": map_pose,
+            "stamp_ns": pose.stamp_ns,
+        }));
+    }
 }
+
+/// Live poses go on the event stream at most 2 Hz per robot (odometry arrives at 10 Hz or
+/// more; `GET …/robots` has every one).
+const POSE_EVENT_PERIOD_NS: u64 = 500_000_000;
 
 /// Most messages taken into one batch (one solve, one store commit).
 const MAX_BATCH: usize = 512;

@@ -91,6 +91,8 @@ pub struct LiveOdometry {
     pub odometry: Pose2,
     pub stamp_ns: u64,
     pub received_ns: u64,
+    /// When this robot's last `pose` event went out.
+    pub evented_ns: u64,
 }
 
 /// Counters for `/metrics`.
