@@ -200,6 +200,7 @@ impl NodeBuilder {
                 .last
                 .map(|last| pose2_to_wire(last.between(&robot2))),
             scan_origin_in_robot: Some(pose2_to_wire(robot2.between(&scan_frame))),
+            earlier_gps: Vec::new(),
         };
         self.next_node_seq += 1;
         self.last = Some(robot2);
