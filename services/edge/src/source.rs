@@ -131,8 +131,10 @@ impl Source for SimSource {
         )
         .expect("the simulator's track is ordered");
         let gps = fleet_scan
-            .gps
-            .map(|fix| sim_gps_reading(&self.robot, &fix, self.epoch_ns));
+            .gps_since_previous
+            .iter()
+            .map(|fix| sim_gps_reading(&self.robot, fix, self.epoch_ns))
+            .collect();
         let scan = SensorScan {
             raw,
             track,
