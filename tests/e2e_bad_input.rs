@@ -73,11 +73,16 @@ async fn bad_messages_are_counted_and_rejected_and_nothing_accepted_is_lost() {
             .odometry
             .as_mut()
             .and_then(|o| o.header.as_mut()),
-        other_robot.gps.as_mut().and_then(|g| g.header.as_mut()),
     ]
     .into_iter()
     .flatten()
-    {
+    .chain(
+        other_robot
+            .gps
+            .iter_mut()
+            .chain(other_robot.earlier_gps.iter_mut())
+            .filter_map(|g| g.header.as_mut()),
+    ) {
         header.robot_id = "robot9".into();
     }
     let cases: Vec<(String, Vec<u8>, &str)> = vec![

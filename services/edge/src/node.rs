@@ -1,6 +1,6 @@
 //! From 3D scans with odometry and GPS to the nodes a robot sends (pure, no I/O): a node
-//! every few metres or degrees, its scan leveled (paper 2.1–3.2), the GPS fix carried to the
-//! scan's start.
+//! every few metres or degrees, its scan leveled (paper 2.1–3.2), every GPS fix since the
+//! previous node carried to the scan's start.
 
 use leveling::nalgebra::{Isometry3, Point3, Vector3};
 use leveling::{DeskewError, Leveler, PoseTrack, Scan3d, SegmentParams, leveled_frame};
@@ -16,6 +16,10 @@ pub struct NodeParams {
     pub node_distance_m: f64,
     /// …or this much rotation (deg).
     pub node_rotation_deg: f64,
+    /// A node carries every GPS fix since the previous node (a 1 Hz receiver and a node every
+    /// 4 s: four), up to this many, the latest kept: a robot standing still makes no node,
+    /// and its fixes meanwhile, from one spot, are not independent.
+    pub max_gps_fixes: usize,
 }
 
 impl Default for NodeParams {
@@ -23,6 +27,7 @@ impl Default for NodeParams {
         NodeParams {
             node_distance_m: 1.0,
             node_rotation_deg: 20.0,
+            max_gps_fixes: 10,
         }
     }
 }
@@ -53,8 +58,9 @@ pub struct SensorScan {
     pub track: PoseTrack,
     /// The sensor's mount on the robot.
     pub sensor_in_robot: Isometry3<f64>,
-    /// The latest GPS fix at or before the scan's start, if the receiver had one.
-    pub gps: Option<GpsReading>,
+    /// The GPS fixes since the previous scan, at or before this scan's start, oldest first
+    /// (none when the receiver had none).
+    pub gps: Vec<GpsReading>,
 }
 
 /// A scan of a fixed (not leveled) 2D scanner.
@@ -67,7 +73,8 @@ pub struct PlanarScan {
     /// Dead reckoning at the scan (odometry frame).
     pub robot_at_start: Isometry3<f64>,
     pub sensor_in_robot: Isometry3<f64>,
-    pub gps: Option<GpsReading>,
+    /// As [`SensorScan::gps`].
+    pub gps: Vec<GpsReading>,
 }
 
 /// Why a scan gave no node.
@@ -91,6 +98,10 @@ pub struct NodeBuilder {
     next_node_seq: u64,
     /// The robot's planar odometry pose at the last node.
     last: Option<Pose2>,
+    /// GPS fixes since the last node, oldest first, for the next one.
+    pending_gps: Vec<GpsReading>,
+    /// The stamp of the latest fix taken (a fix a source repeats is taken once).
+    last_gps_ns: Option<u64>,
 }
 
 impl NodeBuilder {
@@ -108,12 +119,16 @@ impl NodeBuilder {
             leveler: Leveler::new(segment),
             next_node_seq: first_node_seq,
             last: None,
+            pending_gps: Vec::new(),
+            last_gps_ns: None,
         }
     }
 
     /// The node of `scan` when the robot moved far enough since the last node (or there is
-    /// none yet); `None` otherwise, without leveling the scan.
+    /// none yet); `None` otherwise, without leveling the scan. The scan's GPS fixes go with
+    /// the next node either way.
     pub fn offer(&mut self, scan: &SensorScan) -> Result<Option<v1::Node>, NodeError> {
+        self.take_gps(&scan.gps);
         let start_ns = scan.raw.columns.first().ok_or(NodeError::Empty)?.stamp_ns;
         let robot_at_start = scan
             .track
@@ -135,13 +150,13 @@ impl NodeBuilder {
             &robot_at_start,
             scan_frame,
             wire_scan,
-            scan.gps.as_ref(),
         )))
     }
 
     /// The node of a scan from a fixed 2D scanner (no leveling: its frame tilts with the
     /// robot), by the same rule as [`Self::offer`]. For comparisons with the paper's baseline.
     pub fn offer_planar(&mut self, scan: &PlanarScan) -> Option<v1::Node> {
+        self.take_gps(&scan.gps);
         if !self.moved_enough(&scan.robot_at_start) {
             return None;
         }
@@ -153,13 +168,17 @@ impl NodeBuilder {
             counts: None,
             columns: u32::try_from(scan.bearings_rad.len()).unwrap_or(u32::MAX),
         };
-        Some(self.assemble(
-            scan.stamp_ns,
-            &scan.robot_at_start,
-            scan_frame,
-            wire_scan,
-            scan.gps.as_ref(),
-        ))
+        Some(self.assemble(scan.stamp_ns, &scan.robot_at_start, scan_frame, wire_scan))
+    }
+
+    /// Keeps the fixes newer than the last one taken for the next node.
+    fn take_gps(&mut self, readings: &[GpsReading]) {
+        for g in readings {
+            if self.last_gps_ns.is_none_or(|t| g.stamp_ns > t) {
+                self.last_gps_ns = Some(g.stamp_ns);
+                self.pending_gps.push(g.clone());
+            }
+        }
     }
 
     fn header(&self, stamp_ns: u64) -> v1::Header {
@@ -181,9 +200,20 @@ impl NodeBuilder {
         robot_at_start: &Isometry3<f64>,
         scan_frame: Pose2,
         scan: v1::LeveledScan,
-        gps: Option<&GpsReading>,
     ) -> v1::Node {
         let robot2 = Pose2::from_isometry3(robot_at_start);
+        // Fixes after the scan's start wait for the next node; of the others the latest
+        // max_gps_fixes go, the last one as Node.gps.
+        let later = self.pending_gps.partition_point(|g| g.stamp_ns <= start_ns);
+        let rest = self.pending_gps.split_off(later);
+        let mut fixes: Vec<v1::GpsFix> = std::mem::replace(&mut self.pending_gps, rest)
+            .iter()
+            .rev()
+            .take(self.params.max_gps_fixes)
+            .map(|g| gps_to_wire(g, robot_at_start, self.header(start_ns)))
+            .collect();
+        let gps = (!fixes.is_empty()).then(|| fixes.remove(0));
+        fixes.reverse();
         let node = v1::Node {
             header: Some(self.header(start_ns)),
             node_seq: self.next_node_seq,
@@ -195,11 +225,12 @@ impl NodeBuilder {
                 },
                 self.header(start_ns),
             )),
-            gps: gps.map(|g| gps_to_wire(g, robot_at_start, self.header(start_ns))),
+            gps,
             odometry_delta_from_previous: self
                 .last
                 .map(|last| pose2_to_wire(last.between(&robot2))),
             scan_origin_in_robot: Some(pose2_to_wire(robot2.between(&scan_frame))),
+            earlier_gps: fixes,
         };
         self.next_node_seq += 1;
         self.last = Some(robot2);
@@ -238,5 +269,86 @@ fn gps_to_wire(g: &GpsReading, robot_at_start: &Isometry3<f64>, header: v1::Head
             y: offset.y,
             z: offset.z,
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use leveling::nalgebra::Translation3;
+
+    const S: u64 = 1_000_000_000;
+
+    /// A robot driving east at 1 m/s from x = 0 at time 0, the antenna 0.5 m behind it.
+    fn robot_at(t_ns: u64) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::new(t_ns as f64 / S as f64, 0.0, 0.0),
+            Default::default(),
+        )
+    }
+
+    fn fix(t_ns: u64) -> GpsReading {
+        GpsReading {
+            stamp_ns: t_ns,
+            latitude_deg: 52.0,
+            longitude_deg: 9.0,
+            altitude_m: 60.0,
+            sigma_horizontal_m: 0.5,
+            sigma_vertical_m: 1.0,
+            status: v1::FixStatus::Fix,
+            antenna_in_robot_m: Vector3::new(-0.5, 0.0, 1.0),
+            odometry_at_fix: robot_at(t_ns),
+        }
+    }
+
+    fn scan(t_ns: u64, gps: Vec<GpsReading>) -> PlanarScan {
+        PlanarScan {
+            stamp_ns: t_ns,
+            bearings_rad: vec![0.0, 0.1],
+            ranges_m: vec![5.0, 0.0],
+            robot_at_start: robot_at(t_ns),
+            sensor_in_robot: Isometry3::identity(),
+            gps,
+        }
+    }
+
+    fn stamps(node: &v1::Node) -> Vec<u64> {
+        let stamp = |g: &v1::GpsFix| g.header.as_ref().unwrap().stamp_ns / S;
+        node.earlier_gps
+            .iter()
+            .chain(&node.gps)
+            .map(stamp)
+            .collect()
+    }
+
+    #[test]
+    fn a_node_carries_every_fix_since_the_previous_node() {
+        let params = NodeParams {
+            node_distance_m: 3.0,
+            max_gps_fixes: 5,
+            ..NodeParams::default()
+        };
+        let mut builder = NodeBuilder::new("park", "r0", params, SegmentParams::default(), 0);
+        let first = builder.offer_planar(&scan(0, vec![fix(0)])).unwrap();
+        assert_eq!(stamps(&first), [0]);
+        // 2 m: no node, its fixes wait; the fix at 2 s comes again and is taken once.
+        let waiting = scan(2 * S, vec![fix(S), fix(2 * S)]);
+        assert!(builder.offer_planar(&waiting).is_none());
+        let node = builder
+            .offer_planar(&scan(4 * S, vec![fix(2 * S), fix(3 * S), fix(4 * S)]))
+            .unwrap();
+        wire::validate_node(&node).unwrap();
+        assert_eq!(stamps(&node), [1, 2, 3, 4]);
+        // Each carried to the node: where the antenna was at the fix's time, in the robot
+        // frame at the scan's start (4 s, x = 4 m).
+        let offset = |g: &v1::GpsFix| g.antenna_offset_m.as_ref().unwrap().x;
+        assert!((offset(&node.earlier_gps[0]) - (1.0 - 0.5 - 4.0)).abs() < 1e-12);
+        assert!((offset(node.gps.as_ref().unwrap()) + 0.5).abs() < 1e-12);
+        // At most max_gps_fixes, the latest; none: no fix on the node.
+        let many = (5..12).map(|t| fix(t * S)).collect();
+        let node = builder.offer_planar(&scan(11 * S, many)).unwrap();
+        assert_eq!(stamps(&node), [7, 8, 9, 10, 11]);
+        let node = builder.offer_planar(&scan(15 * S, Vec::new())).unwrap();
+        assert!(node.gps.is_none() && node.earlier_gps.is_empty());
     }
 }

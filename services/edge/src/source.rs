@@ -131,8 +131,10 @@ impl Source for SimSource {
         )
         .expect("the simulator's track is ordered");
         let gps = fleet_scan
-            .gps
-            .map(|fix| sim_gps_reading(&self.robot, &fix, self.epoch_ns));
+            .gps_since_previous
+            .iter()
+            .map(|fix| sim_gps_reading(&self.robot, fix, self.epoch_ns))
+            .collect();
         let scan = SensorScan {
             raw,
             track,
@@ -243,7 +245,7 @@ impl Source for FilesSource {
                 raw,
                 track: PoseTrack::stationary(pose),
                 sensor_in_robot: loaded.sensor_in_robot,
-                gps: None,
+                gps: Vec::new(),
             });
             return Some(SourceEvent::Odometry(TimedPose { stamp_ns, pose }));
         }

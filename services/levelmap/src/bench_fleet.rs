@@ -134,7 +134,6 @@ fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u
         node.header.as_mut(),
         node.scan.as_mut().and_then(|s| s.header.as_mut()),
         node.odometry.as_mut().and_then(|o| o.header.as_mut()),
-        node.gps.as_mut().and_then(|g| g.header.as_mut()),
     ]
     .into_iter()
     .flatten()
@@ -142,6 +141,15 @@ fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u
         h.robot_id = robot.to_owned();
         h.stamp_ns = stamp_ns;
         h.sent_ns = stamp_ns;
+    }
+    // Fixes keep their own (earlier, increasing) times, shifted with the node.
+    let shift = stamp_ns.saturating_sub(template.header.as_ref().map_or(0, |h| h.stamp_ns));
+    for g in node.gps.iter_mut().chain(node.earlier_gps.iter_mut()) {
+        if let Some(h) = g.header.as_mut() {
+            h.robot_id = robot.to_owned();
+            h.stamp_ns += shift;
+            h.sent_ns = stamp_ns;
+        }
     }
     if let Some(o) = node.odometry.as_mut() {
         if let Some(p) = o.pose.as_mut() {
@@ -151,7 +159,7 @@ fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u
             p.x_m += east_m;
         }
     }
-    if let Some(g) = node.gps.as_mut() {
+    for g in node.gps.iter_mut().chain(node.earlier_gps.iter_mut()) {
         let datum = sim::PARK_DATUM;
         let mut enu = datum.geodetic_to_enu(&Geodetic {
             latitude_deg: g.latitude_deg,

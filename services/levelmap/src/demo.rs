@@ -276,7 +276,11 @@ fn map_fixed2d(args: &DemoArgs) -> Result<(f64, usize)> {
                     .collect(),
                 robot_at_start: scan.odometry_at_start,
                 sensor_in_robot: mount,
-                gps: scan.gps.map(|f| edge::sim_gps_reading(robot, &f, 0)),
+                gps: scan
+                    .gps_since_previous
+                    .iter()
+                    .map(|f| edge::sim_gps_reading(robot, f, 0))
+                    .collect(),
             };
             let Some(node) = builder.offer_planar(&planar) else {
                 continue;

@@ -285,7 +285,10 @@ async fn node_detail(State(api): State<Api>, Path((fleet, node)): Path<(String, 
         "stamp_ns": n.stamp_ns,
         "pose": v.poses[node],
         "odometry": n.odometry,
-        "gps": n.gps.map(|g| json!({"position_m": [g.position_m.x, g.position_m.y]})),
+        "gps": n.gps.iter().map(|g| json!({
+            "position_m": [g.position_m.x, g.position_m.y],
+            "lever_arm_m": [g.lever_arm_m.x, g.lever_arm_m.y],
+        })).collect::<Vec<_>>(),
         "counts": n.counts.map(|c| json!({
             "points": c.points, "invalid": c.invalid, "ground": c.ground,
             "landmark": c.landmark, "overhang": c.overhang,
@@ -501,7 +504,7 @@ async fn openapi() -> Reply {
             "/api/v1/fleets/{fleet}/map.yaml": {"get": {"summary": "map_server YAML for map.pgm", "responses": {"200": {"description": "application/yaml"}}}},
             "/api/v1/fleets/{fleet}/map.geojson": {"get": {"summary": "Nodes and trajectories in WGS84 (RFC 7946)", "responses": {"200": {"description": "application/geo+json"}, "404": {"description": "no datum yet"}}}},
             "/api/v1/fleets/{fleet}/graph.g2o": {"get": {"summary": "Pose network as g2o text", "responses": {"200": {"description": "text"}}}},
-            "/api/v1/fleets/{fleet}/nodes/{node}": get_json("Node detail with its leveled scan"),
+            "/api/v1/fleets/{fleet}/nodes/{node}": get_json("Node detail with its leveled scan and GPS fixes (oldest first: position and lever arm in the node frame, m)"),
             "/api/v1/fleets/{fleet}/optimize": {"post": {"summary": "Re-optimize the fleet's network now", "security": [{"bearer": []}],
                 "responses": {"200": {"description": "the optimizer's report"}, "401": {"description": "no or wrong token"}, "403": {"description": "no token configured"}}}},
             "/api/v1/events": {"get": {"summary": "Server-sent events: node mapped, poses optimized (JSON data)", "responses": {"200": {"description": "text/event-stream"}}}}

@@ -46,7 +46,9 @@ pub struct NodeRecord {
     pub robot_odometry: Pose2,
     /// The scan's frame in the robot's planar frame.
     pub scan_origin: Pose2,
-    pub gps: Option<GpsObservation>,
+    /// Its GPS fixes as the mapper took them (`Node.earlier_gps` then `Node.gps`: oldest
+    /// first), each an edge of the network.
+    pub gps: Vec<GpsObservation>,
     pub counts: Option<v1::SegmentationCounts>,
     /// The leveled scan: bearings (rad) and ranges (m, 0 = no return).
     pub bearings_rad: Vec<f32>,
@@ -213,10 +215,12 @@ impl FleetMap {
         let (bearings, ranges): (Vec<f32>, Vec<f32>) = leveled.returns().unzip();
         let scan =
             Scan2::from_polar(&bearings, &ranges, self.max_range_m).expect("returns come in pairs");
-        let gps = node
-            .gps
-            .as_ref()
-            .and_then(|fix| self.gps_observation(fix, &scan_origin));
+        let gps: Vec<GpsObservation> = node
+            .earlier_gps
+            .iter()
+            .chain(&node.gps)
+            .filter_map(|fix| self.gps_observation(fix, &scan_origin))
+            .collect();
 
         let robot = match self.by_id.get(&robot_id) {
             Some(&r) => r,
@@ -230,7 +234,7 @@ impl FleetMap {
                 self.robots.len() - 1
             }
         };
-        let placed = self.mapper.add_robot_scan(robot, scan_frame, scan, gps)?;
+        let placed = self.mapper.add_robot_scan(robot, scan_frame, scan, &gps)?;
         let slam::Placed::Node(index) = placed else {
             unreachable!("node distance 0: every scan is a node")
         };

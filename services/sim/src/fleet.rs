@@ -24,6 +24,10 @@ pub struct FleetScan {
     pub odometry_at_start: Isometry3<f64>,
     /// The GPS fix of the receiver period in which the scan starts; `None` on a dropout.
     pub gps: Option<GpsFix>,
+    /// Every fix after the previous scan's start up to this scan's start (for the first scan,
+    /// up to its start), oldest first: at 1 Hz and a scan every 4 s, four (fewer on dropouts).
+    /// Ends with `gps` when that is `Some`.
+    pub gps_since_previous: Vec<GpsFix>,
     /// The fixed horizontal 2D scanner's scan at the scan's start (for comparison).
     pub fixed2d: Vec<Beam2d>,
 }
@@ -40,6 +44,7 @@ pub struct FleetRobot<'w> {
     fixes: Vec<GpsFix>,
     rng: Rng,
     next_start_ns: u64,
+    previous_start_ns: Option<u64>,
     seq: u64,
     end_ns: u64,
 }
@@ -70,6 +75,7 @@ impl<'w> FleetRobot<'w> {
             fixes,
             rng,
             next_start_ns: 0,
+            previous_start_ns: None,
             seq: 0,
             end_ns: duration_ns,
         })
@@ -130,7 +136,15 @@ impl<'w> FleetRobot<'w> {
             .last()
             .filter(|f| f.stamp_ns + self.gps.period_ns > start)
             .copied();
+        let gps_since_previous = self
+            .fixes
+            .iter()
+            .skip_while(|f| self.previous_start_ns.is_some_and(|p| f.stamp_ns <= p))
+            .take_while(|f| f.stamp_ns <= start)
+            .copied()
+            .collect();
         let fixed2d = self.fixed2d.scan(self.world, &truth(start));
+        self.previous_start_ns = Some(start);
         self.next_start_ns = end + 1;
         let seq = self.seq;
         self.seq += 1;
@@ -141,7 +155,40 @@ impl<'w> FleetRobot<'w> {
             track,
             odometry_at_start,
             gps,
+            gps_since_previous,
             fixed2d,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_fix_comes_with_one_scan_the_latest_as_gps() {
+        let world = World::park();
+        let mut robot = FleetRobot::new(&world, 1, 40_000_000_000, 3).unwrap();
+        let (mut taken, mut previous_start) = (Vec::new(), None);
+        while let Some(scan) = robot.next_scan() {
+            let start = scan.scan.raw.columns[0].stamp_ns;
+            for fix in &scan.gps_since_previous {
+                assert!(fix.stamp_ns <= start);
+                assert!(previous_start.is_none_or(|p| fix.stamp_ns > p));
+            }
+            if scan.gps.is_some() {
+                assert_eq!(scan.gps, scan.gps_since_previous.last().copied());
+            }
+            assert!(scan.seq == 0 || scan.gps_since_previous.len() >= 3);
+            taken.extend(scan.gps_since_previous);
+            previous_start = Some(start);
+        }
+        let before_last_start: Vec<GpsFix> = robot
+            .fixes
+            .iter()
+            .take_while(|f| previous_start.is_some_and(|p| f.stamp_ns <= p))
+            .copied()
+            .collect();
+        assert_eq!(taken, before_last_start);
     }
 }

@@ -159,7 +159,8 @@ pub struct GpsObservation {
     pub position_m: Vector2<f64>,
     /// Its covariance (m²), from the fix.
     pub covariance_m2: Matrix2<f64>,
-    /// The antenna in the scan's frame (m).
+    /// The antenna in the scan's frame (m). For a fix older than the scan, where the antenna
+    /// was at the fix's time in the scan's frame (dead reckoning carries the fix to the scan).
     pub lever_arm_m: Vector2<f64>,
 }
 
@@ -239,18 +240,21 @@ impl Mapper2d {
     /// Adds a scan taken at `odometry` (any consistent odometry frame) by a single robot:
     /// [`Self::add_robot_scan`] for robot 0 without GPS.
     pub fn add_scan(&mut self, odometry: Pose2, scan: Scan2) -> Result<Placed, GraphError> {
-        self.add_robot_scan(0, odometry, scan, None)
+        self.add_robot_scan(0, odometry, scan, &[])
     }
 
     /// Adds a scan of robot `robot` (a small index) taken at `odometry` (the robot's
-    /// odometry frame), with a GPS fix if there is one: a new node when the robot moved far
-    /// enough since its last node (or it has none yet), else attached to its last node.
+    /// odometry frame), with the GPS fixes the robot has for it (none, one, or every fix
+    /// since its last scan, each carried to this scan's frame: see
+    /// [`GpsObservation::lever_arm_m`]): a new node when the robot moved far enough since its
+    /// last node (or it has none yet), one GPS edge per fix; else attached to its last node,
+    /// its fixes dropped.
     pub fn add_robot_scan(
         &mut self,
         robot: usize,
         odometry: Pose2,
         scan: Scan2,
-        gps: Option<GpsObservation>,
+        gps: &[GpsObservation],
     ) -> Result<Placed, GraphError> {
         self.stats.scans += 1;
         if self.chains.len() <= robot {
@@ -365,11 +369,17 @@ impl Mapper2d {
             .is_some_and(|i| (e.transpose() * i * e)[(0, 0)] <= limit)
     }
 
-    /// Adds the GPS edge of `node`'s fix; returns whether there was one.
-    fn add_gps(&mut self, node: usize, gps: Option<GpsObservation>) -> bool {
-        let Some(fix) = gps else {
-            return false;
-        };
+    /// Adds a GPS edge per fix of `node`; returns whether it added any.
+    fn add_gps(&mut self, node: usize, gps: &[GpsObservation]) -> bool {
+        let mut added = false;
+        for fix in gps {
+            added |= self.add_gps_edge(node, fix);
+        }
+        added
+    }
+
+    /// Adds the GPS edge of one fix of `node`; returns whether it was taken.
+    fn add_gps_edge(&mut self, node: usize, fix: &GpsObservation) -> bool {
         // A fix the network would reject (NaN, a covariance not positive definite) is
         // dropped here rather than failing every later optimization.
         let Some(information) = fix.covariance_m2.try_inverse() else {
@@ -608,7 +618,7 @@ mod tests {
         let poses = |y: f64| (0..4).map(move |k| Pose2::new(-2.0 + 0.6 * k as f64, y, 0.0));
         for (k, pose) in poses(0.0).enumerate() {
             mapper
-                .add_robot_scan(0, pose, scan_at(&pose, k as u64), Some(fix_at(&pose)))
+                .add_robot_scan(0, pose, scan_at(&pose, k as u64), &[fix_at(&pose)])
                 .expect("robot 0");
         }
         // Robot 1 starts 4 m apart (beyond the inter-robot search radius), linked to robot 0
@@ -620,13 +630,13 @@ mod tests {
         bad_covariance.covariance_m2 = Matrix2::new(1.0, 2.0, 2.0, 1.0);
         let mut deferred_at_start = 0;
         for (k, pose) in poses(-4.0).enumerate() {
-            let fix = match k {
-                1 => Some(bad_nan),
-                2 => Some(bad_covariance),
-                _ => Some(fix_at(&pose)),
+            let fixes = match k {
+                1 => vec![bad_nan],
+                2 => vec![bad_covariance, fix_at(&pose)],
+                _ => vec![fix_at(&pose)],
             };
             mapper
-                .add_robot_scan(1, pose, scan_at(&pose, 10 + k as u64), fix)
+                .add_robot_scan(1, pose, scan_at(&pose, 10 + k as u64), &fixes)
                 .expect("robot 1");
             if k == 0 {
                 deferred_at_start = mapper.stats().deferred_optimizations;
@@ -634,7 +644,7 @@ mod tests {
         }
         let stats = mapper.stats();
         assert!(deferred_at_start > 0, "{stats:?}");
-        assert_eq!(stats.gps_edges, 4 + 2, "{stats:?}");
+        assert_eq!(stats.gps_edges, 4 + 3, "{stats:?}");
         assert_eq!(mapper.node_robot(4), (1, 0));
         mapper.finish().expect("anchored by then");
     }

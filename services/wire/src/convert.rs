@@ -354,7 +354,8 @@ pub fn validate_gps_fix(fix: &v1::GpsFix) -> Result<(), WireError> {
 }
 
 /// Checks a node: header; a scan and odometry, valid, from the same fleet and robot; the GPS
-/// fix and the odometry delta, if present, valid.
+/// fixes and the odometry delta, if present, valid; `earlier_gps` only beside `gps`, oldest
+/// first, each stamped before `gps`.
 pub fn validate_node(node: &v1::Node) -> Result<(), WireError> {
     let header = check_header(node.header.as_ref(), "Node.header")?;
     let scan = node
@@ -377,6 +378,7 @@ pub fn validate_node(node: &v1::Node) -> Result<(), WireError> {
             same_sender(header, g, "Node.gps.header")?;
         }
     }
+    validate_earlier_gps(header, node)?;
     for pose in [
         &node.odometry_delta_from_previous,
         &node.scan_origin_in_robot,
@@ -385,6 +387,40 @@ pub fn validate_node(node: &v1::Node) -> Result<(), WireError> {
     .flatten()
     {
         pose2d_from_wire(pose)?;
+    }
+    Ok(())
+}
+
+/// Checks `Node.earlier_gps`: only beside `Node.gps`, each fix valid and from the node's
+/// sender, stamps strictly increasing and before `Node.gps`'s.
+fn validate_earlier_gps(header: &v1::Header, node: &v1::Node) -> Result<(), WireError> {
+    const FIELD: &str = "Node.earlier_gps";
+    let Some(latest) = &node.gps else {
+        return match node.earlier_gps.len() {
+            0 => Ok(()),
+            n => Err(WireError::Invalid {
+                field: FIELD,
+                detail: format!("{n} fixes without Node.gps"),
+            }),
+        };
+    };
+    let stamp = |fix: &v1::GpsFix| fix.header.as_ref().map_or(0, |h| h.stamp_ns);
+    let mut previous: Option<u64> = None;
+    for (k, fix) in node.earlier_gps.iter().enumerate() {
+        validate_gps_fix(fix)?;
+        if let Some(g) = &fix.header {
+            same_sender(header, g, "Node.earlier_gps.header")?;
+        }
+        let t = stamp(fix);
+        if previous.is_some_and(|p| t <= p) || t >= stamp(latest) {
+            return Err(WireError::InvalidValue {
+                field: FIELD,
+                index: Some(k),
+                value: t as f64,
+                problem: "a stamp not after the fix before it and before Node.gps's",
+            });
+        }
+        previous = Some(t);
     }
     Ok(())
 }
@@ -477,7 +513,7 @@ mod tests {
                 header(9),
             )),
             gps: Some(v1::GpsFix {
-                header: Some(gps_header),
+                header: Some(gps_header.clone()),
                 latitude_deg: 52.3822,
                 longitude_deg: 9.7166,
                 altitude_m: 60.0,
@@ -490,6 +526,23 @@ mod tests {
                     z: 0.9,
                 }),
             }),
+            earlier_gps: vec![v1::GpsFix {
+                header: Some(v1::Header {
+                    stamp_ns: STAMP_NS - 1_020_000_000,
+                    ..gps_header
+                }),
+                latitude_deg: 52.38219,
+                longitude_deg: 9.71659,
+                altitude_m: 60.1,
+                position_covariance_m2: vec![0.04, 0.0, 0.0, 0.0, 0.04, 0.0, 0.0, 0.0, 0.25],
+                status: v1::FixStatus::RtkFixed.into(),
+                satellites: 13,
+                antenna_offset_m: Some(v1::Vec3 {
+                    x: -1.1,
+                    y: 0.05,
+                    z: 0.9,
+                }),
+            }],
             odometry_delta_from_previous: Some(v1::Pose2D {
                 x_m: 4.9,
                 y_m: 0.2,
@@ -664,6 +717,7 @@ mod tests {
         // GPS is optional.
         let mut n = node();
         n.gps = None;
+        n.earlier_gps.clear();
         n.odometry_delta_from_previous = None;
         decode_node(&n.encode_to_vec()).unwrap();
     }
@@ -807,5 +861,59 @@ mod tests {
                 ..
             }
         ));
+    }
+
+    #[test]
+    fn bad_earlier_fixes_are_rejected() {
+        let err = rejection(|n| n.earlier_gps[0].longitude_deg = f64::NAN);
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "GpsFix.longitude_deg",
+                problem: "not finite",
+                ..
+            }
+        ));
+        let err = rejection(|n| {
+            n.earlier_gps[0].header.as_mut().unwrap().robot_id = "rover-2".into();
+        });
+        assert!(matches!(
+            err,
+            WireError::Invalid {
+                field: "Node.earlier_gps.header",
+                ..
+            }
+        ));
+        // Not before Node.gps, or out of order.
+        let err = rejection(|n| {
+            let latest = n.gps.as_ref().unwrap().header.as_ref().unwrap().stamp_ns;
+            n.earlier_gps[0].header.as_mut().unwrap().stamp_ns = latest;
+        });
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "Node.earlier_gps",
+                index: Some(0),
+                ..
+            }
+        ));
+        let err = rejection(|n| {
+            let mut older = n.earlier_gps[0].clone();
+            older.header.as_mut().unwrap().stamp_ns -= 1_000_000_000;
+            n.earlier_gps.push(older);
+        });
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "Node.earlier_gps",
+                index: Some(1),
+                ..
+            }
+        ));
+        let err = rejection(|n| n.gps = None);
+        assert!(
+            err.to_string().contains("1 fixes without Node.gps"),
+            "{err}"
+        );
     }
 }
