@@ -6,7 +6,7 @@
 use serde::Serialize;
 use slam::geodesy::{GeoDatum, Geodetic};
 use slam::matching::Scan2;
-use slam::nalgebra::{Matrix2, Vector2};
+use slam::nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
 use slam::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, OptimizeReport, Pose2};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -219,7 +219,14 @@ impl FleetMap {
             .earlier_gps
             .iter()
             .chain(&node.gps)
-            .filter_map(|fix| self.gps_observation(fix, &scan_origin))
+            .filter_map(|fix| {
+                self.gps_observation(
+                    fix,
+                    &odometry.pose.rotation,
+                    robot_odometry.theta,
+                    &scan_origin,
+                )
+            })
             .collect();
 
         let robot = match self.by_id.get(&robot_id) {
@@ -257,8 +264,16 @@ impl FleetMap {
     }
 
     /// A fix as a GPS observation of the node's scan frame; `None` for a fix without
-    /// position (no fix, no covariance nor a status that implies one).
-    fn gps_observation(&mut self, fix: &v1::GpsFix, scan_origin: &Pose2) -> Option<GpsObservation> {
+    /// position (no fix, no covariance nor a status that implies one). The antenna offset is
+    /// in the (tilted) robot frame: the robot's roll and pitch turn it into the horizontal
+    /// lever arm (on a 10° slope a 1 m mast leans 0.17 m).
+    fn gps_observation(
+        &mut self,
+        fix: &v1::GpsFix,
+        attitude: &UnitQuaternion<f64>,
+        heading_rad: f64,
+        scan_origin: &Pose2,
+    ) -> Option<GpsObservation> {
         let status = v1::FixStatus::try_from(fix.status).unwrap_or(v1::FixStatus::Unspecified);
         let covariance = if fix.position_covariance_m2.len() == 9 {
             let c = &fix.position_covariance_m2;
@@ -277,11 +292,15 @@ impl FleetMap {
         };
         let datum = *self.datum.get_or_insert(GeoDatum { origin: geodetic });
         let enu = datum.geodetic_to_enu(&geodetic);
-        let antenna = fix
+        let offset = fix
             .antenna_offset_m
             .as_ref()
-            .map_or([0.0, 0.0], |v| [v.x, v.y]);
-        let lever = scan_origin.inverse().transform_point(antenna);
+            .map_or(Vector3::zeros(), |v| Vector3::new(v.x, v.y, v.z));
+        let heading = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), heading_rad);
+        let leveled = heading.inverse() * (attitude * offset);
+        let lever = scan_origin
+            .inverse()
+            .transform_point([leveled.x, leveled.y]);
         Some(GpsObservation {
             position_m: Vector2::new(enu.x, enu.y),
             covariance_m2: covariance,
