@@ -109,40 +109,45 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
 
     let session = config.zenoh.open().await?;
     let (work_tx, work_rx) = mpsc::channel::<Work>();
-    let mut subscribers = Vec::new();
-    for fleet in ["*"] {
-        let node_keys = format!("{}/{fleet}/robots/*/{}", wire::KEY_ROOT, Topic::Node);
-        let tx = work_tx.clone();
-        subscribers.push(
-            session
-                .declare_subscriber(node_keys)
-                .callback(move |sample| {
-                    let _ = tx.send(Work::Node {
-                        key: sample.key_expr().as_str().to_owned(),
-                        payload: sample.payload().to_bytes().into_owned(),
-                    });
-                })
-                .await
-                .map_err(anyhow::Error::from_boxed)?,
-        );
-        let odom_keys = format!("{}/{fleet}/robots/*/{}", wire::KEY_ROOT, Topic::Odom);
-        let live = shared.clone();
-        let known: Vec<String> = config.fleets.clone();
-        subscribers.push(
-            session
-                .declare_subscriber(odom_keys)
-                .callback(move |sample| {
-                    on_odometry(
-                        &live,
-                        &known,
-                        sample.key_expr().as_str(),
-                        &sample.payload().to_bytes(),
-                    )
-                })
-                .await
-                .map_err(anyhow::Error::from_boxed)?,
-        );
-    }
+    let node_keys = format!("{}/*/robots/*/{}", wire::KEY_ROOT, Topic::Node);
+    let tx = work_tx.clone();
+    let nodes = session
+        .declare_subscriber(node_keys)
+        .callback(move |sample| {
+            let _ = tx.send(Work::Node {
+                key: sample.key_expr().as_str().to_owned(),
+                payload: sample.payload().to_bytes().into_owned(),
+            });
+        })
+        .await
+        .map_err(anyhow::Error::from_boxed)?;
+    let odom_keys = format!("{}/*/robots/*/{}", wire::KEY_ROOT, Topic::Odom);
+    let (live, known) = (shared.clone(), config.fleets.clone());
+    let odometry = session
+        .declare_subscriber(odom_keys)
+        .callback(move |sample| {
+            on_odometry(
+                &live,
+                &known,
+                sample.key_expr().as_str(),
+                &sample.payload().to_bytes(),
+            )
+        })
+        .await
+        .map_err(anyhow::Error::from_boxed)?;
+    // `levelmap/{fleet}/map/{summary,poses}` as Zenoh queries, for robots and tools on the bus.
+    let views = shared.clone();
+    let queries = session
+        .declare_queryable(format!("{}/*/map/*", wire::KEY_ROOT))
+        .callback(move |query| {
+            let key = query.key_expr().as_str().to_owned();
+            if let Some(body) = map_query(&views, &key) {
+                let _ = query.reply(key, body.to_string()).wait();
+            }
+        })
+        .await
+        .map_err(anyhow::Error::from_boxed)?;
+    let subscriptions = (nodes, odometry, queries);
 
     let worker = {
         let shared = shared.clone();
@@ -151,8 +156,8 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         std::thread::Builder::new()
             .name("levelmap-mapping".into())
             .spawn(move || {
-                // The subscribers live as long as the worker.
-                let _subscribers = subscribers;
+                // The subscriptions live as long as the worker.
+                let _subscriptions = subscriptions;
                 worker(config, store, fleets, shared, session, work_rx)
             })?
     };
@@ -230,6 +235,31 @@ fn restore(
         fleets.insert(stored.id.clone(), map);
     }
     Ok(fleets)
+}
+
+/// The answer to a `levelmap/{fleet}/map/{item}` query: `summary` or `poses` (every node's
+/// pose), as JSON; `None` for an unknown fleet or item.
+fn map_query(shared: &Shared, key: &str) -> Option<serde_json::Value> {
+    let mut chunks = key.split('/').skip(1);
+    let (fleet, _map, item) = (chunks.next()?, chunks.next()?, chunks.next()?);
+    let view = shared.fleet(fleet)?;
+    match item {
+        "summary" => Some(json!({
+            "fleet": view.id,
+            "robots": view.robots.len(),
+            "nodes": view.poses.len(),
+            "edges": view.edges.len(),
+            "loop_closures": view.stats.loop_closures,
+            "inter_robot_closures": view.stats.inter_robot_closures,
+        })),
+        "poses" => Some(json!({
+            "fleet": view.id,
+            "nodes": view.nodes.iter().zip(&view.poses).map(|(n, p)| json!({
+                "robot": view.robots[n.robot].id, "node_seq": n.node_seq, "pose": p,
+            })).collect::<Vec<_>>(),
+        })),
+        _ => None,
+    }
 }
 
 fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]) {
