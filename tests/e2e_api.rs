@@ -7,7 +7,6 @@ mod common;
 use common::*;
 use std::time::Duration;
 use wire::Message;
-use wire::session::SessionConfig;
 
 const TOKEN: &str = "s3cret";
 
@@ -29,18 +28,7 @@ fn http_post(addr: &str, path: &str, token: Option<&str>) -> u16 {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_route_answers_in_its_format() {
     let dir = temp_dir("api");
-    let zenoh = format!("tcp/127.0.0.1:{}", free_port());
-    let mapper = mapper::start(mapper::MapperConfig {
-        zenoh: SessionConfig::router(&zenoh),
-        http_listen: "127.0.0.1:0".into(),
-        store_path: dir.join("mapper.redb"),
-        token: TOKEN.into(),
-        ..Default::default()
-    })
-    .await
-    .expect("mapper starts");
-    let http = mapper.http_addr.to_string();
-    let session = SessionConfig::client(&zenoh).open().await.expect("client");
+    let (mapper, session, http) = in_process_mapper(&dir, TOKEN).await;
     let key = wire::node_key("park", "robot0").unwrap();
     let nodes = real_nodes(3);
     // Re-sent until all are in, as the edge does.

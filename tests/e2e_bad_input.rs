@@ -9,22 +9,11 @@ mod common;
 use common::*;
 use std::time::Duration;
 use wire::Message;
-use wire::session::SessionConfig;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_messages_are_counted_and_rejected_and_nothing_accepted_is_lost() {
     let dir = temp_dir("bad-input");
-    let zenoh = format!("tcp/127.0.0.1:{}", free_port());
-    let mapper = mapper::start(mapper::MapperConfig {
-        zenoh: SessionConfig::router(&zenoh),
-        http_listen: "127.0.0.1:0".into(),
-        store_path: dir.join("mapper.redb"),
-        ..Default::default()
-    })
-    .await
-    .expect("mapper starts");
-    let http = mapper.http_addr.to_string();
-    let session = SessionConfig::client(&zenoh).open().await.expect("client");
+    let (mapper, session, http) = in_process_mapper(&dir, "").await;
     let key = wire::node_key("park", "robot0").unwrap();
     let put = |key: String, bytes: Vec<u8>| {
         let session = session.clone();

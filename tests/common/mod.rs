@@ -320,3 +320,26 @@ pub fn real_nodes(n: usize) -> Vec<wire::v1::Node> {
     }
     nodes
 }
+
+/// A mapper in this process on free ports, with a Zenoh client session to it.
+pub async fn in_process_mapper(
+    dir: &Path,
+    token: &str,
+) -> (mapper::Running, zenoh::Session, String) {
+    let zenoh = format!("tcp/127.0.0.1:{}", free_port());
+    let mapper = mapper::start(mapper::MapperConfig {
+        zenoh: wire::session::SessionConfig::router(&zenoh),
+        http_listen: "127.0.0.1:0".into(),
+        store_path: dir.join("mapper.redb"),
+        token: token.into(),
+        ..Default::default()
+    })
+    .await
+    .expect("mapper starts");
+    let session = wire::session::SessionConfig::client(&zenoh)
+        .open()
+        .await
+        .expect("client session");
+    let http = mapper.http_addr.to_string();
+    (mapper, session, http)
+}

@@ -179,10 +179,7 @@ fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u
 }
 
 pub fn run(args: &BenchFleetArgs) -> Result<()> {
-    tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()?
-        .block_on(run_async(args))
+    crate::services::runtime()?.block_on(run_async(args))
 }
 
 async fn run_async(args: &BenchFleetArgs) -> Result<()> {

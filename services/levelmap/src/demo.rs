@@ -71,10 +71,7 @@ struct DemoReport {
 }
 
 pub fn run(args: &DemoArgs) -> Result<()> {
-    tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()?
-        .block_on(run_async(args))
+    crate::services::runtime()?.block_on(run_async(args))
 }
 
 async fn run_async(args: &DemoArgs) -> Result<()> {
