@@ -109,6 +109,17 @@ fn check_routes(http: &str) {
     let png = http_get(http, &format!("{base}/map.png")).unwrap();
     assert_eq!(png.0, 200);
     assert!(png.1.as_bytes().starts_with(b"\x89PNG") || png.1.contains("PNG"));
+    // Where the PNG lies: a positive cell size and a grid of cells.
+    let meta = json(&format!("{base}/map.json"));
+    assert!(meta["resolution_m"].as_f64().unwrap() > 0.0, "{meta}");
+    assert!(meta["width"].as_u64().unwrap() > 0 && meta["origin_m"].is_array());
+    assert_eq!(meta["nodes"], 3);
+    // The dashboard at / and its modules under /web/.
+    let page = http_get(http, "/").unwrap();
+    assert_eq!(page.0, 200);
+    assert!(page.1.contains("/web/app.js"), "the page loads its module");
+    assert_eq!(http_get(http, "/web/app.js").unwrap().0, 200);
+    assert_eq!(http_get(http, "/web/nope.js").unwrap().0, 404);
     // GeoJSON in WGS84 near the simulated park's datum (lon 9.71, lat 52.39).
     let geo = json(&format!("{base}/map.geojson"));
     assert_eq!(geo["type"], "FeatureCollection");

@@ -47,6 +47,9 @@ pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>) -> Router {
         .route("/api/v1/fleets/{fleet}/nodes/{node}", get(node_detail))
         .route("/api/v1/fleets/{fleet}/optimize", post(optimize))
         .route("/api/v1/events", get(events))
+        .route("/api/v1/fleets/{fleet}/map.json", get(map_json))
+        .route("/", get(web_index))
+        .route("/web/{file}", get(web_file))
         .with_state(Api { shared, work })
 }
 
@@ -421,6 +424,72 @@ async fn map_geojson(State(api): State<Api>, Path(fleet): Path<String>) -> Reply
         .into_response())
 }
 
+/// The grid's placement beside `map.png` (same query, same grid): cell size, the world position
+/// of the lower-left corner of cell (0, 0), size in cells, and how many nodes it was made from.
+async fn map_json(
+    State(api): State<Api>,
+    Path(fleet): Path<String>,
+    Query(q): Query<GridQuery>,
+) -> Reply {
+    let v = view(&api, &fleet)?;
+    let nodes = v.poses.len();
+    let g = grid(v, q).await?;
+    json_reply(json!({
+        "resolution_m": g.resolution_m,
+        "origin_m": g.origin_m,
+        "width": g.width,
+        "height": g.height,
+        "nodes": nodes,
+    }))
+}
+
+/// The dashboard (`web/`), compiled in: file name, content type, content.
+const WEB_FILES: &[(&str, &str, &str)] = &[
+    (
+        "index.html",
+        "text/html; charset=utf-8",
+        include_str!("../../../web/index.html"),
+    ),
+    (
+        "app.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../web/app.js"),
+    ),
+    (
+        "view.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../web/view.js"),
+    ),
+    (
+        "style.css",
+        "text/css; charset=utf-8",
+        include_str!("../../../web/style.css"),
+    ),
+];
+
+fn web_reply(file: &str) -> Reply {
+    let (_, content_type, body) = WEB_FILES
+        .iter()
+        .find(|(name, _, _)| *name == file)
+        .ok_or_else(|| not_found(format!("no file {file:?} in the dashboard")))?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, *content_type),
+            (header::CACHE_CONTROL, "no-cache"),
+        ],
+        *body,
+    )
+        .into_response())
+}
+
+async fn web_index() -> Reply {
+    web_reply("index.html")
+}
+
+async fn web_file(Path(file): Path<String>) -> Reply {
+    web_reply(&file)
+}
+
 fn authorized(api: &Api, headers: &HeaderMap) -> Result<(), (StatusCode, String)> {
     let token = &api.shared.token;
     let given = headers
@@ -502,6 +571,7 @@ async fn openapi() -> Reply {
             "/api/v1/fleets/{fleet}/map.png": {"get": {"summary": "Occupancy grid as PNG (free 254, occupied 0, unknown 205); ?resolution_m=", "responses": {"200": {"description": "image/png"}}}},
             "/api/v1/fleets/{fleet}/map.pgm": {"get": {"summary": "Occupancy grid as PGM for ROS map_server (with map.yaml)", "responses": {"200": {"description": "image/x-portable-graymap"}}}},
             "/api/v1/fleets/{fleet}/map.yaml": {"get": {"summary": "map_server YAML for map.pgm", "responses": {"200": {"description": "application/yaml"}}}},
+            "/api/v1/fleets/{fleet}/map.json": get_json("Where map.png lies: resolution_m, origin_m (lower-left corner of cell (0, 0)), width, height (cells), nodes"),
             "/api/v1/fleets/{fleet}/map.geojson": {"get": {"summary": "Nodes and trajectories in WGS84 (RFC 7946)", "responses": {"200": {"description": "application/geo+json"}, "404": {"description": "no datum yet"}}}},
             "/api/v1/fleets/{fleet}/graph.g2o": {"get": {"summary": "Pose network as g2o text", "responses": {"200": {"description": "text"}}}},
             "/api/v1/fleets/{fleet}/nodes/{node}": get_json("Node detail with its leveled scan and GPS fixes (oldest first: position and lever arm in the node frame, m)"),
@@ -510,4 +580,24 @@ async fn openapi() -> Reply {
             "/api/v1/events": {"get": {"summary": "Server-sent events: node mapped, poses optimized (JSON data)", "responses": {"200": {"description": "text/event-stream"}}}}
         }
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::WEB_FILES;
+
+    /// Every page file in `web/` is compiled in, and nothing else is listed.
+    #[test]
+    fn web_files_match_the_folder() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../web");
+        let mut on_disk: Vec<String> = std::fs::read_dir(dir)
+            .expect("web/")
+            .map(|e| e.expect("entry").file_name().into_string().expect("utf-8"))
+            .filter(|n| [".html", ".js", ".css"].iter().any(|x| n.ends_with(x)))
+            .collect();
+        on_disk.sort();
+        let mut listed: Vec<String> = WEB_FILES.iter().map(|(n, _, _)| n.to_string()).collect();
+        listed.sort();
+        assert_eq!(on_disk, listed);
+    }
 }

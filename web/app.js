@@ -1,0 +1,579 @@
+// levelmap dashboard: the first fleet's map, robots, pose network and node inspector, live
+// from the mapping server's API and its event stream (docs/services.md).
+
+import { View, scaleBarMetres, formatMetres } from "./view.js";
+
+const API = "/api/v1";
+const PALETTE = ["#e6550d", "#3182bd", "#31a354", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf"];
+const EDGE_COLOURS = {
+  Odometry: "#8a8a8a",
+  ScanMatch: "#2f7ed8",
+  LoopClosure: "#e0412f",
+  InterRobot: "#9b3fd1",
+};
+const GPS_COLOUR = "#1b9e5a";
+
+// Everything the page shows, open to tests and the console as window.levelmapState.
+const state = {
+  fleet: null,
+  robots: {}, // id -> {id, colour, pose: {x, y, theta}, lastSeenMs, nodes}
+  nodes: [], // {id, robot, node_seq, pose}
+  edges: [], // {from, to, kind}
+  gps: [], // {node, position_m, residual_m}
+  summary: null,
+  grid: null, // {resolution_m, origin_m, width, height, image}
+  showNetwork: false,
+  showGrid: true,
+  inspector: null, // {id, points, counts}
+  events: 0,
+  autoFit: true,
+  errors: [],
+};
+const view = new View();
+window.levelmapState = state;
+window.levelmapView = view;
+
+const $ = (id) => document.getElementById(id);
+const canvas = $("map");
+const ctx = canvas.getContext("2d");
+
+async function getJson(path) {
+  const r = await fetch(API + path);
+  if (!r.ok) throw new Error(`${path}: ${r.status}`);
+  return r.json();
+}
+
+function note(e) {
+  state.errors.push(String(e));
+  if (state.errors.length > 20) state.errors.shift();
+  console.warn(e);
+}
+
+function robot(id) {
+  let r = state.robots[id];
+  if (!r) {
+    const n = Object.keys(state.robots).length;
+    r = state.robots[id] = { id, colour: PALETTE[n % PALETTE.length], pose: null, lastSeenMs: 0, nodes: 0 };
+    // Colours follow the id order, so a reload gives every robot the same colour.
+    Object.keys(state.robots)
+      .sort()
+      .forEach((k, i) => (state.robots[k].colour = PALETTE[i % PALETTE.length]));
+  }
+  return r;
+}
+
+// ---- data --------------------------------------------------------------------------------
+
+async function findFleet() {
+  while (!state.fleet) {
+    try {
+      const { fleets } = await getJson("/fleets");
+      if (fleets.length) state.fleet = fleets[0];
+    } catch (e) {
+      note(e);
+    }
+    if (!state.fleet) await new Promise((ok) => setTimeout(ok, 1000));
+  }
+  $("fleet").textContent = `fleet ${state.fleet}`;
+}
+
+async function loadRobots() {
+  const { robots, now_ns } = await getJson(`/fleets/${state.fleet}/robots`);
+  const now = Date.now();
+  for (const r of robots) {
+    const s = robot(r.id);
+    s.pose = r.pose;
+    s.nodes = r.nodes;
+    if (r.last_seen_ns) s.lastSeenMs = now - (now_ns - r.last_seen_ns) / 1e6;
+  }
+}
+
+async function loadGraph() {
+  const g = await getJson(`/fleets/${state.fleet}/graph`);
+  state.nodes = g.nodes.map((n) => ({ id: n.id, robot: n.robot, node_seq: n.node_seq, pose: n.pose }));
+  state.edges = g.edges.map((e) => ({ from: e.from, to: e.to, kind: e.kind }));
+  state.gps = g.gps;
+  for (const n of state.nodes) robot(n.robot);
+}
+
+async function loadSummary() {
+  state.summary = await getJson(`/fleets/${state.fleet}/summary`);
+  renderSummary();
+}
+
+async function loadGrid() {
+  const meta = await getJson(`/fleets/${state.fleet}/map.json`);
+  const image = new Image();
+  image.src = `${API}/fleets/${state.fleet}/map.png?t=${meta.nodes}`;
+  await image.decode();
+  // The PNG is a second request: keep it only if it is the grid the JSON described.
+  if (image.naturalWidth === meta.width && image.naturalHeight === meta.height) {
+    state.grid = { ...meta, image };
+  }
+}
+
+// Refreshes that events ask for, each at most once per period and never two at once.
+function throttled(fn, periodMs) {
+  let running = false;
+  let again = false;
+  let last = 0;
+  const run = async () => {
+    if (running) {
+      again = true;
+      return;
+    }
+    const wait = last + periodMs - Date.now();
+    if (wait > 0) {
+      running = true;
+      await new Promise((ok) => setTimeout(ok, wait));
+      running = false;
+    }
+    running = true;
+    last = Date.now();
+    try {
+      await fn();
+    } catch (e) {
+      note(e);
+    }
+    running = false;
+    redraw();
+    if (again) {
+      again = false;
+      run();
+    }
+  };
+  return run;
+}
+const refreshGraph = throttled(loadGraph, 1000);
+const refreshSummary = throttled(loadSummary, 1000);
+const refreshGrid = throttled(loadGrid, 3000);
+const refreshRobots = throttled(loadRobots, 1000);
+
+function onEvent(msg) {
+  let ev;
+  try {
+    ev = JSON.parse(msg.data);
+  } catch {
+    return;
+  }
+  if (ev.fleet !== state.fleet) return;
+  state.events += 1;
+  if (ev.type === "pose") {
+    const r = robot(ev.robot);
+    r.pose = ev.pose;
+    r.lastSeenMs = Date.now();
+  } else if (ev.type === "node") {
+    if (!state.nodes.some((n) => n.id === ev.node)) {
+      state.nodes.push({ id: ev.node, robot: ev.robot, node_seq: ev.node_seq, pose: ev.pose });
+    }
+    robot(ev.robot).nodes = ev.node_seq + 1;
+    refreshGraph();
+    refreshSummary();
+    refreshGrid();
+  } else if (ev.type === "optimized") {
+    refreshGraph();
+    refreshSummary();
+    refreshGrid();
+  }
+  redraw();
+}
+
+// ---- panels ------------------------------------------------------------------------------
+
+function fillList(dl, rows) {
+  dl.replaceChildren();
+  for (const [k, v] of rows) {
+    const dt = document.createElement("dt");
+    dt.textContent = k;
+    const dd = document.createElement("dd");
+    dd.textContent = v;
+    dl.append(dt, dd);
+  }
+}
+
+function renderSummary() {
+  const s = state.summary;
+  if (!s) return;
+  const o = s.last_optimization;
+  fillList($("summary-list"), [
+    ["robots", s.robots],
+    ["nodes", s.nodes],
+    ["edges", s.edges],
+    ["loop closures", s.loop_closures],
+    ["between robots", s.inter_robot_closures],
+    ["GPS edges", s.gps_edges],
+    ["last solve χ²", o ? o.final_chi2.toFixed(1) : "—"],
+    ["iterations", o ? `${o.iterations} (${o.stop})` : "—"],
+  ]);
+}
+
+function renderRobots() {
+  const ul = $("robot-list");
+  const now = Date.now();
+  const items = Object.values(state.robots)
+    .sort((a, b) => a.id.localeCompare(b.id))
+    .map((r) => {
+      const li = document.createElement("li");
+      li.dataset.robot = r.id;
+      const sw = document.createElement("span");
+      sw.className = "swatch";
+      sw.style.background = r.colour;
+      const name = document.createElement("span");
+      name.textContent = r.id;
+      const age = document.createElement("span");
+      age.className = "age";
+      age.textContent = r.lastSeenMs ? `${((now - r.lastSeenMs) / 1000).toFixed(1)} s ago` : "no odometry";
+      li.append(sw, name, age);
+      return li;
+    });
+  ul.replaceChildren(...items);
+}
+
+async function inspect(id) {
+  const n = await getJson(`/fleets/${state.fleet}/nodes/${id}`);
+  const pts = [];
+  n.scan.bearing_rad.forEach((b, i) => {
+    const r = n.scan.range_m[i];
+    if (r > 0) pts.push([r * Math.cos(b), r * Math.sin(b)]);
+  });
+  state.inspector = { id, robot: n.robot, points: pts.length, counts: n.counts };
+  $("inspector").hidden = false;
+  $("inspector-title").textContent = `${id} (${n.robot} #${n.node_seq})`;
+  drawScan(pts);
+  const c = n.counts || {};
+  fillList($("inspector-list"), [
+    ["pose", `${n.pose.x.toFixed(2)}, ${n.pose.y.toFixed(2)} m, ${((n.pose.theta * 180) / Math.PI).toFixed(1)}°`],
+    ["scan points", pts.length],
+    ["3D points", c.points ?? "—"],
+    ["ground", c.ground ?? "—"],
+    ["landmark", c.landmark ?? "—"],
+    ["overhang", c.overhang ?? "—"],
+    ["invalid", c.invalid ?? "—"],
+    ["GPS fixes", n.gps.length],
+    ["edges", n.edges.map((e) => `${e.kind} ${e.from}→${e.to}`).join(", ") || "—"],
+  ]);
+  redraw();
+}
+
+/// The leveled scan in the robot frame, forward (x) up, fitted to the canvas.
+function drawScan(pts) {
+  const c = $("scan");
+  const g = c.getContext("2d");
+  g.clearRect(0, 0, c.width, c.height);
+  const maxR = Math.max(5, ...pts.map(([x, y]) => Math.hypot(x, y)));
+  const s = (c.width / 2 - 8) / maxR;
+  const cx = c.width / 2;
+  const cy = c.height / 2;
+  g.strokeStyle = "#ddd";
+  for (const r of [maxR / 2, maxR]) {
+    g.beginPath();
+    g.arc(cx, cy, r * s, 0, 2 * Math.PI);
+    g.stroke();
+  }
+  g.fillStyle = "#c0392b";
+  for (const [x, y] of pts) g.fillRect(cx - y * s - 1, cy - x * s - 1, 2, 2);
+  g.fillStyle = "#222";
+  g.beginPath();
+  g.moveTo(cx, cy - 8);
+  g.lineTo(cx - 5, cy + 5);
+  g.lineTo(cx + 5, cy + 5);
+  g.fill();
+  g.fillText(`${maxR.toFixed(0)} m`, cx + maxR * s * 0.71, cy - maxR * s * 0.71);
+}
+
+// ---- map ---------------------------------------------------------------------------------
+
+function bounds() {
+  let b = null;
+  const add = (p) => {
+    if (!p) return;
+    b = b ? [Math.min(b[0], p.x), Math.min(b[1], p.y), Math.max(b[2], p.x), Math.max(b[3], p.y)] : [p.x, p.y, p.x, p.y];
+  };
+  state.nodes.forEach((n) => add(n.pose));
+  Object.values(state.robots).forEach((r) => add(r.pose));
+  return b;
+}
+
+let pending = false;
+function redraw() {
+  if (pending) return;
+  pending = true;
+  requestAnimationFrame(() => {
+    pending = false;
+    draw();
+  });
+}
+
+function draw() {
+  const dpr = window.devicePixelRatio || 1;
+  const w = canvas.clientWidth;
+  const h = canvas.clientHeight;
+  if (canvas.width !== Math.round(w * dpr) || canvas.height !== Math.round(h * dpr)) {
+    canvas.width = Math.round(w * dpr);
+    canvas.height = Math.round(h * dpr);
+  }
+  view.width = w;
+  view.height = h;
+  if (state.autoFit) view.fit(bounds());
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  ctx.clearRect(0, 0, w, h);
+
+  const g = state.grid;
+  if (g && state.showGrid) {
+    const [x0, y0] = view.toScreen(g.origin_m[0], g.origin_m[1] + g.height * g.resolution_m);
+    ctx.imageSmoothingEnabled = view.scale * g.resolution_m < 1;
+    ctx.globalAlpha = 0.9;
+    ctx.drawImage(g.image, x0, y0, g.width * g.resolution_m * view.scale, g.height * g.resolution_m * view.scale);
+    ctx.globalAlpha = 1;
+  }
+
+  const byId = new Map(state.nodes.map((n) => [n.id, n]));
+  if (state.showNetwork) drawNetwork(byId);
+  drawTrajectories();
+  drawRobots();
+  drawSelection(byId);
+  drawScaleBar();
+  renderRobots();
+}
+
+function drawNetwork(byId) {
+  ctx.lineWidth = 1.5;
+  for (const e of state.edges) {
+    const a = byId.get(e.from);
+    const b = byId.get(e.to);
+    if (!a || !b) continue;
+    ctx.strokeStyle = EDGE_COLOURS[e.kind] || "#000";
+    ctx.beginPath();
+    ctx.moveTo(...view.toScreen(a.pose.x, a.pose.y));
+    ctx.lineTo(...view.toScreen(b.pose.x, b.pose.y));
+    ctx.stroke();
+  }
+  // GPS residuals: from the fix to where the antenna is on the solved pose.
+  ctx.strokeStyle = GPS_COLOUR;
+  ctx.fillStyle = GPS_COLOUR;
+  for (const f of state.gps) {
+    const [px, py] = f.position_m;
+    const [sx, sy] = view.toScreen(px, py);
+    const [ex, ey] = view.toScreen(px + f.residual_m[0], py + f.residual_m[1]);
+    ctx.fillRect(sx - 1, sy - 1, 2, 2);
+    ctx.beginPath();
+    ctx.moveTo(sx, sy);
+    ctx.lineTo(ex, ey);
+    ctx.stroke();
+  }
+  ctx.fillStyle = "#222";
+  for (const n of state.nodes) {
+    const [x, y] = view.toScreen(n.pose.x, n.pose.y);
+    ctx.beginPath();
+    ctx.arc(x, y, 3, 0, 2 * Math.PI);
+    ctx.fill();
+  }
+}
+
+function drawTrajectories() {
+  const byRobot = new Map();
+  for (const n of state.nodes) {
+    if (!byRobot.has(n.robot)) byRobot.set(n.robot, []);
+    byRobot.get(n.robot).push(n);
+  }
+  ctx.lineWidth = 2;
+  for (const [id, nodes] of byRobot) {
+    const r = robot(id);
+    nodes.sort((a, b) => a.node_seq - b.node_seq);
+    const pts = nodes.map((n) => view.toScreen(n.pose.x, n.pose.y));
+    if (r.pose) pts.push(view.toScreen(r.pose.x, r.pose.y));
+    ctx.strokeStyle = r.colour;
+    ctx.beginPath();
+    pts.forEach(([x, y], i) => (i ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+    ctx.stroke();
+    ctx.fillStyle = r.colour;
+    for (const [x, y] of pts.slice(0, nodes.length)) ctx.fillRect(x - 2, y - 2, 4, 4);
+  }
+}
+
+function drawRobots() {
+  ctx.font = "12px system-ui, sans-serif";
+  for (const r of Object.values(state.robots)) {
+    if (!r.pose) continue;
+    const [x, y] = view.toScreen(r.pose.x, r.pose.y);
+    ctx.save();
+    ctx.translate(x, y);
+    ctx.rotate(-r.pose.theta);
+    ctx.fillStyle = r.colour;
+    ctx.strokeStyle = "#fff";
+    ctx.lineWidth = 1.5;
+    ctx.beginPath();
+    ctx.moveTo(14, 0);
+    ctx.lineTo(-8, 8);
+    ctx.lineTo(-4, 0);
+    ctx.lineTo(-8, -8);
+    ctx.closePath();
+    ctx.fill();
+    ctx.stroke();
+    ctx.restore();
+    const age = r.lastSeenMs ? ` · ${((Date.now() - r.lastSeenMs) / 1000).toFixed(0)} s` : "";
+    ctx.fillStyle = "#111";
+    ctx.fillText(`${r.id}${age}`, x + 12, y - 10);
+  }
+}
+
+function drawSelection(byId) {
+  const n = state.inspector && byId.get(state.inspector.id);
+  if (!n) return;
+  const [x, y] = view.toScreen(n.pose.x, n.pose.y);
+  ctx.strokeStyle = "#000";
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.arc(x, y, 7, 0, 2 * Math.PI);
+  ctx.stroke();
+}
+
+function drawScaleBar() {
+  const m = scaleBarMetres(view.scale);
+  const px = m * view.scale;
+  const x = 16;
+  const y = view.height - 20;
+  ctx.fillStyle = "rgba(255,255,255,0.8)";
+  ctx.fillRect(x - 6, y - 18, px + 12, 26);
+  ctx.strokeStyle = "#111";
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.moveTo(x, y - 5);
+  ctx.lineTo(x, y);
+  ctx.lineTo(x + px, y);
+  ctx.lineTo(x + px, y - 5);
+  ctx.stroke();
+  ctx.fillStyle = "#111";
+  ctx.font = "12px system-ui, sans-serif";
+  ctx.fillText(formatMetres(m), x + 4, y - 6);
+}
+
+/// The node nearest the canvas point (CSS px), within `radius` px.
+function nodeAt(sx, sy, radius = 10) {
+  let best = null;
+  let bestD = radius;
+  for (const n of state.nodes) {
+    const [x, y] = view.toScreen(n.pose.x, n.pose.y);
+    const d = Math.hypot(x - sx, y - sy);
+    if (d <= bestD) {
+      best = n;
+      bestD = d;
+    }
+  }
+  return best;
+}
+// Where a node is drawn, for tests: canvas CSS px relative to the page.
+state.nodeOnPage = (id) => {
+  const n = state.nodes.find((k) => k.id === id);
+  if (!n) return null;
+  const [x, y] = view.toScreen(n.pose.x, n.pose.y);
+  const r = canvas.getBoundingClientRect();
+  return { x: r.left + x, y: r.top + y };
+};
+
+// ---- input -------------------------------------------------------------------------------
+
+let drag = null;
+canvas.addEventListener("pointerdown", (e) => {
+  drag = { x: e.clientX, y: e.clientY, moved: 0 };
+  canvas.setPointerCapture(e.pointerId);
+});
+canvas.addEventListener("pointermove", (e) => {
+  if (!drag) return;
+  const dx = e.clientX - drag.x;
+  const dy = e.clientY - drag.y;
+  drag.moved += Math.abs(dx) + Math.abs(dy);
+  drag.x = e.clientX;
+  drag.y = e.clientY;
+  if (drag.moved > 3) {
+    canvas.classList.add("dragging");
+    state.autoFit = false;
+    view.pan(dx, dy);
+    redraw();
+  }
+});
+canvas.addEventListener("pointerup", (e) => {
+  const click = drag && drag.moved <= 3;
+  drag = null;
+  canvas.classList.remove("dragging");
+  if (!click) return;
+  const r = canvas.getBoundingClientRect();
+  const n = nodeAt(e.clientX - r.left, e.clientY - r.top);
+  if (n) inspect(n.id).catch(note);
+});
+canvas.addEventListener(
+  "wheel",
+  (e) => {
+    e.preventDefault();
+    state.autoFit = false;
+    const r = canvas.getBoundingClientRect();
+    view.zoomAt(e.clientX - r.left, e.clientY - r.top, Math.exp(-e.deltaY * 0.0015));
+    redraw();
+  },
+  { passive: false },
+);
+window.addEventListener("resize", redraw);
+
+$("toggle-network").addEventListener("change", (e) => {
+  state.showNetwork = e.target.checked;
+  document.body.classList.toggle("network", state.showNetwork);
+  redraw();
+});
+$("toggle-grid").addEventListener("change", (e) => {
+  state.showGrid = e.target.checked;
+  redraw();
+});
+$("fit").addEventListener("click", () => {
+  state.autoFit = true;
+  redraw();
+});
+$("inspector-close").addEventListener("click", () => {
+  state.inspector = null;
+  $("inspector").hidden = true;
+  redraw();
+});
+
+const TOKEN_KEY = "levelmap.token";
+$("token").value = localStorage.getItem(TOKEN_KEY) || "";
+$("token").addEventListener("change", (e) => localStorage.setItem(TOKEN_KEY, e.target.value));
+$("optimize").addEventListener("click", async () => {
+  const status = $("optimize-status");
+  if (!state.fleet) return;
+  status.textContent = "solving…";
+  try {
+    const r = await fetch(`${API}/fleets/${state.fleet}/optimize`, {
+      method: "POST",
+      headers: { Authorization: `Bearer ${$("token").value}` },
+    });
+    if (r.ok) {
+      const rep = await r.json();
+      status.textContent = rep.final_chi2 !== undefined ? `χ² ${rep.final_chi2.toFixed(1)}` : "done";
+      refreshSummary();
+      refreshGraph();
+    } else {
+      status.textContent = `${r.status}: ${(await r.text()).trim()}`;
+    }
+  } catch (e) {
+    status.textContent = String(e);
+  }
+});
+
+// ---- start -------------------------------------------------------------------------------
+
+async function start() {
+  redraw();
+  await findFleet();
+  const events = new EventSource(`${API}/events`);
+  events.onmessage = onEvent;
+  await Promise.all([loadGraph(), loadRobots(), loadSummary()]).catch(note);
+  refreshGrid();
+  state.ready = true;
+  redraw();
+  // Last-seen ages tick on, and the robots' list catches what the stream dropped.
+  setInterval(() => {
+    refreshRobots();
+    redraw();
+  }, 1000);
+}
+
+start().catch(note);

@@ -1,0 +1,167 @@
+// Browser test of the dashboard: a real demo (mapper and three simulated robots over Zenoh on
+// loopback) serves the page; Debian's chromium, driven by playwright-core, loads it.
+//
+//   LEVELMAP_BIN=…/debug/levelmap node --test tests/
+//
+// Screenshots go to LEVELMAP_WEB_ARTIFACTS (default ../target/web-artifacts).
+
+import { test, before, after } from "node:test";
+import assert from "node:assert/strict";
+import { spawn } from "node:child_process";
+import { mkdtempSync, mkdirSync, rmSync, existsSync } from "node:fs";
+import { tmpdir } from "node:os";
+import path from "node:path";
+import net from "node:net";
+import { fileURLToPath } from "node:url";
+import { chromium } from "playwright-core";
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const repo = path.resolve(here, "../..");
+const artifacts = process.env.LEVELMAP_WEB_ARTIFACTS || path.join(repo, "target/web-artifacts");
+const sleep = (ms) => new Promise((ok) => setTimeout(ok, ms));
+
+function findBinary() {
+  const candidates = [
+    process.env.LEVELMAP_BIN,
+    process.env.CARGO_TARGET_DIR && path.join(process.env.CARGO_TARGET_DIR, "debug/levelmap"),
+    path.join(repo, "target/debug/levelmap"),
+  ].filter(Boolean);
+  const found = candidates.find((p) => existsSync(p));
+  if (!found) throw new Error(`no levelmap binary (tried ${candidates.join(", ")}): build it or set LEVELMAP_BIN`);
+  return found;
+}
+
+function freePort() {
+  return new Promise((ok, fail) => {
+    const s = net.createServer();
+    s.unref();
+    s.on("error", fail);
+    s.listen(0, "127.0.0.1", () => {
+      const { port } = s.address();
+      s.close(() => ok(port));
+    });
+  });
+}
+
+let demo;
+let demoLog = "";
+let dir;
+let browser;
+let page;
+let base;
+const consoleErrors = [];
+
+async function waitFor(what, fn, timeoutMs) {
+  const end = Date.now() + timeoutMs;
+  let last;
+  while (Date.now() < end) {
+    try {
+      const v = await fn();
+      if (v) return v;
+    } catch (e) {
+      last = e;
+    }
+    await sleep(250);
+  }
+  throw new Error(`timed out waiting for ${what}${last ? `: ${last}` : ""}\n--- demo output ---\n${demoLog.slice(-3000)}`);
+}
+
+before(async () => {
+  mkdirSync(artifacts, { recursive: true });
+  dir = mkdtempSync(path.join(tmpdir(), "levelmap-web-"));
+  const http = await freePort();
+  const zenoh = await freePort();
+  base = `http://127.0.0.1:${http}`;
+  // 120 s of simulated driving at 4x: 30 s of wall time with the robots moving, time enough
+  // for the page to load and for two screenshots seconds apart.
+  demo = spawn(
+    findBinary(),
+    ["demo", "--speed", "4", "--duration", "120", "--serve", "--http", `127.0.0.1:${http}`,
+      "--zenoh", `tcp/127.0.0.1:${zenoh}`, "--dir", dir],
+    { stdio: ["ignore", "pipe", "pipe"] },
+  );
+  demo.stdout.on("data", (d) => (demoLog += d));
+  demo.stderr.on("data", (d) => (demoLog += d));
+  await waitFor("the page", async () => (await fetch(`${base}/`)).ok, 60_000);
+
+  browser = await chromium.launch({
+    executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
+    args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+      "--disable-background-networking", "--disable-component-update", "--disable-sync"],
+  });
+  page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
+  page.on("console", (m) => {
+    if (m.type() === "error") consoleErrors.push(m.text());
+  });
+  page.on("pageerror", (e) => consoleErrors.push(String(e)));
+  await page.goto(`${base}/`);
+});
+
+after(async () => {
+  await browser?.close();
+  if (demo && demo.exitCode === null) {
+    demo.kill("SIGINT");
+    const exited = new Promise((ok) => demo.once("exit", ok));
+    if (!(await Promise.race([exited.then(() => true), sleep(5000)]))) demo.kill("SIGKILL");
+  }
+  if (dir) rmSync(dir, { recursive: true, force: true });
+});
+
+const robotPoses = () =>
+  page.evaluate(() =>
+    Object.fromEntries(Object.values(window.levelmapState.robots).filter((r) => r.pose).map((r) => [r.id, r.pose])),
+  );
+
+test("the robots move on the map", async () => {
+  await waitFor(
+    "three robots and some nodes on the page",
+    () => page.evaluate(() => {
+      const s = window.levelmapState;
+      return s.ready && Object.values(s.robots).filter((r) => r.pose).length === 3 && s.nodes.length >= 3;
+    }),
+    60_000,
+  );
+  const first = await robotPoses();
+  await page.screenshot({ path: path.join(artifacts, "1-robots.png") });
+  await sleep(3000);
+  const second = await robotPoses();
+  await page.screenshot({ path: path.join(artifacts, "2-robots-later.png") });
+  const moved = Object.keys(first).map((id) => Math.hypot(second[id].x - first[id].x, second[id].y - first[id].y));
+  assert.ok(moved.every((d) => d > 1), `every robot moved over 1 m in 3 s: ${moved.map((d) => d.toFixed(2))}`);
+  // The summary panel and the robots' list show the live map.
+  assert.match(await page.textContent("#summary-list"), /nodes\d+/);
+  assert.equal(await page.locator("#robot-list li").count(), 3);
+});
+
+test("the pose network overlay toggles", async () => {
+  assert.equal(await page.evaluate(() => window.levelmapState.showNetwork), false);
+  assert.equal(await page.isVisible("#legend"), false);
+  await page.click("#toggle-network");
+  assert.equal(await page.evaluate(() => window.levelmapState.showNetwork), true);
+  assert.equal(await page.isVisible("#legend"), true);
+  await page.screenshot({ path: path.join(artifacts, "3-network.png") });
+  await page.click("#toggle-network");
+  assert.equal(await page.evaluate(() => window.levelmapState.showNetwork), false);
+  await page.click("#toggle-network");
+});
+
+test("clicking a node opens the inspector with its scan", async () => {
+  assert.equal(await page.isVisible("#inspector"), false);
+  // Stop following the robots so the node stays where it is clicked.
+  await page.mouse.move(640, 400);
+  await page.mouse.wheel(0, -1);
+  const at = await page.evaluate(() => window.levelmapState.nodeOnPage(0));
+  assert.ok(at, "node 0 is on the page");
+  await page.mouse.click(at.x, at.y);
+  await waitFor("the inspector", () => page.evaluate(() => window.levelmapState.inspector?.points > 0), 10_000);
+  const inspected = await page.evaluate(() => window.levelmapState.inspector);
+  assert.ok(inspected.points > 10, `the leveled scan has points: ${inspected.points}`);
+  assert.ok(inspected.counts.points > 0, "segmentation counts");
+  assert.equal(await page.isVisible("#inspector"), true);
+  assert.match(await page.textContent("#inspector-list"), /landmark\d+/);
+  await page.screenshot({ path: path.join(artifacts, "4-inspector.png") });
+});
+
+test("no console errors", () => {
+  assert.deepEqual(consoleErrors, []);
+});
