@@ -4,7 +4,9 @@
 use std::path::PathBuf;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let proto_root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../proto");
+    // Read at run time: a build script compiled for one checkout may run for another that
+    // shares the target folder.
+    let proto_root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR")?).join("../../proto");
     let version_dir = proto_root.join("levelmap/v1");
     println!("cargo:rerun-if-changed={}", proto_root.display());
     println!("cargo:rerun-if-changed={}", version_dir.display());
