@@ -4,7 +4,7 @@
 //! trajectory error of the map's nodes against ground truth, and robots that meet share one
 //! map (inter-robot closures).
 
-use leveling::nalgebra::{Isometry3, Point3};
+use leveling::nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use leveling::{Leveler, SegmentParams};
 use sim::{FleetRobot, FleetScan, World};
 use slam::matching::Scan2;
@@ -65,7 +65,15 @@ fn gps_for(scan: &FleetScan, robot: &FleetRobot, frame_in_robot: [f64; 2]) -> Ve
                 .odometry_track(fix.stamp_ns, fix.stamp_ns)
                 .at(fix.stamp_ns)
                 .expect("the track covers the fix");
-            let lever = scan.odometry_at_start.inverse() * (at_fix * antenna);
+            // Where the antenna was at the fix, in the robot frame at the scan's start, turned
+            // level with the robot's roll and pitch (as the mapper does: a leaning mast).
+            let start = &scan.odometry_at_start;
+            let offset = (start.inverse() * (at_fix * antenna)).coords;
+            let heading = UnitQuaternion::from_axis_angle(
+                &Vector3::z_axis(),
+                Pose2::from_isometry3(start).theta,
+            );
+            let lever = heading.inverse() * (start.rotation * offset);
             let var = fix.sigma_horizontal_m.powi(2);
             GpsObservation {
                 position_m: Vector2::new(fix.enu_m.x, fix.enu_m.y),
@@ -77,8 +85,9 @@ fn gps_for(scan: &FleetScan, robot: &FleetRobot, frame_in_robot: [f64; 2]) -> Ve
 }
 
 /// Measured (120 s, seed 7), every 1 Hz fix since the previous scan on each node (3.8 per
-/// node): leveled ATE 0.077 m with 4 inter-robot closures, fixed 2D 0.248 m (3.2×). With one
-/// fix per node (the latest at the scan's start) they were 0.138 and 0.413 m (3.0×). The
+/// node), lever arms levelled with the robot's attitude: leveled ATE 0.072 m with 4
+/// inter-robot closures, fixed 2D 0.244 m (3.4×). Without the levelling they were 0.077 and
+/// 0.248 m; with one fix per node (the latest at the scan's start) 0.138 and 0.413 m (3.0×). The
 /// bounds below guard that. GPS sets the floor: with these fixes and exact relative edges
 /// (every sequential and closure edge of the leveled network set to the truth, at its
 /// information) the ATE is 0.068 m (one fix per node: 0.126 m).
@@ -145,7 +154,7 @@ fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
     eprintln!("leveled: ATE {ate:.3} m, {stats:?}");
     eprintln!("fixed 2D: ATE {ate_fixed:.3} m, {stats_fixed:?}");
     assert!(stats.inter_robot_closures >= 1, "{stats:?}");
-    assert!(ate <= 0.09, "leveled ATE {ate:.3} m");
+    assert!(ate <= 0.085, "leveled ATE {ate:.3} m");
     assert!(
         ate_fixed >= 3.0 * ate,
         "fixed {ate_fixed:.3} m, leveled {ate:.3} m"
