@@ -433,6 +433,8 @@ function drawNetwork(box) {
     if (!p) paths.set(e.kind, (p = new Path2D()));
     const [sx, sy] = view.toScreen(ax, ay);
     const [ex, ey] = view.toScreen(bx, by);
+    // Level of detail: an edge under a pixel long is not seen (zoomed out on a big map).
+    if (Math.abs(ex - sx) + Math.abs(ey - sy) < 1) continue;
     p.moveTo(sx, sy);
     p.lineTo(ex, ey);
   }
@@ -459,9 +461,13 @@ function drawNetwork(box) {
   ctx.fill(gpsDots);
   ctx.stroke(gpsLines);
   const dots = new Path2D();
+  const drawn = new Set(); // one dot per pixel
   for (const n of state.nodes) {
     if (!inBox(box, n.pose.x, n.pose.y)) continue;
     const [x, y] = view.toScreen(n.pose.x, n.pose.y);
+    const key = Math.round(x) * 16384 + Math.round(y);
+    if (drawn.has(key)) continue;
+    drawn.add(key);
     dots.moveTo(x + 3, y);
     dots.arc(x, y, 3, 0, 2 * Math.PI);
   }
@@ -476,18 +482,24 @@ function drawTrajectories(box) {
     const line = new Path2D();
     const marks = new Path2D();
     let px = 0, py = 0, penDown = false;
+    let lx = -1e9, ly = -1e9; // the last point put in the path (screen px)
     const step = (x, y, mark) => {
+      const [sx, sy] = view.toScreen(x, y);
+      // Level of detail: points under a pixel from the last one drawn add nothing.
+      const near = Math.abs(sx - lx) + Math.abs(sy - ly) < 1;
       if (penDown && segInBox(box, px, py, x, y)) {
-        const [sx, sy] = view.toScreen(x, y);
-        line.lineTo(sx, sy);
+        if (!near) {
+          line.lineTo(sx, sy);
+          if (mark) marks.rect(sx - 2, sy - 2, 4, 4);
+          lx = sx;
+          ly = sy;
+        }
       } else {
         // Off screen: lift the pen; start again at this point.
-        const [sx, sy] = view.toScreen(x, y);
         line.moveTo(sx, sy);
-      }
-      if (mark && inBox(box, x, y)) {
-        const [sx, sy] = view.toScreen(x, y);
-        marks.rect(sx - 2, sy - 2, 4, 4);
+        if (mark && inBox(box, x, y)) marks.rect(sx - 2, sy - 2, 4, 4);
+        lx = sx;
+        ly = sy;
       }
       px = x;
       py = y;
