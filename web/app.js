@@ -2,6 +2,7 @@
 // from the mapping server's API and its event stream (docs/services.md).
 
 import { View, scaleBarMetres, formatMetres } from "./view.js";
+import { enuToGeodetic, formatLatLon } from "./geo.js";
 
 const API = "/api/v1";
 const PALETTE = ["#e6550d", "#3182bd", "#31a354", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf"];
@@ -28,6 +29,11 @@ const state = {
   events: 0,
   autoFit: true,
   errors: [],
+  cursor: null, // {x, y} map metres under the pointer, with latitude_deg, longitude_deg if the map has a datum
+  firstFullFrameMs: null, // performance.now() of the first frame with every node of the summary drawn
+  graphLoads: 0,
+  draws: 0,
+  drawMsMean: 0, // running mean of draw() time, ms (about the last 50 frames)
 };
 const view = new View();
 window.levelmapState = state;
@@ -88,12 +94,53 @@ async function loadRobots() {
   }
 }
 
+// Nodes by id and each robot's nodes in sequence order, rebuilt (lazily, for the next frame)
+// when nodes come or go.
+let nodeIndex = new Map();
+let tracks = new Map();
+let tracksDirty = true;
+let lastGraphLoad = 0;
+
 async function loadGraph() {
   const g = await getJson(`/fleets/${state.fleet}/graph`);
-  state.nodes = g.nodes.map((n) => ({ id: n.id, robot: n.robot, node_seq: n.node_seq, pose: n.pose }));
+  lastGraphLoad = Date.now();
+  state.graphLoads += 1;
+  const nodes = g.nodes.map((n) => ({ id: n.id, robot: n.robot, node_seq: n.node_seq, pose: n.pose }));
+  // Nodes announced by events after this graph was made stay until the next one has them.
+  const index = new Map(nodes.map((n) => [n.id, n]));
+  for (const n of state.nodes) {
+    if (!index.has(n.id) && n.fromEvent && Date.now() - n.fromEvent < 10_000) {
+      index.set(n.id, n);
+      nodes.push(n);
+    }
+  }
+  state.nodes = nodes;
+  nodeIndex = index;
   state.edges = g.edges.map((e) => ({ from: e.from, to: e.to, kind: e.kind }));
   state.gps = g.gps;
   for (const n of state.nodes) robot(n.robot);
+  tracksDirty = true;
+}
+
+function addNode(n) {
+  if (nodeIndex.has(n.id)) return;
+  nodeIndex.set(n.id, n);
+  state.nodes.push(n);
+  tracksDirty = true;
+}
+
+function trackMap() {
+  if (tracksDirty) {
+    tracks = new Map();
+    for (const n of state.nodes) {
+      let t = tracks.get(n.robot);
+      if (!t) tracks.set(n.robot, (t = []));
+      t.push(n);
+    }
+    for (const t of tracks.values()) t.sort((a, b) => a.node_seq - b.node_seq);
+    tracksDirty = false;
+  }
+  return tracks;
 }
 
 async function loadSummary() {
@@ -145,6 +192,18 @@ function throttled(fn, periodMs) {
   return run;
 }
 const refreshGraph = throttled(loadGraph, 1000);
+// Node events are applied as they come; the whole graph (edges, re-optimized poses) is
+// fetched again at most every GRAPH_PERIOD_MS for them, and soon after an `optimized`.
+const GRAPH_PERIOD_MS = 5000;
+let graphTimer = null;
+function graphSoon() {
+  if (graphTimer) return;
+  const wait = Math.max(0, lastGraphLoad + GRAPH_PERIOD_MS - Date.now());
+  graphTimer = setTimeout(() => {
+    graphTimer = null;
+    refreshGraph();
+  }, wait);
+}
 const refreshSummary = throttled(loadSummary, 1000);
 const refreshGrid = throttled(loadGrid, 3000);
 const refreshRobots = throttled(loadRobots, 1000);
@@ -163,11 +222,9 @@ function onEvent(msg) {
     r.pose = ev.pose;
     r.lastSeenMs = Date.now();
   } else if (ev.type === "node") {
-    if (!state.nodes.some((n) => n.id === ev.node)) {
-      state.nodes.push({ id: ev.node, robot: ev.robot, node_seq: ev.node_seq, pose: ev.pose });
-    }
+    addNode({ id: ev.node, robot: ev.robot, node_seq: ev.node_seq, pose: ev.pose, fromEvent: Date.now() });
     robot(ev.robot).nodes = ev.node_seq + 1;
-    refreshGraph();
+    graphSoon();
     refreshSummary();
     refreshGrid();
   } else if (ev.type === "optimized") {
@@ -284,14 +341,17 @@ function drawScan(pts) {
 // ---- map ---------------------------------------------------------------------------------
 
 function bounds() {
-  let b = null;
+  let x0 = Infinity, y0 = Infinity, x1 = -Infinity, y1 = -Infinity;
   const add = (p) => {
     if (!p) return;
-    b = b ? [Math.min(b[0], p.x), Math.min(b[1], p.y), Math.max(b[2], p.x), Math.max(b[3], p.y)] : [p.x, p.y, p.x, p.y];
+    if (p.x < x0) x0 = p.x;
+    if (p.x > x1) x1 = p.x;
+    if (p.y < y0) y0 = p.y;
+    if (p.y > y1) y1 = p.y;
   };
-  state.nodes.forEach((n) => add(n.pose));
-  Object.values(state.robots).forEach((r) => add(r.pose));
-  return b;
+  for (const n of state.nodes) add(n.pose);
+  for (const r of Object.values(state.robots)) add(r.pose);
+  return x0 <= x1 ? [x0, y0, x1, y1] : null;
 }
 
 let pending = false;
@@ -304,7 +364,27 @@ function redraw() {
   });
 }
 
+// The world box on screen, with a margin of `px` pixels: what lies outside is not drawn.
+function visibleBox(px = 20) {
+  const [x0, y1] = view.toWorld(-px, -px);
+  const [x1, y0] = view.toWorld(view.width + px, view.height + px);
+  return [x0, y0, x1, y1];
+}
+
+const inBox = (b, x, y) => x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3];
+// Whether the segment's bounding box meets the box (cheap and conservative).
+const segInBox = (b, ax, ay, bx, by) =>
+  Math.max(ax, bx) >= b[0] && Math.min(ax, bx) <= b[2] && Math.max(ay, by) >= b[1] && Math.min(ay, by) <= b[3];
+
 function draw() {
+  const t0 = performance.now();
+  drawFrame();
+  const ms = performance.now() - t0;
+  state.draws += 1;
+  state.drawMsMean += (ms - state.drawMsMean) / Math.min(state.draws, 50);
+}
+
+function drawFrame() {
   const dpr = window.devicePixelRatio || 1;
   const w = canvas.clientWidth;
   const h = canvas.clientHeight;
@@ -327,74 +407,117 @@ function draw() {
     ctx.globalAlpha = 1;
   }
 
-  const byId = new Map(state.nodes.map((n) => [n.id, n]));
-  if (state.showNetwork) drawNetwork(byId);
-  drawTrajectories();
-  drawRobots();
-  drawSelection(byId);
+  const box = visibleBox();
+  if (state.showNetwork) drawNetwork(box);
+  drawTrajectories(box);
+  drawRobots(box);
+  drawSelection();
   drawScaleBar();
-  renderRobots();
+  if (state.firstFullFrameMs === null && state.ready && state.summary && state.nodes.length > 0 &&
+      state.nodes.length >= state.summary.nodes) {
+    state.firstFullFrameMs = performance.now();
+  }
 }
 
-function drawNetwork(byId) {
+function drawNetwork(box) {
   ctx.lineWidth = 1.5;
+  // One path per edge kind.
+  const paths = new Map();
   for (const e of state.edges) {
-    const a = byId.get(e.from);
-    const b = byId.get(e.to);
+    const a = nodeIndex.get(e.from);
+    const b = nodeIndex.get(e.to);
     if (!a || !b) continue;
-    ctx.strokeStyle = EDGE_COLOURS[e.kind] || "#000";
-    ctx.beginPath();
-    ctx.moveTo(...view.toScreen(a.pose.x, a.pose.y));
-    ctx.lineTo(...view.toScreen(b.pose.x, b.pose.y));
-    ctx.stroke();
+    const ax = a.pose.x, ay = a.pose.y, bx = b.pose.x, by = b.pose.y;
+    if (!segInBox(box, ax, ay, bx, by)) continue;
+    let p = paths.get(e.kind);
+    if (!p) paths.set(e.kind, (p = new Path2D()));
+    const [sx, sy] = view.toScreen(ax, ay);
+    const [ex, ey] = view.toScreen(bx, by);
+    // Level of detail: an edge under a pixel long is not seen (zoomed out on a big map).
+    if (Math.abs(ex - sx) + Math.abs(ey - sy) < 1) continue;
+    p.moveTo(sx, sy);
+    p.lineTo(ex, ey);
+  }
+  for (const [kind, p] of paths) {
+    ctx.strokeStyle = EDGE_COLOURS[kind] || "#000";
+    ctx.stroke(p);
   }
   // GPS residuals: from the fix to where the antenna is on the solved pose.
-  ctx.strokeStyle = GPS_COLOUR;
-  ctx.fillStyle = GPS_COLOUR;
+  const gpsLines = new Path2D();
+  const gpsDots = new Path2D();
   for (const f of state.gps) {
     const [px, py] = f.position_m;
+    const qx = px + f.residual_m[0];
+    const qy = py + f.residual_m[1];
+    if (!segInBox(box, px, py, qx, qy)) continue;
     const [sx, sy] = view.toScreen(px, py);
-    const [ex, ey] = view.toScreen(px + f.residual_m[0], py + f.residual_m[1]);
-    ctx.fillRect(sx - 1, sy - 1, 2, 2);
-    ctx.beginPath();
-    ctx.moveTo(sx, sy);
-    ctx.lineTo(ex, ey);
-    ctx.stroke();
+    const [ex, ey] = view.toScreen(qx, qy);
+    gpsDots.rect(sx - 1, sy - 1, 2, 2);
+    gpsLines.moveTo(sx, sy);
+    gpsLines.lineTo(ex, ey);
+  }
+  ctx.strokeStyle = GPS_COLOUR;
+  ctx.fillStyle = GPS_COLOUR;
+  ctx.fill(gpsDots);
+  ctx.stroke(gpsLines);
+  const dots = new Path2D();
+  const drawn = new Set(); // one dot per pixel
+  for (const n of state.nodes) {
+    if (!inBox(box, n.pose.x, n.pose.y)) continue;
+    const [x, y] = view.toScreen(n.pose.x, n.pose.y);
+    const key = Math.round(x) * 16384 + Math.round(y);
+    if (drawn.has(key)) continue;
+    drawn.add(key);
+    dots.moveTo(x + 3, y);
+    dots.arc(x, y, 3, 0, 2 * Math.PI);
   }
   ctx.fillStyle = "#222";
-  for (const n of state.nodes) {
-    const [x, y] = view.toScreen(n.pose.x, n.pose.y);
-    ctx.beginPath();
-    ctx.arc(x, y, 3, 0, 2 * Math.PI);
-    ctx.fill();
-  }
+  ctx.fill(dots);
 }
 
-function drawTrajectories() {
-  const byRobot = new Map();
-  for (const n of state.nodes) {
-    if (!byRobot.has(n.robot)) byRobot.set(n.robot, []);
-    byRobot.get(n.robot).push(n);
-  }
+function drawTrajectories(box) {
   ctx.lineWidth = 2;
-  for (const [id, nodes] of byRobot) {
+  for (const [id, nodes] of trackMap()) {
     const r = robot(id);
-    nodes.sort((a, b) => a.node_seq - b.node_seq);
-    const pts = nodes.map((n) => view.toScreen(n.pose.x, n.pose.y));
-    if (r.pose) pts.push(view.toScreen(r.pose.x, r.pose.y));
+    const line = new Path2D();
+    const marks = new Path2D();
+    let px = 0, py = 0, penDown = false;
+    let lx = -1e9, ly = -1e9; // the last point put in the path (screen px)
+    const step = (x, y, mark) => {
+      const [sx, sy] = view.toScreen(x, y);
+      // Level of detail: points under a pixel from the last one drawn add nothing.
+      const near = Math.abs(sx - lx) + Math.abs(sy - ly) < 1;
+      if (penDown && segInBox(box, px, py, x, y)) {
+        if (!near) {
+          line.lineTo(sx, sy);
+          if (mark) marks.rect(sx - 2, sy - 2, 4, 4);
+          lx = sx;
+          ly = sy;
+        }
+      } else {
+        // Off screen: lift the pen; start again at this point.
+        line.moveTo(sx, sy);
+        if (mark && inBox(box, x, y)) marks.rect(sx - 2, sy - 2, 4, 4);
+        lx = sx;
+        ly = sy;
+      }
+      px = x;
+      py = y;
+      penDown = true;
+    };
+    for (const n of nodes) step(n.pose.x, n.pose.y, true);
+    if (r.pose) step(r.pose.x, r.pose.y, false);
     ctx.strokeStyle = r.colour;
-    ctx.beginPath();
-    pts.forEach(([x, y], i) => (i ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
-    ctx.stroke();
+    ctx.stroke(line);
     ctx.fillStyle = r.colour;
-    for (const [x, y] of pts.slice(0, nodes.length)) ctx.fillRect(x - 2, y - 2, 4, 4);
+    ctx.fill(marks);
   }
 }
 
-function drawRobots() {
+function drawRobots(box) {
   ctx.font = "12px system-ui, sans-serif";
   for (const r of Object.values(state.robots)) {
-    if (!r.pose) continue;
+    if (!r.pose || !inBox(box, r.pose.x, r.pose.y)) continue;
     const [x, y] = view.toScreen(r.pose.x, r.pose.y);
     ctx.save();
     ctx.translate(x, y);
@@ -417,8 +540,8 @@ function drawRobots() {
   }
 }
 
-function drawSelection(byId) {
-  const n = state.inspector && byId.get(state.inspector.id);
+function drawSelection() {
+  const n = state.inspector && nodeIndex.get(state.inspector.id);
   if (!n) return;
   const [x, y] = view.toScreen(n.pose.x, n.pose.y);
   ctx.strokeStyle = "#000";
@@ -478,7 +601,27 @@ canvas.addEventListener("pointerdown", (e) => {
   drag = { x: e.clientX, y: e.clientY, moved: 0 };
   canvas.setPointerCapture(e.pointerId);
 });
+// The status bar: map metres under the pointer and, with a datum, WGS84.
+function showCursor(sx, sy) {
+  const [x, y] = view.toWorld(sx, sy);
+  const c = { x, y };
+  const d = state.summary?.datum;
+  let text = `x ${x.toFixed(2)} m, y ${y.toFixed(2)} m`;
+  if (d) {
+    const g = enuToGeodetic(d, x, y);
+    c.latitude_deg = g.latitude_deg;
+    c.longitude_deg = g.longitude_deg;
+    text += ` · ${formatLatLon(g)}`;
+  } else {
+    text += " · no GPS datum";
+  }
+  state.cursor = c;
+  $("cursor").textContent = text;
+}
+
 canvas.addEventListener("pointermove", (e) => {
+  const r = canvas.getBoundingClientRect();
+  showCursor(e.clientX - r.left, e.clientY - r.top);
   if (!drag) return;
   const dx = e.clientX - drag.x;
   const dy = e.clientY - drag.y;
@@ -568,10 +711,12 @@ async function start() {
   await Promise.all([loadGraph(), loadRobots(), loadSummary()]).catch(note);
   refreshGrid();
   state.ready = true;
+  renderRobots();
   redraw();
   // Last-seen ages tick on, and the robots' list catches what the stream dropped.
   setInterval(() => {
     refreshRobots();
+    renderRobots();
     redraw();
   }, 1000);
 }

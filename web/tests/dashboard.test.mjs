@@ -133,6 +133,19 @@ test("the robots move on the map", async () => {
   assert.equal(await page.locator("#robot-list li").count(), 3);
 });
 
+test("the status bar shows the pointer's WGS84 position", async () => {
+  await waitFor("the map's GPS datum", () => page.evaluate(() => window.levelmapState.summary?.datum), 30_000);
+  const box = await page.locator("#map").boundingBox();
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  await page.mouse.move(box.x + box.width / 2 + 5, box.y + box.height / 2 + 5);
+  const c = await page.evaluate(() => window.levelmapState.cursor);
+  assert.ok(c && Number.isFinite(c.x) && Number.isFinite(c.y), `cursor in map metres: ${JSON.stringify(c)}`);
+  // The simulated park lies near 52.39° N, 9.71° E; a few hundred metres is 0.01° at most.
+  assert.ok(Math.abs(c.latitude_deg - 52.39) < 0.01, `latitude ${c.latitude_deg}`);
+  assert.ok(Math.abs(c.longitude_deg - 9.71) < 0.01, `longitude ${c.longitude_deg}`);
+  assert.match(await page.textContent("#cursor"), /52\.3\d+° N, 9\.7\d+° E/);
+});
+
 test("the pose network overlay toggles", async () => {
   assert.equal(await page.evaluate(() => window.levelmapState.showNetwork), false);
   assert.equal(await page.isVisible("#legend"), false);

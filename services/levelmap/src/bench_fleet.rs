@@ -53,6 +53,9 @@ pub struct BenchFleetArgs {
     pub dir: std::path::PathBuf,
     #[arg(long)]
     pub json: bool,
+    /// Keep the mapper serving (HTTP API and dashboard) after the run, until Ctrl-C.
+    #[arg(long)]
+    pub serve: bool,
 }
 
 #[derive(Serialize, Default)]
@@ -366,12 +369,11 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
         s.close().await.map_err(anyhow::Error::from_boxed)?;
     }
     drop(sse);
-    mapper.stop().await?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+    let report_text = if args.json {
+        serde_json::to_string_pretty(&report)?
     } else {
         let (p, q) = (&report.publish_to_http, &report.pose_queries);
-        println!(
+        format!(
             "{} robots, {} nodes published, {} visible: publish → HTTP p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms",
             report.robots,
             report.nodes_published,
@@ -379,13 +381,21 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
             p.p50_ms,
             p.p99_ms,
             p.max_ms
-        );
-        println!(
-            "pose queries: {} at {:.0}/s, p50 {:.2} ms, p99 {:.2} ms ({} errors)",
+        ) + &format!(
+            "\npose queries: {} at {:.0}/s, p50 {:.2} ms, p99 {:.2} ms ({} errors)",
             q.count, report.pose_query_rate_achieved, q.p50_ms, q.p99_ms, report.pose_query_errors
+        )
+    };
+    println!("{report_text}");
+    if args.serve {
+        // The report is out; the map stays up for the dashboard (web/bench/pan.mjs).
+        eprintln!(
+            "serving http://{http}/ (fleet {FLEET}, {} nodes) until Ctrl-C",
+            report.map_nodes
         );
+        tokio::signal::ctrl_c().await?;
     }
-    Ok(())
+    mapper.stop().await
 }
 
 /// Reads `/api/v1/events` and notes when each node event arrives.

@@ -456,6 +456,11 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
         include_str!("../../../web/app.js"),
     ),
     (
+        "geo.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../web/geo.js"),
+    ),
+    (
         "view.js",
         "text/javascript; charset=utf-8",
         include_str!("../../../web/view.js"),
