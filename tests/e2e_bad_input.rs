@@ -55,23 +55,7 @@ async fn bad_messages_are_counted_and_rejected_and_nothing_accepted_is_lost() {
     ahead.node_seq = 5;
     // A well-formed node of robot9, sent on robot0's key.
     let mut other_robot = nodes[1].clone();
-    for header in [
-        other_robot.header.as_mut(),
-        other_robot.scan.as_mut().and_then(|s| s.header.as_mut()),
-        other_robot
-            .odometry
-            .as_mut()
-            .and_then(|o| o.header.as_mut()),
-    ]
-    .into_iter()
-    .flatten()
-    .chain(
-        other_robot
-            .gps
-            .iter_mut()
-            .chain(other_robot.earlier_gps.iter_mut())
-            .filter_map(|g| g.header.as_mut()),
-    ) {
+    for header in other_robot.headers_mut() {
         header.robot_id = "robot9".into();
     }
     let cases: Vec<(String, Vec<u8>, &str)> = vec![

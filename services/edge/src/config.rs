@@ -72,9 +72,7 @@ impl Default for EdgeConfig {
 impl EdgeConfig {
     /// Reads a TOML file; unknown keys are errors (a typo must not silently become a default).
     pub fn load(path: &Path) -> anyhow::Result<EdgeConfig> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+        wire::session::load_toml(path)
     }
 }
 

@@ -14,8 +14,9 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use std::future::Future;
 use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
+use wire::session::now_ns;
 use wire::{Message, v1};
 use zenoh::qos::CongestionControl;
 
@@ -49,12 +50,6 @@ enum Produced {
     Odometry(Box<v1::Odometry>),
     ScanError,
     End,
-}
-
-pub fn now_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
 }
 
 /// Runs the edge service until the source ends and every node is acked, or `shutdown`

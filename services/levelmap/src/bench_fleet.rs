@@ -133,26 +133,13 @@ fn node_pool(per_loop: usize) -> Vec<Vec<v1::Node>> {
 fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u64) -> v1::Node {
     let mut node = template.clone();
     node.node_seq = k;
-    for h in [
-        node.header.as_mut(),
-        node.scan.as_mut().and_then(|s| s.header.as_mut()),
-        node.odometry.as_mut().and_then(|o| o.header.as_mut()),
-    ]
-    .into_iter()
-    .flatten()
-    {
-        h.robot_id = robot.to_owned();
-        h.stamp_ns = stamp_ns;
-        h.sent_ns = stamp_ns;
-    }
-    // Fixes keep their own (earlier, increasing) times, shifted with the node.
+    // Every header moves by the same time: the fixes keep their own (earlier, increasing)
+    // times relative to the scan's start.
     let shift = stamp_ns.saturating_sub(template.header.as_ref().map_or(0, |h| h.stamp_ns));
-    for g in node.gps.iter_mut().chain(node.earlier_gps.iter_mut()) {
-        if let Some(h) = g.header.as_mut() {
-            h.robot_id = robot.to_owned();
-            h.stamp_ns += shift;
-            h.sent_ns = stamp_ns;
-        }
+    for h in node.headers_mut() {
+        h.robot_id = robot.to_owned();
+        h.stamp_ns += shift;
+        h.sent_ns = stamp_ns;
     }
     if let Some(o) = node.odometry.as_mut() {
         if let Some(p) = o.pose.as_mut() {
@@ -278,7 +265,7 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     }
     let sent: Arc<Mutex<HashMap<(String, u64), Instant>>> = Arc::default();
     let started = Instant::now();
-    let epoch = edge::service::now_ns();
+    let epoch = wire::session::now_ns();
     let tick = Duration::from_secs_f64(1.0 / args.odometry_rate.max(args.node_rate));
     let node_every = (args.odometry_rate.max(args.node_rate) / args.node_rate).round() as u64;
     let mut odometry_published = 0u64;

@@ -95,7 +95,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
     if !args.json {
         println!("mapper: Zenoh {} · HTTP {api}/summary", args.zenoh);
     }
-    let epoch_ns = edge::service::now_ns();
+    let epoch_ns = wire::session::now_ns();
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let mut robots = Vec::new();
     for i in 0..usize::from(args.robots) {
@@ -142,7 +142,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         let pose = t.truth_at(stamp_ns - epoch_ns);
         Pose2::from_isometry3(&leveling::leveled_frame(&pose, &t.scanner().mount).inverse())
     };
-    let ate = ate_rmse(view.nodes.iter().zip(&view.poses).map(|(n, p)| {
+    let ate = slam::position_rmse(view.nodes.iter().zip(&view.poses).map(|(n, p)| {
         let robot: usize = view.robots[n.robot].id["robot".len()..]
             .parse()
             .expect("robotN");
@@ -216,15 +216,6 @@ fn robot_config(args: &DemoArgs, i: usize) -> EdgeConfig {
     }
 }
 
-fn ate_rmse(pairs: impl Iterator<Item = (Pose2, Pose2)>) -> f64 {
-    let (mut sum, mut n) = (0.0, 0usize);
-    for (p, t) in pairs {
-        sum += (p.x - t.x).powi(2) + (p.y - t.y).powi(2);
-        n += 1;
-    }
-    (sum / n.max(1) as f64).sqrt()
-}
-
 /// The same run (the simulator is deterministic per seed) from the fixed 2D scanners, mapped
 /// with the mapper's own code and parameters: the ATE and the loop closures.
 fn map_fixed2d(args: &DemoArgs) -> Result<(f64, usize)> {
@@ -292,6 +283,6 @@ fn map_fixed2d(args: &DemoArgs) -> Result<(f64, usize)> {
         }
     }
     map.optimize_now()?;
-    let ate = ate_rmse(map.poses().iter().copied().zip(truth));
+    let ate = slam::position_rmse(map.poses().iter().copied().zip(truth));
     Ok((ate, map.stats().loop_closures))
 }

@@ -66,7 +66,7 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
         None => edge::EdgeConfig::default(),
     };
     let report = runtime()?.block_on(async {
-        let source = edge::open_source(&config, edge::service::now_ns())?;
+        let source = edge::open_source(&config, wire::session::now_ns())?;
         edge::run(config, source, async {
             let _ = tokio::signal::ctrl_c().await;
         })

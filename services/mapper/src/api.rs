@@ -1,7 +1,7 @@
 //! The HTTP API (`/api/v1`, JSON): thin handlers over the current fleet views. Routes and
 //! their shapes are listed in the OpenAPI document served at `/api/v1/openapi.json`.
 
-use crate::server::{Work, now_ns};
+use crate::server::Work;
 use crate::state::{FleetView, Shared};
 use axum::Router;
 use axum::extract::{Path, Query, State};
@@ -15,6 +15,7 @@ use std::fmt::Write as _;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::sync::mpsc;
+use wire::session::now_ns;
 
 #[derive(Clone)]
 struct Api {
@@ -365,14 +366,25 @@ async fn grid(
     .map_err(internal)?
 }
 
+/// The fleet's grid in one of the formats users' tools read.
+async fn grid_reply(
+    api: &Api,
+    fleet: &str,
+    q: GridQuery,
+    content_type: &'static str,
+    encode: impl FnOnce(&slam::OccupancyGrid) -> Result<Vec<u8>, graphio::EncodeError>,
+) -> Reply {
+    let g = grid(view(api, fleet)?, q).await?;
+    let bytes = encode(&g).map_err(internal)?;
+    Ok(([(header::CONTENT_TYPE, content_type)], bytes).into_response())
+}
+
 async fn map_png(
     State(api): State<Api>,
     Path(fleet): Path<String>,
     Query(q): Query<GridQuery>,
 ) -> Reply {
-    let g = grid(view(&api, &fleet)?, q).await?;
-    let png = graphio::gridmap::to_png(&g).map_err(internal)?;
-    Ok(([(header::CONTENT_TYPE, "image/png")], png).into_response())
+    grid_reply(&api, &fleet, q, "image/png", graphio::gridmap::to_png).await
 }
 
 async fn map_pgm(
@@ -380,9 +392,8 @@ async fn map_pgm(
     Path(fleet): Path<String>,
     Query(q): Query<GridQuery>,
 ) -> Reply {
-    let g = grid(view(&api, &fleet)?, q).await?;
-    let pgm = graphio::gridmap::to_pgm(&g).map_err(internal)?;
-    Ok(([(header::CONTENT_TYPE, "image/x-portable-graymap")], pgm).into_response())
+    let pgm = graphio::gridmap::to_pgm;
+    grid_reply(&api, &fleet, q, "image/x-portable-graymap", pgm).await
 }
 
 /// The map_server YAML beside `map.pgm` (same query, same grid).
@@ -391,9 +402,9 @@ async fn map_yaml(
     Path(fleet): Path<String>,
     Query(q): Query<GridQuery>,
 ) -> Reply {
-    let g = grid(view(&api, &fleet)?, q).await?;
-    let yaml = graphio::gridmap::to_map_yaml(&g, "map.pgm");
-    Ok(([(header::CONTENT_TYPE, "application/yaml")], yaml).into_response())
+    let yaml =
+        |g: &slam::OccupancyGrid| Ok(graphio::gridmap::to_map_yaml(g, "map.pgm").into_bytes());
+    grid_reply(&api, &fleet, q, "application/yaml", yaml).await
 }
 
 /// Nodes and per-robot trajectories in WGS84 (needs the map's GPS datum).

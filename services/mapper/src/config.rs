@@ -65,9 +65,7 @@ pub fn fleet_mapping_params() -> Mapper2dParams {
 impl MapperConfig {
     /// Reads a TOML file; unknown keys are errors.
     pub fn load(path: &Path) -> anyhow::Result<MapperConfig> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+        wire::session::load_toml(path)
     }
 }
 

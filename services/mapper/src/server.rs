@@ -17,28 +17,10 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::sync::mpsc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
-use wire::{Message, Topic, WireError, v1};
+use std::time::{Duration, Instant};
+use wire::session::now_ns;
+use wire::{Message, Topic, v1};
 use zenoh::Wait;
-
-pub fn now_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
-
-/// The counter label of a wire error.
-pub fn reason(e: &WireError) -> &'static str {
-    match e {
-        WireError::Decode { .. } => "malformed",
-        WireError::Version { .. } => "version",
-        WireError::Missing { .. } => "missing_field",
-        WireError::InvalidId { .. } => "invalid_id",
-        WireError::InvalidKey { .. } => "invalid_key",
-        WireError::InvalidValue { .. } => "invalid_value",
-        WireError::Invalid { .. } => "inconsistent",
-    }
-}
 
 /// Work for the mapping worker.
 pub enum Work {
@@ -275,7 +257,7 @@ fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]) {
     let odometry = match wire::decode_odometry(payload) {
         Ok(o) => o,
         Err(e) => {
-            metrics.reject("odom", reason(&e));
+            metrics.reject("odom", e.reason());
             return;
         }
     };
@@ -584,7 +566,7 @@ impl NodeContext<'_> {
         let node = match wire::decode_node(&payload) {
             Ok(n) => n,
             Err(e) => {
-                self.reject(reason(&e), key, &e);
+                self.reject(e.reason(), key, &e);
                 return None;
             }
         };

@@ -42,13 +42,8 @@ fn map_fleet(inputs: Vec<NodeInput>) -> (MapperStats, f64) {
         }
     }
     mapper.finish().expect("optimize");
-    let poses = &mapper.graph().poses;
-    let sum: f64 = poses
-        .iter()
-        .zip(&truth)
-        .map(|(p, t)| (p.x - t.x).powi(2) + (p.y - t.y).powi(2))
-        .sum();
-    (mapper.stats(), (sum / poses.len() as f64).sqrt())
+    let poses = mapper.graph().poses.iter().copied();
+    (mapper.stats(), slam::position_rmse(poses.zip(truth)))
 }
 
 /// The GPS fixes as the mapper takes them, for a node frame `frame_in_robot` (m, robot

@@ -21,4 +21,4 @@ pub use nalgebra;
 pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};
 pub use robust::Robust;
-pub use se2::{Pose2, wrap_angle};
+pub use se2::{Pose2, position_rmse, wrap_angle};

@@ -12,6 +12,17 @@ pub struct Pose2 {
     pub theta: f64,
 }
 
+/// The absolute trajectory error of positions: RMSE of the distances between each estimate
+/// and its truth (m), over the pairs given (0 for none).
+pub fn position_rmse(pairs: impl IntoIterator<Item = (Pose2, Pose2)>) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (p, t) in pairs {
+        sum += (p.x - t.x).powi(2) + (p.y - t.y).powi(2);
+        n += 1;
+    }
+    if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
+}
+
 /// An angle brought into (−π, π].
 pub fn wrap_angle(a: f64) -> f64 {
     let b = (a + PI).rem_euclid(2.0 * PI) - PI;
@@ -76,6 +87,14 @@ impl Pose2 {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn position_rmse_is_the_rms_distance() {
+        let p = |x, y| super::Pose2::new(x, y, 0.3);
+        let pairs = [(p(3.0, 4.0), p(0.0, 0.0)), (p(1.0, 1.0), p(1.0, 1.0))];
+        assert!((super::position_rmse(pairs) - (25.0f64 / 2.0).sqrt()).abs() < 1e-12);
+        assert_eq!(super::position_rmse([]), 0.0);
+    }
+
     use super::*;
 
     fn close(a: &Pose2, b: &Pose2) -> bool {

@@ -32,6 +32,21 @@ pub enum WireError {
     Invalid { field: &'static str, detail: String },
 }
 
+impl WireError {
+    /// A short label of the kind of rejection, for counters (`/metrics`) and logs.
+    pub fn reason(&self) -> &'static str {
+        match self {
+            WireError::Decode { .. } => "malformed",
+            WireError::Version { .. } => "version",
+            WireError::Missing { .. } => "missing_field",
+            WireError::InvalidId { .. } => "invalid_id",
+            WireError::InvalidKey { .. } => "invalid_key",
+            WireError::InvalidValue { .. } => "invalid_value",
+            WireError::Invalid { .. } => "inconsistent",
+        }
+    }
+}
+
 impl fmt::Display for WireError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {

@@ -38,6 +38,25 @@ pub mod session;
 /// The wire version every [`v1::Header`] carries; receivers reject any other.
 pub const WIRE_VERSION: u32 = 1;
 
+impl v1::Node {
+    /// Every header the node holds: its own, its scan's, its odometry's and its fixes'.
+    pub fn headers_mut(&mut self) -> impl Iterator<Item = &mut v1::Header> {
+        [
+            self.header.as_mut(),
+            self.scan.as_mut().and_then(|s| s.header.as_mut()),
+            self.odometry.as_mut().and_then(|o| o.header.as_mut()),
+        ]
+        .into_iter()
+        .flatten()
+        .chain(
+            self.gps
+                .iter_mut()
+                .chain(self.earlier_gps.iter_mut())
+                .filter_map(|g| g.header.as_mut()),
+        )
+    }
+}
+
 impl v1::Header {
     /// A header of the current [`WIRE_VERSION`]. `seq` counts publications per robot and topic;
     /// `stamp_ns` is the measurement time and `sent_ns` the publication time (ns since the

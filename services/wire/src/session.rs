@@ -1,6 +1,24 @@
 //! The Zenoh session of a levelmap service: mode and endpoints from the service's config file.
 
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
+use std::path::Path;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+/// Wall-clock time in ns since the Unix epoch, as the wire's stamps are.
+pub fn now_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}
+
+/// Reads a service's TOML config file; unknown keys are errors when `T` denies them (a typo
+/// must not silently become a default). Errors name the file.
+pub fn load_toml<T: DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
 
 /// Where a service's Zenoh session listens and connects. Mirrors Zenoh's own config keys
 /// (`mode`, `listen/endpoints`, `connect/endpoints`, `scouting/multicast/enabled`).
