@@ -76,6 +76,20 @@ fn check_routes(http: &str) {
     assert_eq!(graph["nodes"].as_array().unwrap().len(), 3);
     assert_eq!(graph["edges"].as_array().unwrap().len(), 2, "{graph}");
     assert!(graph["edges"][0]["information"].is_array());
+    // The same graph as columns, for the dashboard.
+    let columns = json(&format!("{base}/graph?columns=true"));
+    assert_eq!(columns["robots"], serde_json::json!(["robot0"]));
+    assert_eq!(columns["nodes"]["node_seq"], serde_json::json!([0, 1, 2]));
+    for (i, n) in graph["nodes"].as_array().unwrap().iter().enumerate() {
+        let x = columns["nodes"]["x"][i].as_f64().unwrap();
+        assert!(
+            (x - n["pose"]["x"].as_f64().unwrap()).abs() <= 5e-4,
+            "{columns}"
+        );
+    }
+    assert_eq!(columns["edges"]["from"], serde_json::json!([0, 1]));
+    let kind = columns["edges"]["kind"][0].as_u64().unwrap() as usize;
+    assert_eq!(columns["kinds"][kind], graph["edges"][0]["kind"]);
     let node = json(&format!("{base}/nodes/1"));
     assert_eq!(node["node_seq"], 1);
     assert!(!node["scan"]["range_m"].as_array().unwrap().is_empty());
@@ -114,6 +128,41 @@ fn check_routes(http: &str) {
     assert!(meta["resolution_m"].as_f64().unwrap() > 0.0, "{meta}");
     assert!(meta["width"].as_u64().unwrap() > 0 && meta["origin_m"].is_array());
     assert_eq!(meta["nodes"], 3);
+    // A part of the map, and a cap on cells that coarsens instead of refusing.
+    let res = meta["resolution_m"].as_f64().unwrap();
+    let (x0, y0) = (
+        meta["origin_m"][0].as_f64().unwrap(),
+        meta["origin_m"][1].as_f64().unwrap(),
+    );
+    let part = json(&format!(
+        "{base}/map.json?bbox={x0},{y0},{},{}",
+        x0 + 5.0,
+        y0 + 3.0
+    ));
+    assert_eq!(part["resolution_m"].as_f64().unwrap(), res, "{part}");
+    // 5 m × 3 m of 0.1 m cells, and one cell of margin on each side.
+    let (w, h) = (
+        part["width"].as_u64().unwrap(),
+        part["height"].as_u64().unwrap(),
+    );
+    assert!(
+        w <= 53
+            && h <= 33
+            && w * h < meta["width"].as_u64().unwrap() * meta["height"].as_u64().unwrap(),
+        "{part}"
+    );
+    let coarse = json(&format!("{base}/map.json?max_cells=10000"));
+    let cells = coarse["width"].as_u64().unwrap() * coarse["height"].as_u64().unwrap();
+    assert!(
+        cells <= 10_000 && coarse["resolution_m"].as_f64().unwrap() > res,
+        "{coarse}"
+    );
+    assert_eq!(
+        http_get(http, &format!("{base}/map.png?bbox=1,2,3"))
+            .unwrap()
+            .0,
+        400
+    );
     // The dashboard at / and its modules under /web/.
     let page = http_get(http, "/").unwrap();
     assert_eq!(page.0, 200);

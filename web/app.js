@@ -22,7 +22,9 @@ const state = {
   edges: [], // {from, to, kind}
   gps: [], // {node, position_m, residual_m}
   summary: null,
-  grid: null, // {resolution_m, origin_m, width, height, image}
+  grid: null, // the whole map: {resolution_m, origin_m, width, height, nodes, image}
+  gridDetail: null, // the part on screen at finer cells: the same, and {cell, box} asked for
+  gridDetailLoads: 0,
   showNetwork: false,
   showGrid: true,
   inspector: null, // {id, points, counts}
@@ -33,6 +35,7 @@ const state = {
   firstFullFrameMs: null, // performance.now() of the first frame with every node of the summary drawn
   graphLoads: 0,
   draws: 0,
+  layerDraws: 0, // times the trajectories and network were drawn into the layer
   drawMsMean: 0, // running mean of draw() time, ms (about the last 50 frames)
 };
 const view = new View();
@@ -64,6 +67,7 @@ function robot(id) {
     Object.keys(state.robots)
       .sort()
       .forEach((k, i) => (state.robots[k].colour = PALETTE[i % PALETTE.length]));
+    layerData += 1;
   }
   return r;
 }
@@ -102,10 +106,15 @@ let tracksDirty = true;
 let lastGraphLoad = 0;
 
 async function loadGraph() {
-  const g = await getJson(`/fleets/${state.fleet}/graph`);
+  // Columns: a tenth of the bytes of one object per item, for maps of thousands of nodes.
+  const g = await getJson(`/fleets/${state.fleet}/graph?columns=true`);
   lastGraphLoad = Date.now();
   state.graphLoads += 1;
-  const nodes = g.nodes.map((n) => ({ id: n.id, robot: n.robot, node_seq: n.node_seq, pose: n.pose }));
+  const gn = g.nodes;
+  const nodes = new Array(gn.x.length);
+  for (let i = 0; i < nodes.length; i++) {
+    nodes[i] = { id: i, robot: g.robots[gn.robot[i]], node_seq: gn.node_seq[i], pose: { x: gn.x[i], y: gn.y[i], theta: gn.theta[i] } };
+  }
   // Nodes announced by events after this graph was made stay until the next one has them.
   const index = new Map(nodes.map((n) => [n.id, n]));
   for (const n of state.nodes) {
@@ -116,10 +125,17 @@ async function loadGraph() {
   }
   state.nodes = nodes;
   nodeIndex = index;
-  state.edges = g.edges.map((e) => ({ from: e.from, to: e.to, kind: e.kind }));
-  state.gps = g.gps;
-  for (const n of state.nodes) robot(n.robot);
+  const ge = g.edges;
+  state.edges = ge.from.map((from, i) => ({ from, to: ge.to[i], kind: g.kinds[ge.kind[i]] }));
+  const gg = g.gps;
+  state.gps = gg.node.map((node, i) => ({
+    node,
+    position_m: [gg.x[i], gg.y[i]],
+    residual_m: [gg.residual_x[i], gg.residual_y[i]],
+  }));
+  for (const r of g.robots) robot(r);
   tracksDirty = true;
+  layerData += 1;
 }
 
 function addNode(n) {
@@ -127,6 +143,7 @@ function addNode(n) {
   nodeIndex.set(n.id, n);
   state.nodes.push(n);
   tracksDirty = true;
+  layerData += 1;
 }
 
 function trackMap() {
@@ -148,15 +165,52 @@ async function loadSummary() {
   renderSummary();
 }
 
+// The occupancy grid in two pictures: an overview of the whole map, its cells as coarse as it
+// takes to stay under GRID_MAX_CELLS, and, zoomed in past the overview's cells, a detail of
+// the part on screen (and half a screen around) at the cells the zoom can show.
+const GRID_MAX_CELLS = 2048 * 2048;
+const GRID_FINEST_M = 0.1; // the mapper's default cell
+
+async function fetchGrid(query) {
+  const r = await fetch(`${API}/fleets/${state.fleet}/map.png?max_cells=${GRID_MAX_CELLS}${query}`, { cache: "no-store" });
+  if (!r.ok) throw new Error(`map.png${query}: ${r.status} ${(await r.text()).trim()}`);
+  // Where the picture lies comes with it, so it always matches the picture.
+  const placement = JSON.parse(r.headers.get("levelmap-grid"));
+  return { ...placement, image: await createImageBitmap(await r.blob()) };
+}
+
 async function loadGrid() {
-  const meta = await getJson(`/fleets/${state.fleet}/map.json`);
-  const image = new Image();
-  image.src = `${API}/fleets/${state.fleet}/map.png?t=${meta.nodes}`;
-  await image.decode();
-  // The PNG is a second request: keep it only if it is the grid the JSON described.
-  if (image.naturalWidth === meta.width && image.naturalHeight === meta.height) {
-    state.grid = { ...meta, image };
+  state.grid = await fetchGrid("");
+  state.gridDetail = null;
+  await loadGridDetail();
+}
+
+// The detail the view wants: null when the overview's cells are already under 2 px.
+function wantedDetail() {
+  const g = state.grid;
+  if (!g || g.resolution_m * view.scale <= 2) return null;
+  // The finest cell worth a pixel, in powers of two of the finest: small zooms reuse it.
+  const cell = GRID_FINEST_M * 2 ** Math.max(0, Math.ceil(Math.log2(1 / (view.scale * GRID_FINEST_M))));
+  if (cell >= g.resolution_m) return null;
+  return { cell, box: visibleBox(view, Math.max(view.width, view.height) / 2) };
+}
+
+async function loadGridDetail() {
+  const want = wantedDetail();
+  const d = state.gridDetail;
+  if (!want) {
+    state.gridDetail = null;
+    return;
   }
+  const [x0, y0, x1, y1] = visibleBox(view, 0);
+  if (d && d.cell === want.cell && d.nodes === state.grid.nodes &&
+      x0 >= d.box[0] && y0 >= d.box[1] && x1 <= d.box[2] && y1 <= d.box[3]) {
+    return;
+  }
+  const box = want.box.map((v) => v.toFixed(1));
+  const detail = await fetchGrid(`&resolution_m=${want.cell}&bbox=${box.join(",")}`);
+  state.gridDetail = { ...detail, cell: want.cell, box: want.box };
+  state.gridDetailLoads += 1;
 }
 
 // Refreshes that events ask for, each at most once per period and never two at once.
@@ -206,6 +260,14 @@ function graphSoon() {
 }
 const refreshSummary = throttled(loadSummary, 1000);
 const refreshGrid = throttled(loadGrid, 3000);
+const refreshGridDetail = throttled(loadGridDetail, 300);
+// After the view moves: the detail the new view needs, once the moving stops.
+let viewTimer = null;
+function viewMoved() {
+  state.autoFit = false;
+  clearTimeout(viewTimer);
+  viewTimer = setTimeout(refreshGridDetail, 250);
+}
 const refreshRobots = throttled(loadRobots, 1000);
 
 function onEvent(msg) {
@@ -364,10 +426,10 @@ function redraw() {
   });
 }
 
-// The world box on screen, with a margin of `px` pixels: what lies outside is not drawn.
-function visibleBox(px = 20) {
-  const [x0, y1] = view.toWorld(-px, -px);
-  const [x1, y0] = view.toWorld(view.width + px, view.height + px);
+// The world box a view shows, with a margin of `px` pixels: what lies outside is not drawn.
+function visibleBox(v, px = 20) {
+  const [x0, y1] = v.toWorld(-px, -px);
+  const [x1, y0] = v.toWorld(v.width + px, v.height + px);
   return [x0, y0, x1, y1];
 }
 
@@ -384,6 +446,67 @@ function draw() {
   state.drawMsMean += (ms - state.drawMsMean) / Math.min(state.draws, 50);
 }
 
+// The map's static picture (trajectories and the pose network: thousands of paths) is drawn
+// into a layer twice the canvas's size and moved with the view, so panning costs one image
+// copy. It is drawn again when the view leaves it, when what it shows is toggled, and, at most
+// every LAYER_REFRESH_MS, when the data or the zoom changed (meanwhile the old one is moved
+// and scaled).
+const LAYER_REFRESH_MS = 500;
+let layerData = 0; // bumped whenever the data the layer shows changes
+const layer = { canvas: document.createElement("canvas"), view: null, data: -1, style: "", madeAt: -Infinity };
+layer.ctx = layer.canvas.getContext("2d");
+
+function drawLayer(dpr, style) {
+  const lv = new View();
+  Object.assign(lv, { cx: view.cx, cy: view.cy, scale: view.scale, width: view.width * 2, height: view.height * 2 });
+  const c = layer.canvas;
+  if (c.width !== Math.round(lv.width * dpr) || c.height !== Math.round(lv.height * dpr)) {
+    c.width = Math.round(lv.width * dpr);
+    c.height = Math.round(lv.height * dpr);
+  }
+  const g = layer.ctx;
+  g.setTransform(dpr, 0, 0, dpr, 0, 0);
+  g.clearRect(0, 0, lv.width, lv.height);
+  const box = visibleBox(lv);
+  if (state.showNetwork) drawNetwork(g, lv, box);
+  drawTrajectories(g, lv, box);
+  Object.assign(layer, { view: lv, data: layerData, style, madeAt: performance.now() });
+  state.layerDraws += 1;
+}
+
+// Whether the layer holds everything the canvas shows now.
+function layerCovers() {
+  const lv = layer.view;
+  const [x0, y1] = view.toWorld(0, 0);
+  const [x1, y0] = view.toWorld(view.width, view.height);
+  const [lx0, ly1] = lv.toWorld(0, 0);
+  const [lx1, ly0] = lv.toWorld(lv.width, lv.height);
+  return x0 >= lx0 && x1 <= lx1 && y0 >= ly0 && y1 <= ly1;
+}
+
+let layerTimer = null;
+function drawLayerAndBlit(dpr) {
+  const style = `${state.showNetwork}|${dpr}`;
+  const lv = layer.view;
+  const age = performance.now() - layer.madeAt;
+  const young = age < LAYER_REFRESH_MS;
+  const sameScale = lv && lv.scale === view.scale;
+  const exact = sameScale && layer.data === layerData;
+  if (!lv || layer.style !== style || (!exact && !young) || (!layerCovers() && (sameScale || !young))) {
+    drawLayer(dpr, style);
+  } else if (!exact && !layerTimer) {
+    layerTimer = setTimeout(() => {
+      layerTimer = null;
+      redraw();
+    }, LAYER_REFRESH_MS - age);
+  }
+  const l = layer.view;
+  const k = view.scale / l.scale;
+  const [wx, wy] = l.toWorld(0, 0);
+  const [sx, sy] = view.toScreen(wx, wy);
+  ctx.drawImage(layer.canvas, sx, sy, l.width * k, l.height * k);
+}
+
 function drawFrame() {
   const dpr = window.devicePixelRatio || 1;
   const w = canvas.clientWidth;
@@ -398,29 +521,31 @@ function drawFrame() {
   ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
   ctx.clearRect(0, 0, w, h);
 
-  const g = state.grid;
-  if (g && state.showGrid) {
-    const [x0, y0] = view.toScreen(g.origin_m[0], g.origin_m[1] + g.height * g.resolution_m);
-    ctx.imageSmoothingEnabled = view.scale * g.resolution_m < 1;
+  if (state.showGrid) {
     ctx.globalAlpha = 0.9;
-    ctx.drawImage(g.image, x0, y0, g.width * g.resolution_m * view.scale, g.height * g.resolution_m * view.scale);
+    for (const g of [state.grid, state.gridDetail]) {
+      if (!g) continue;
+      const [x0, y0] = view.toScreen(g.origin_m[0], g.origin_m[1] + g.height * g.resolution_m);
+      ctx.imageSmoothingEnabled = view.scale * g.resolution_m < 1;
+      ctx.drawImage(g.image, x0, y0, g.width * g.resolution_m * view.scale, g.height * g.resolution_m * view.scale);
+    }
     ctx.globalAlpha = 1;
   }
 
-  const box = visibleBox();
-  if (state.showNetwork) drawNetwork(box);
-  drawTrajectories(box);
+  const box = visibleBox(view);
+  drawLayerAndBlit(dpr);
+  drawLiveTails(box);
   drawRobots(box);
   drawSelection();
   drawScaleBar();
   if (state.firstFullFrameMs === null && state.ready && state.summary && state.nodes.length > 0 &&
-      state.nodes.length >= state.summary.nodes) {
+      state.nodes.length >= state.summary.nodes && layer.data === layerData) {
     state.firstFullFrameMs = performance.now();
   }
 }
 
-function drawNetwork(box) {
-  ctx.lineWidth = 1.5;
+function drawNetwork(g, v, box) {
+  g.lineWidth = 1.5;
   // One path per edge kind.
   const paths = new Map();
   for (const e of state.edges) {
@@ -431,16 +556,16 @@ function drawNetwork(box) {
     if (!segInBox(box, ax, ay, bx, by)) continue;
     let p = paths.get(e.kind);
     if (!p) paths.set(e.kind, (p = new Path2D()));
-    const [sx, sy] = view.toScreen(ax, ay);
-    const [ex, ey] = view.toScreen(bx, by);
+    const [sx, sy] = v.toScreen(ax, ay);
+    const [ex, ey] = v.toScreen(bx, by);
     // Level of detail: an edge under a pixel long is not seen (zoomed out on a big map).
     if (Math.abs(ex - sx) + Math.abs(ey - sy) < 1) continue;
     p.moveTo(sx, sy);
     p.lineTo(ex, ey);
   }
   for (const [kind, p] of paths) {
-    ctx.strokeStyle = EDGE_COLOURS[kind] || "#000";
-    ctx.stroke(p);
+    g.strokeStyle = EDGE_COLOURS[kind] || "#000";
+    g.stroke(p);
   }
   // GPS residuals: from the fix to where the antenna is on the solved pose.
   const gpsLines = new Path2D();
@@ -450,67 +575,83 @@ function drawNetwork(box) {
     const qx = px + f.residual_m[0];
     const qy = py + f.residual_m[1];
     if (!segInBox(box, px, py, qx, qy)) continue;
-    const [sx, sy] = view.toScreen(px, py);
-    const [ex, ey] = view.toScreen(qx, qy);
+    const [sx, sy] = v.toScreen(px, py);
+    const [ex, ey] = v.toScreen(qx, qy);
     gpsDots.rect(sx - 1, sy - 1, 2, 2);
     gpsLines.moveTo(sx, sy);
     gpsLines.lineTo(ex, ey);
   }
-  ctx.strokeStyle = GPS_COLOUR;
-  ctx.fillStyle = GPS_COLOUR;
-  ctx.fill(gpsDots);
-  ctx.stroke(gpsLines);
+  g.strokeStyle = GPS_COLOUR;
+  g.fillStyle = GPS_COLOUR;
+  g.fill(gpsDots);
+  g.stroke(gpsLines);
   const dots = new Path2D();
   const drawn = new Set(); // one dot per pixel
   for (const n of state.nodes) {
     if (!inBox(box, n.pose.x, n.pose.y)) continue;
-    const [x, y] = view.toScreen(n.pose.x, n.pose.y);
+    const [x, y] = v.toScreen(n.pose.x, n.pose.y);
     const key = Math.round(x) * 16384 + Math.round(y);
     if (drawn.has(key)) continue;
     drawn.add(key);
     dots.moveTo(x + 3, y);
     dots.arc(x, y, 3, 0, 2 * Math.PI);
   }
-  ctx.fillStyle = "#222";
-  ctx.fill(dots);
+  g.fillStyle = "#222";
+  g.fill(dots);
 }
 
-function drawTrajectories(box) {
-  ctx.lineWidth = 2;
+function drawTrajectories(g, v, box) {
+  g.lineWidth = 2;
   for (const [id, nodes] of trackMap()) {
     const r = robot(id);
     const line = new Path2D();
     const marks = new Path2D();
     let px = 0, py = 0, penDown = false;
     let lx = -1e9, ly = -1e9; // the last point put in the path (screen px)
-    const step = (x, y, mark) => {
-      const [sx, sy] = view.toScreen(x, y);
+    for (const n of nodes) {
+      const { x, y } = n.pose;
+      const [sx, sy] = v.toScreen(x, y);
       // Level of detail: points under a pixel from the last one drawn add nothing.
       const near = Math.abs(sx - lx) + Math.abs(sy - ly) < 1;
       if (penDown && segInBox(box, px, py, x, y)) {
         if (!near) {
           line.lineTo(sx, sy);
-          if (mark) marks.rect(sx - 2, sy - 2, 4, 4);
+          marks.rect(sx - 2, sy - 2, 4, 4);
           lx = sx;
           ly = sy;
         }
       } else {
         // Off screen: lift the pen; start again at this point.
         line.moveTo(sx, sy);
-        if (mark && inBox(box, x, y)) marks.rect(sx - 2, sy - 2, 4, 4);
+        if (inBox(box, x, y)) marks.rect(sx - 2, sy - 2, 4, 4);
         lx = sx;
         ly = sy;
       }
       px = x;
       py = y;
       penDown = true;
-    };
-    for (const n of nodes) step(n.pose.x, n.pose.y, true);
-    if (r.pose) step(r.pose.x, r.pose.y, false);
+    }
+    g.strokeStyle = r.colour;
+    g.stroke(line);
+    g.fillStyle = r.colour;
+    g.fill(marks);
+  }
+}
+
+// Each robot's way from its last node to where it is now: live, so drawn every frame.
+function drawLiveTails(box) {
+  ctx.lineWidth = 2;
+  for (const [id, nodes] of trackMap()) {
+    const r = robot(id);
+    const last = nodes[nodes.length - 1];
+    if (!r.pose || !last || !segInBox(box, last.pose.x, last.pose.y, r.pose.x, r.pose.y)) continue;
+    const [ax, ay] = view.toScreen(last.pose.x, last.pose.y);
+    const [bx, by] = view.toScreen(r.pose.x, r.pose.y);
     ctx.strokeStyle = r.colour;
-    ctx.stroke(line);
-    ctx.fillStyle = r.colour;
-    ctx.fill(marks);
+    ctx.beginPath();
+    ctx.moveTo(ax, ay);
+    ctx.lineTo(bx, by);
+    ctx.stroke();
   }
 }
 
@@ -630,8 +771,8 @@ canvas.addEventListener("pointermove", (e) => {
   drag.y = e.clientY;
   if (drag.moved > 3) {
     canvas.classList.add("dragging");
-    state.autoFit = false;
     view.pan(dx, dy);
+    viewMoved();
     redraw();
   }
 });
@@ -648,9 +789,9 @@ canvas.addEventListener(
   "wheel",
   (e) => {
     e.preventDefault();
-    state.autoFit = false;
     const r = canvas.getBoundingClientRect();
     view.zoomAt(e.clientX - r.left, e.clientY - r.top, Math.exp(-e.deltaY * 0.0015));
+    viewMoved();
     redraw();
   },
   { passive: false },
@@ -669,6 +810,7 @@ $("toggle-grid").addEventListener("change", (e) => {
 $("fit").addEventListener("click", () => {
   state.autoFit = true;
   redraw();
+  setTimeout(refreshGridDetail, 50);
 });
 $("inspector-close").addEventListener("click", () => {
   state.inspector = null;

@@ -40,6 +40,12 @@ pub struct GridParams {
     /// pose kilometres away gives a clear error instead of a huge allocation. The default
     /// 2²⁴ cells is 410 m × 410 m at 0.1 m.
     pub max_cells: usize,
+    /// Instead of refusing a grid over `max_cells`, make the cells as much coarser as it
+    /// takes (an overview of a map too big for `resolution_m`).
+    pub coarsen_to_fit: bool,
+    /// Only this part of the map, `[min x, min y, max x, max y]` (m): the beams of every scan
+    /// that reach it still count.
+    pub window_m: Option<[f64; 4]>,
 }
 
 impl Default for GridParams {
@@ -54,6 +60,8 @@ impl Default for GridParams {
             occupied_threshold: 0.65,
             free_threshold: 0.35,
             max_cells: 1 << 24,
+            coarsen_to_fit: false,
+            window_m: None,
         }
     }
 }
@@ -212,29 +220,59 @@ impl OccupancyGrid {
                 })
         };
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        let window = params.window_m;
+        // With a window, only the scans whose beams reach into it.
+        let mut scans_used = Vec::with_capacity(scans.len());
         for &(pose, scan) in &scans {
+            let (mut slo, mut shi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
             for (q, _) in beams(pose, scan).chain([([pose.x, pose.y], false)]) {
                 for d in 0..2 {
-                    lo[d] = lo[d].min(q[d]);
-                    hi[d] = hi[d].max(q[d]);
+                    slo[d] = slo[d].min(q[d]);
+                    shi[d] = shi[d].max(q[d]);
                 }
             }
+            if window
+                .is_some_and(|w| shi[0] < w[0] || slo[0] > w[2] || shi[1] < w[1] || slo[1] > w[3])
+            {
+                continue;
+            }
+            for d in 0..2 {
+                lo[d] = lo[d].min(slo[d]);
+                hi[d] = hi[d].max(shi[d]);
+            }
+            scans_used.push((pose, scan));
         }
-        let res = params.resolution_m;
-        let origin_m = [
-            ((lo[0] / res).floor() - 1.0) * res,
-            ((lo[1] / res).floor() - 1.0) * res,
-        ];
-        // Sizes as f64 first: a pose far off can make them overflow any integer.
-        let size = |d: usize| ((hi[d] - origin_m[d]) / res).floor() + 2.0;
-        let (w, h) = (size(0), size(1));
-        if w * h > params.max_cells as f64 {
-            return Err(GridError::TooLarge {
-                width: w.min(u64::MAX as f64) as u64,
-                height: h.min(u64::MAX as f64) as u64,
-                max_cells: params.max_cells,
-            });
+        let scans = scans_used;
+        if let Some(w) = window {
+            (lo[0], lo[1]) = (lo[0].max(w[0]), lo[1].max(w[1]));
+            (hi[0], hi[1]) = (hi[0].min(w[2]), hi[1].min(w[3]));
+            // No scan reaches it: the window, all unknown.
+            if scans.is_empty() || lo[0] >= hi[0] || lo[1] >= hi[1] {
+                (lo, hi) = ([w[0], w[1]], [w[2], w[3]]);
+            }
         }
+        let mut res = params.resolution_m;
+        let (origin_m, w, h) = loop {
+            let origin_m = [
+                ((lo[0] / res).floor() - 1.0) * res,
+                ((lo[1] / res).floor() - 1.0) * res,
+            ];
+            // Sizes as f64 first: a pose far off can make them overflow any integer.
+            let size = |d: usize| ((hi[d] - origin_m[d]) / res).floor() + 2.0;
+            let (w, h) = (size(0), size(1));
+            if w * h <= params.max_cells as f64 {
+                break (origin_m, w, h);
+            }
+            if !params.coarsen_to_fit || !(w * h).is_finite() {
+                return Err(GridError::TooLarge {
+                    width: w.min(u64::MAX as f64) as u64,
+                    height: h.min(u64::MAX as f64) as u64,
+                    max_cells: params.max_cells,
+                });
+            }
+            // The margin cells make one step sometimes fall short: step again.
+            res *= (w * h / params.max_cells as f64).sqrt() * 1.001;
+        };
         let (width, height) = (w as usize, h as usize);
         // Cell units: cell (x, y) is [x, x+1) × [y, y+1).
         let units = |q: [f64; 2]| [(q[0] - origin_m[0]) / res, (q[1] - origin_m[1]) / res];
@@ -242,7 +280,11 @@ impl OccupancyGrid {
             let u = units(q);
             (u[0].floor() as i64, u[1].floor() as i64)
         };
-        let index = |(x, y): (i64, i64)| y as usize * width + x as usize;
+        // Cells outside the grid (beams leaving a window) are not kept.
+        let index = |(x, y): (i64, i64)| {
+            (x >= 0 && y >= 0 && (x as usize) < width && (y as usize) < height)
+                .then(|| y as usize * width + x as usize)
+        };
         let mut log_odds = vec![0f32; width * height];
         // The scan (counted from 1) that last updated a cell, 2k+1 for a pass and 2k+2 for a
         // return; 0: never seen.
@@ -251,7 +293,7 @@ impl OccupancyGrid {
         for (k, &(pose, scan)) in scans.iter().enumerate() {
             let (pass, ret) = (2 * k as u32 + 1, 2 * k as u32 + 2);
             for (q, hit) in beams(pose, scan) {
-                let c = index(cell(q));
+                let Some(c) = index(cell(q)) else { continue };
                 if hit && mark[c] != ret {
                     mark[c] = ret;
                     log_odds[c] = clamp(log_odds[c] + params.log_odds_hit);
@@ -261,7 +303,7 @@ impl OccupancyGrid {
             for (q, hit) in beams(pose, scan) {
                 let to = cell(q);
                 let mut clear = |x: i64, y: i64| {
-                    let c = index((x, y));
+                    let Some(c) = index((x, y)) else { return };
                     if mark[c] != ret && mark[c] != pass {
                         mark[c] = pass;
                         log_odds[c] = clamp(log_odds[c] + params.log_odds_miss);
@@ -487,5 +529,73 @@ mod tests {
         let mut none = 0;
         traverse([3.2, 3.7], [3.9, 3.1], |_, _| none += 1);
         assert_eq!(none, 0);
+    }
+
+    #[test]
+    fn a_window_is_the_same_cells_as_the_whole_grid_there() {
+        let pose = Pose2::new(0.7, -0.4, 0.5);
+        let scan = scan_of(&room(6.05), pose);
+        let whole = OccupancyGrid::from_scans([(pose, &scan)], &GridParams::default()).unwrap();
+        let params = GridParams {
+            window_m: Some([0.0, 0.0, 2.0, 5.0]),
+            ..GridParams::default()
+        };
+        let part = OccupancyGrid::from_scans([(pose, &scan)], &params).unwrap();
+        // x: 0–2 m and a cell of margin each side (−0.1–2.2 m); y: 0 m to the wall's cells.
+        assert_eq!((part.width, part.height), (23, 33));
+        for iy in 0..part.height {
+            for ix in 0..part.width {
+                let (wx, wy) = whole.cell_at(part.cell_center(ix, iy)).expect("inside");
+                assert_eq!(
+                    part.occupancy(ix, iy),
+                    whole.occupancy(wx, wy),
+                    "({ix}, {iy})"
+                );
+            }
+        }
+        let away = GridParams {
+            window_m: Some([100.0, 100.0, 110.0, 110.0]),
+            ..GridParams::default()
+        };
+        // Beyond the map: the window, all unknown.
+        let empty = OccupancyGrid::from_scans([(pose, &scan)], &away).unwrap();
+        assert_eq!((empty.width, empty.height), (102, 102));
+        assert_eq!(empty.counts(), (102 * 102, 0, 0));
+    }
+
+    #[test]
+    fn coarsen_to_fit_grows_the_cells_until_the_grid_fits() {
+        let pose = Pose2::new(0.7, -0.4, 0.5);
+        let scan = scan_of(&room(6.05), pose);
+        let small = GridParams {
+            max_cells: 1000,
+            ..GridParams::default()
+        };
+        assert!(matches!(
+            OccupancyGrid::from_scans([(pose, &scan)], &small),
+            Err(GridError::TooLarge { .. })
+        ));
+        let fit = GridParams {
+            coarsen_to_fit: true,
+            ..small
+        };
+        let grid = OccupancyGrid::from_scans([(pose, &scan)], &fit).unwrap();
+        assert!(
+            grid.width * grid.height <= 1000,
+            "{} × {}",
+            grid.width,
+            grid.height
+        );
+        // 64 × 64 cells of 0.1 m into 1000: cells about 0.2 m, not much coarser.
+        assert!(
+            (0.19..0.23).contains(&grid.resolution_m),
+            "{}",
+            grid.resolution_m
+        );
+        let (_, free, occupied) = grid.counts();
+        assert!(
+            free > 600 && occupied > 80,
+            "{free} free, {occupied} occupied"
+        );
     }
 }
