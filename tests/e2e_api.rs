@@ -90,6 +90,28 @@ fn check_routes(http: &str) {
     assert_eq!(columns["edges"]["from"], serde_json::json!([0, 1]));
     let kind = columns["edges"]["kind"][0].as_u64().unwrap() as usize;
     assert_eq!(columns["kinds"][kind], graph["edges"][0]["kind"]);
+    // Node uncertainty: symmetric 3 × 3 with positive variances (null for the gauge node).
+    let covs = json(&format!("{base}/covariances?nodes=2,1,0"));
+    assert_eq!(covs["nodes"], serde_json::json!([2, 1, 0]));
+    let c = &covs["covariance"][0];
+    for r in 0..3 {
+        assert!(c[r][r].as_f64().unwrap() > 0.0, "{covs}");
+        for k in 0..3 {
+            assert_eq!(c[r][k].as_f64(), c[k][r].as_f64(), "{covs}");
+        }
+    }
+    assert_eq!(
+        http_get(http, &format!("{base}/covariances?nodes=7"))
+            .unwrap()
+            .0,
+        404
+    );
+    assert_eq!(
+        http_get(http, &format!("{base}/covariances?nodes=x"))
+            .unwrap()
+            .0,
+        400
+    );
     let node = json(&format!("{base}/nodes/1"));
     assert_eq!(node["node_seq"], 1);
     assert!(!node["scan"]["range_m"].as_array().unwrap().is_empty());
@@ -184,4 +206,8 @@ fn check_routes(http: &str) {
     assert_eq!(http_post(http, &optimize, None), 401);
     assert_eq!(http_post(http, &optimize, Some("wrong")), 401);
     assert_eq!(http_post(http, &optimize, Some(TOKEN)), 200);
+    // The token can be checked without a 401.
+    let auth = json("/api/v1/auth");
+    assert_eq!(auth["write_routes"], true);
+    assert_eq!(auth["authorized"], false, "{auth}");
 }

@@ -13,6 +13,7 @@ const EDGE_COLOURS = {
   InterRobot: "#9b3fd1",
 };
 const GPS_COLOUR = "#1b9e5a";
+const ELLIPSE_COLOUR = "#d98c00";
 
 // Everything the page shows, open to tests and the console as window.levelmapState.
 const state = {
@@ -28,6 +29,8 @@ const state = {
   showNetwork: false,
   showGrid: true,
   inspector: null, // {id, points, counts}
+  covariances: new Map(), // node id -> 3 × 3 marginal covariance of (x, y, θ), for the ellipses
+  ellipses: "", // what the legend says about them
   events: 0,
   autoFit: true,
   errors: [],
@@ -36,6 +39,7 @@ const state = {
   graphLoads: 0,
   draws: 0,
   layerDraws: 0, // times the trajectories and network were drawn into the layer
+  timings: {}, // performance.now() of the start's steps, and the last layer's drawing time (ms)
   drawMsMean: 0, // running mean of draw() time, ms (about the last 50 frames)
 };
 const view = new View();
@@ -104,6 +108,7 @@ let nodeIndex = new Map();
 let tracks = new Map();
 let tracksDirty = true;
 let lastGraphLoad = 0;
+let graphNodes = 0; // nodes in the last /graph (the ones the server can answer for)
 
 async function loadGraph() {
   // Columns: a tenth of the bytes of one object per item, for maps of thousands of nodes.
@@ -125,6 +130,10 @@ async function loadGraph() {
   }
   state.nodes = nodes;
   nodeIndex = index;
+  graphNodes = gn.x.length;
+  // The poses moved: the uncertainty is the new network's.
+  state.covariances = new Map();
+  refreshCovariances();
   const ge = g.edges;
   state.edges = ge.from.map((from, i) => ({ from, to: ge.to[i], kind: g.kinds[ge.kind[i]] }));
   const gg = g.gps;
@@ -261,12 +270,40 @@ function graphSoon() {
 const refreshSummary = throttled(loadSummary, 1000);
 const refreshGrid = throttled(loadGrid, 3000);
 const refreshGridDetail = throttled(loadGridDetail, 300);
+
+// Node uncertainty ellipses: the marginal covariances of the nodes on screen, asked for when
+// the network is shown and at most MAX_ELLIPSE_NODES are on screen.
+const MAX_ELLIPSE_NODES = 500;
+async function loadCovariances() {
+  if (!state.showNetwork) return;
+  const box = visibleBox(view, 0);
+  const onScreen = state.nodes.filter((n) => n.id < graphNodes && inBox(box, n.pose.x, n.pose.y));
+  if (onScreen.length > MAX_ELLIPSE_NODES) {
+    state.ellipses = `ellipses: zoom in (${onScreen.length} nodes on screen)`;
+  } else {
+    const missing = onScreen.filter((n) => !state.covariances.has(n.id)).map((n) => n.id);
+    if (missing.length) {
+      const loads = state.graphLoads;
+      const c = await getJson(`/fleets/${state.fleet}/covariances?nodes=${missing.join(",")}`);
+      // A graph that came meanwhile makes these stale.
+      if (loads !== state.graphLoads) return;
+      c.nodes.forEach((id, i) => state.covariances.set(id, c.covariance[i]));
+      layerData += 1;
+    }
+    state.ellipses = `95% ellipses (${onScreen.length} nodes)`;
+  }
+  $("ellipses").textContent = state.ellipses;
+}
+const refreshCovariances = throttled(loadCovariances, 1000);
 // After the view moves: the detail the new view needs, once the moving stops.
 let viewTimer = null;
 function viewMoved() {
   state.autoFit = false;
   clearTimeout(viewTimer);
-  viewTimer = setTimeout(refreshGridDetail, 250);
+  viewTimer = setTimeout(() => {
+    refreshGridDetail();
+    refreshCovariances();
+  }, 250);
 }
 const refreshRobots = throttled(loadRobots, 1000);
 
@@ -457,6 +494,7 @@ const layer = { canvas: document.createElement("canvas"), view: null, data: -1, 
 layer.ctx = layer.canvas.getContext("2d");
 
 function drawLayer(dpr, style) {
+  const t0 = performance.now();
   const lv = new View();
   Object.assign(lv, { cx: view.cx, cy: view.cy, scale: view.scale, width: view.width * 2, height: view.height * 2 });
   const c = layer.canvas;
@@ -470,7 +508,9 @@ function drawLayer(dpr, style) {
   const box = visibleBox(lv);
   if (state.showNetwork) drawNetwork(g, lv, box);
   drawTrajectories(g, lv, box);
-  Object.assign(layer, { view: lv, data: layerData, style, madeAt: performance.now() });
+  const now = performance.now();
+  state.timings.layer_draw_ms = now - t0;
+  Object.assign(layer, { view: lv, data: layerData, style, madeAt: now });
   state.layerDraws += 1;
 }
 
@@ -585,6 +625,26 @@ function drawNetwork(g, v, box) {
   g.fillStyle = GPS_COLOUR;
   g.fill(gpsDots);
   g.stroke(gpsLines);
+  // Uncertainty: the 95% ellipse of each node's position (χ² of 2 degrees: 5.991).
+  const ellipses = new Path2D();
+  for (const [id, c] of state.covariances) {
+    const n = nodeIndex.get(id);
+    if (!c || !n || !inBox(box, n.pose.x, n.pose.y)) continue;
+    const [a, b, d] = [c[0][0], c[0][1], c[1][1]];
+    const mid = (a + d) / 2;
+    const half = Math.hypot((a - d) / 2, b);
+    const r1 = Math.sqrt(5.991 * (mid + half)) * v.scale;
+    const r2 = Math.sqrt(5.991 * Math.max(mid - half, 0)) * v.scale;
+    if (r1 < 1) continue;
+    const [x, y] = v.toScreen(n.pose.x, n.pose.y);
+    // The major axis's angle from east; screen y points down.
+    const angle = 0.5 * Math.atan2(2 * b, a - d);
+    ellipses.moveTo(x + r1 * Math.cos(-angle), y + r1 * Math.sin(-angle));
+    ellipses.ellipse(x, y, r1, r2, -angle, 0, 2 * Math.PI);
+  }
+  g.lineWidth = 1;
+  g.strokeStyle = ELLIPSE_COLOUR;
+  g.stroke(ellipses);
   const dots = new Path2D();
   const drawn = new Set(); // one dot per pixel
   for (const n of state.nodes) {
@@ -737,10 +797,24 @@ state.nodeOnPage = (id) => {
 
 // ---- input -------------------------------------------------------------------------------
 
+// One pointer drags (or clicks, if it hardly moved); two pinch: zoom about their midpoint
+// and pan with it (tablets).
 let drag = null;
+const pointers = new Map(); // pointerId -> {x, y} (client px)
+let pinch = null; // {distance, x, y} of the two pointers last move
+const pinchOf = () => {
+  const [a, b] = [...pointers.values()];
+  return { distance: Math.hypot(a.x - b.x, a.y - b.y), x: (a.x + b.x) / 2, y: (a.y + b.y) / 2 };
+};
 canvas.addEventListener("pointerdown", (e) => {
-  drag = { x: e.clientX, y: e.clientY, moved: 0 };
+  pointers.set(e.pointerId, { x: e.clientX, y: e.clientY });
   canvas.setPointerCapture(e.pointerId);
+  if (pointers.size === 2) {
+    pinch = pinchOf();
+    drag = null;
+  } else if (pointers.size === 1) {
+    drag = { x: e.clientX, y: e.clientY, moved: 0 };
+  }
 });
 // The status bar: map metres under the pointer and, with a datum, WGS84.
 function showCursor(sx, sy) {
@@ -763,6 +837,16 @@ function showCursor(sx, sy) {
 canvas.addEventListener("pointermove", (e) => {
   const r = canvas.getBoundingClientRect();
   showCursor(e.clientX - r.left, e.clientY - r.top);
+  if (pointers.has(e.pointerId)) pointers.set(e.pointerId, { x: e.clientX, y: e.clientY });
+  if (pinch && pointers.size === 2) {
+    const p = pinchOf();
+    view.pan(p.x - pinch.x, p.y - pinch.y);
+    if (pinch.distance > 0) view.zoomAt(p.x - r.left, p.y - r.top, p.distance / pinch.distance);
+    pinch = p;
+    viewMoved();
+    redraw();
+    return;
+  }
   if (!drag) return;
   const dx = e.clientX - drag.x;
   const dy = e.clientY - drag.y;
@@ -776,15 +860,19 @@ canvas.addEventListener("pointermove", (e) => {
     redraw();
   }
 });
-canvas.addEventListener("pointerup", (e) => {
-  const click = drag && drag.moved <= 3;
+function pointerEnd(e) {
+  pointers.delete(e.pointerId);
+  if (pointers.size < 2) pinch = null;
+  const click = drag && drag.moved <= 3 && e.type === "pointerup";
   drag = null;
   canvas.classList.remove("dragging");
   if (!click) return;
   const r = canvas.getBoundingClientRect();
-  const n = nodeAt(e.clientX - r.left, e.clientY - r.top);
+  const n = nodeAt(e.clientX - r.left, e.clientY - r.top, e.pointerType === "touch" ? 20 : 10);
   if (n) inspect(n.id).catch(note);
-});
+}
+canvas.addEventListener("pointerup", pointerEnd);
+canvas.addEventListener("pointercancel", pointerEnd);
 canvas.addEventListener(
   "wheel",
   (e) => {
@@ -800,6 +888,7 @@ window.addEventListener("resize", redraw);
 
 $("toggle-network").addEventListener("change", (e) => {
   state.showNetwork = e.target.checked;
+  refreshCovariances();
   document.body.classList.toggle("network", state.showNetwork);
   redraw();
 });
@@ -818,18 +907,40 @@ $("inspector-close").addEventListener("click", () => {
   redraw();
 });
 
+// The bearer token, kept in this browser. The page asks /auth whether the mapper takes it
+// (no write is tried with a token it refuses) and shows the answer on the token field and
+// the re-optimize button.
 const TOKEN_KEY = "levelmap.token";
 $("token").value = localStorage.getItem(TOKEN_KEY) || "";
-$("token").addEventListener("change", (e) => localStorage.setItem(TOKEN_KEY, e.target.value));
+const bearer = () => ({ Authorization: `Bearer ${$("token").value}` });
+
+async function checkToken() {
+  const r = await fetch(`${API}/auth`, { headers: bearer() });
+  const a = await r.json();
+  state.auth = !a.write_routes ? "off" : a.authorized ? "ok" : $("token").value ? "refused" : "none";
+  document.body.dataset.auth = state.auth;
+  const why = {
+    off: "the mapper has no token: its write routes are off",
+    none: "enter the mapper's bearer token to re-optimize",
+    refused: `token refused: ${a.reason}`,
+    ok: "token accepted",
+  }[state.auth];
+  $("token").title = why;
+  $("optimize").disabled = state.auth !== "ok";
+  $("optimize").title = why;
+  $("optimize-status").textContent = state.auth === "refused" ? "token refused" : state.auth === "off" ? "read-only" : "";
+}
+
+$("token").addEventListener("change", (e) => {
+  localStorage.setItem(TOKEN_KEY, e.target.value);
+  checkToken().catch(note);
+});
 $("optimize").addEventListener("click", async () => {
   const status = $("optimize-status");
   if (!state.fleet) return;
   status.textContent = "solving…";
   try {
-    const r = await fetch(`${API}/fleets/${state.fleet}/optimize`, {
-      method: "POST",
-      headers: { Authorization: `Bearer ${$("token").value}` },
-    });
+    const r = await fetch(`${API}/fleets/${state.fleet}/optimize`, { method: "POST", headers: bearer() });
     if (r.ok) {
       const rep = await r.json();
       status.textContent = rep.final_chi2 !== undefined ? `χ² ${rep.final_chi2.toFixed(1)}` : "done";
@@ -837,6 +948,7 @@ $("optimize").addEventListener("click", async () => {
       refreshGraph();
     } else {
       status.textContent = `${r.status}: ${(await r.text()).trim()}`;
+      checkToken().catch(note);
     }
   } catch (e) {
     status.textContent = String(e);
@@ -847,10 +959,13 @@ $("optimize").addEventListener("click", async () => {
 
 async function start() {
   redraw();
+  checkToken().catch(note);
   await findFleet();
+  state.timings.fleet = performance.now();
   const events = new EventSource(`${API}/events`);
   events.onmessage = onEvent;
   await Promise.all([loadGraph(), loadRobots(), loadSummary()]).catch(note);
+  state.timings.loaded = performance.now();
   refreshGrid();
   state.ready = true;
   renderRobots();

@@ -35,6 +35,7 @@ try {
       robots: Object.keys(s.robots).length,
       // performance.now() counts from the navigation's start.
       first_full_frame_ms: s.firstFullFrameMs,
+      timings: s.timings,
       dom_content_loaded_ms: nav ? nav.domContentLoadedEventEnd : null,
     };
   });

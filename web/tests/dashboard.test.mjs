@@ -43,6 +43,7 @@ function freePort() {
   });
 }
 
+const TOKEN = "web-test-token";
 let demo;
 let demoLog = "";
 let dir;
@@ -78,7 +79,7 @@ before(async () => {
     findBinary(),
     ["demo", "--speed", "4", "--duration", "120", "--serve", "--http", `127.0.0.1:${http}`,
       "--zenoh", `tcp/127.0.0.1:${zenoh}`, "--dir", dir],
-    { stdio: ["ignore", "pipe", "pipe"] },
+    { stdio: ["ignore", "pipe", "pipe"], env: { ...process.env, LEVELMAP_TOKEN: TOKEN } },
   );
   demo.stdout.on("data", (d) => (demoLog += d));
   demo.stderr.on("data", (d) => (demoLog += d));
@@ -152,6 +153,11 @@ test("the pose network overlay toggles", async () => {
   await page.click("#toggle-network");
   assert.equal(await page.evaluate(() => window.levelmapState.showNetwork), true);
   assert.equal(await page.isVisible("#legend"), true);
+  // Node uncertainty: the nodes on screen get their covariance ellipses.
+  await waitFor("covariances of the nodes on screen", () => page.evaluate(() => window.levelmapState.covariances.size > 0), 10_000);
+  const c = await page.evaluate(() => [...window.levelmapState.covariances.values()].find((m) => m));
+  assert.ok(c[0][0] > 0 && c[1][1] > 0 && c[0][0] * c[1][1] > c[0][1] ** 2, `a positive definite covariance: ${JSON.stringify(c)}`);
+  assert.match(await page.textContent("#ellipses"), /95% ellipses \(\d+ nodes\)/);
   await page.screenshot({ path: path.join(artifacts, "3-network.png") });
   await page.click("#toggle-network");
   assert.equal(await page.evaluate(() => window.levelmapState.showNetwork), false);
@@ -173,6 +179,81 @@ test("clicking a node opens the inspector with its scan", async () => {
   assert.equal(await page.isVisible("#inspector"), true);
   assert.match(await page.textContent("#inspector-list"), /landmark\d+/);
   await page.screenshot({ path: path.join(artifacts, "4-inspector.png") });
+});
+
+test("the occupancy grid is drawn where the mapper placed it", async () => {
+  await waitFor("the grid", () => page.evaluate(() => window.levelmapState.grid?.image), 20_000);
+  const g = await page.evaluate(() => {
+    const g = window.levelmapState.grid;
+    return { w: g.width, h: g.height, iw: g.image.width, ih: g.image.height, res: g.resolution_m, nodes: g.nodes };
+  });
+  assert.equal(g.iw, g.w, "the picture is the grid the header describes");
+  assert.equal(g.ih, g.h);
+  assert.ok(g.res >= 0.1 && g.nodes > 0, JSON.stringify(g));
+});
+
+test("the token is checked before any write, and re-optimize works with it", async () => {
+  // No token stored: the button is off and says why.
+  assert.equal(await page.evaluate(() => window.levelmapState.auth), "none");
+  assert.equal(await page.isDisabled("#optimize"), true);
+  await page.fill("#token", "wrong");
+  await page.dispatchEvent("#token", "change");
+  await waitFor("the refused state", () => page.evaluate(() => window.levelmapState.auth === "refused"), 5_000);
+  assert.equal(await page.isDisabled("#optimize"), true);
+  assert.match(await page.textContent("#optimize-status"), /token refused/);
+  assert.equal(await page.evaluate(() => document.body.dataset.auth), "refused");
+  await page.screenshot({ path: path.join(artifacts, "5-token-refused.png") });
+  await page.fill("#token", TOKEN);
+  await page.dispatchEvent("#token", "change");
+  await waitFor("the accepted state", () => page.evaluate(() => window.levelmapState.auth === "ok"), 5_000);
+  await page.click("#optimize");
+  await waitFor("the solve's χ²", async () => /χ² \d/.test(await page.textContent("#optimize-status")), 20_000);
+});
+
+test("a tablet: panels under the map, tap to inspect, pinch to zoom", async () => {
+  const tablet = await browser.newContext({ viewport: { width: 820, height: 1180 }, hasTouch: true, deviceScaleFactor: 2 });
+  const tab = await tablet.newPage();
+  tab.on("console", (m) => m.type() === "error" && consoleErrors.push(`tablet: ${m.text()}`));
+  tab.on("pageerror", (e) => consoleErrors.push(`tablet: ${e}`));
+  try {
+    await tab.goto(`${base}/`);
+    await waitFor("the tablet page", () => tab.evaluate(() => window.levelmapState.ready && window.levelmapState.nodes.length > 3), 30_000);
+    const map = await tab.locator("#map").boundingBox();
+    const aside = await tab.locator("aside").boundingBox();
+    assert.ok(map.height >= 500 && map.width >= 800, `the map fills the width: ${JSON.stringify(map)}`);
+    assert.ok(aside.y >= map.y + map.height - 1, "the panels are under the map");
+    assert.ok(await tab.evaluate(() => document.documentElement.scrollWidth <= window.innerWidth), "no sideways scrolling");
+    for (const id of ["#toggle-network", "#toggle-grid", "#fit", "#token", "#optimize"]) {
+      const b = await tab.locator(id).boundingBox();
+      assert.ok(b && b.x >= 0 && b.x + b.width <= 820 && b.height >= 22, `${id} is on screen and big enough: ${JSON.stringify(b)}`);
+    }
+    const cdp = await tablet.newCDPSession(tab);
+    const cx = map.x + map.width / 2;
+    const cy = map.y + map.height / 2;
+    const touch = (type, d) => cdp.send("Input.dispatchTouchEvent", {
+      type,
+      touchPoints: type === "touchEnd" ? [] : [{ x: cx - d, y: cy, id: 1 }, { x: cx + d, y: cy, id: 2 }],
+    });
+    const pinch = async (from, to) => {
+      await touch("touchStart", from);
+      for (let k = 1; k <= 10; k++) await touch("touchMove", from + ((to - from) * k) / 10);
+      await touch("touchEnd", 0);
+    };
+    // A small pinch stops following the robots, so the node stays where it is tapped.
+    await pinch(40, 44);
+    const at = await tab.evaluate(() => window.levelmapState.nodeOnPage(0));
+    assert.ok(at && at.y < map.y + map.height, "node 0 is on the map");
+    await tab.touchscreen.tap(at.x, at.y);
+    await waitFor("the inspector on the tablet", () => tab.evaluate(() => window.levelmapState.inspector?.points > 0), 10_000);
+    // Pinching out from 80 to 320 px between the fingers zooms in 4×.
+    const before = await tab.evaluate(() => window.levelmapView.scale);
+    await pinch(40, 160);
+    const after = await tab.evaluate(() => window.levelmapView.scale);
+    assert.ok(after > before * 3 && after < before * 5, `pinch zooms in about 4×: ${before} → ${after}`);
+    await tab.screenshot({ path: path.join(artifacts, "6-tablet.png") });
+  } finally {
+    await tablet.close();
+  }
 });
 
 test("no console errors", () => {

@@ -44,6 +44,14 @@ pub struct DemoArgs {
     /// Keep serving the map after the robots finish, until Ctrl-C.
     #[arg(long)]
     pub serve: bool,
+    /// Bearer token of the mapper's write routes (re-optimize); none: they are off.
+    #[arg(
+        long,
+        env = "LEVELMAP_TOKEN",
+        default_value = "",
+        hide_env_values = true
+    )]
+    pub token: String,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -88,6 +96,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         store_path: args.dir.join("mapper.redb"),
         datum: Some(sim::PARK_DATUM.origin),
         mapping: sim_mapping_params(),
+        token: args.token.clone(),
         ..MapperConfig::default()
     })
     .await?;

@@ -21,6 +21,9 @@ use wire::session::now_ns;
 struct Api {
     shared: Arc<Shared>,
     work: mpsc::Sender<Work>,
+    /// Per fleet, the optimizer that answers covariance queries: it keeps the network's
+    /// symbolic factorization while the structure stays the same.
+    marginals: Arc<std::sync::Mutex<std::collections::HashMap<String, slam::Optimizer>>>,
 }
 
 pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>) -> Router {
@@ -29,6 +32,7 @@ pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>) -> Router {
         .route("/metrics", get(metrics))
         .route("/api/v1/openapi.json", get(openapi))
         .route("/api/v1/fleets", get(fleets))
+        .route("/api/v1/auth", get(auth))
         .route("/api/v1/fleets/{fleet}/summary", get(summary))
         .route("/api/v1/fleets/{fleet}/robots", get(robots))
         .route(
@@ -46,12 +50,17 @@ pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>) -> Router {
         .route("/api/v1/fleets/{fleet}/graph", get(graph))
         .route("/api/v1/fleets/{fleet}/graph.g2o", get(graph_g2o))
         .route("/api/v1/fleets/{fleet}/nodes/{node}", get(node_detail))
+        .route("/api/v1/fleets/{fleet}/covariances", get(covariances))
         .route("/api/v1/fleets/{fleet}/optimize", post(optimize))
         .route("/api/v1/events", get(events))
         .route("/api/v1/fleets/{fleet}/map.json", get(map_json))
         .route("/", get(web_index))
         .route("/web/{file}", get(web_file))
-        .with_state(Api { shared, work })
+        .with_state(Api {
+            shared,
+            work,
+            marginals: Arc::default(),
+        })
 }
 
 type Reply = Result<Response, (StatusCode, String)>;
@@ -403,6 +412,72 @@ async fn node_detail(State(api): State<Api>, Path((fleet, node)): Path<(String, 
     }))
 }
 
+#[derive(Deserialize)]
+struct CovarianceQuery {
+    /// Node ids, comma-separated.
+    nodes: String,
+}
+
+/// Most nodes one covariance query may ask for.
+const MAX_COVARIANCE_NODES: usize = 500;
+
+/// Marginal covariances of nodes' (x, y, θ) at the current poses, 3 × 3 row-major, null for
+/// the node that fixes the gauge. Each is the inverse of the normal matrix at that node.
+async fn covariances(
+    State(api): State<Api>,
+    Path(fleet): Path<String>,
+    Query(q): Query<CovarianceQuery>,
+) -> Reply {
+    let v = view(&api, &fleet)?;
+    let bad = |why: String| (StatusCode::BAD_REQUEST, why);
+    let nodes: Vec<usize> = q
+        .nodes
+        .split(',')
+        .filter(|s| !s.is_empty())
+        .map(|s| s.trim().parse::<usize>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| {
+            bad(format!(
+                "nodes={:?}: want node ids, comma-separated",
+                q.nodes
+            ))
+        })?;
+    if nodes.len() > MAX_COVARIANCE_NODES {
+        return Err(bad(format!(
+            "{} nodes asked for, at most {MAX_COVARIANCE_NODES} at once",
+            nodes.len()
+        )));
+    }
+    if let Some(n) = nodes.iter().find(|&&n| n >= v.poses.len()) {
+        return Err(not_found(format!("no node {n} in fleet {fleet:?}")));
+    }
+    let marginals = api.marginals.clone();
+    let covs = tokio::task::spawn_blocking(move || {
+        let graph = slam::PoseGraph {
+            poses: v.poses.clone(),
+            edges: v.edges.clone(),
+            gps: v.gps.clone(),
+        };
+        let mut all = marginals.lock().expect("marginals lock");
+        let optimizer = all.entry(v.id.clone()).or_default();
+        optimizer
+            .marginal_covariances(&graph, &nodes)
+            .map(|c| (nodes, c))
+    })
+    .await
+    .map_err(internal)?
+    .map_err(|e| (StatusCode::UNPROCESSABLE_ENTITY, e.to_string()))?;
+    let (nodes, covs) = covs;
+    let rows = |m: &slam::nalgebra::Matrix3<f64>| -> [[f64; 3]; 3] {
+        std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
+    };
+    json_reply(json!({
+        "fleet": fleet,
+        "nodes": nodes,
+        "covariance": covs.iter().map(|c| c.as_ref().map(rows)).collect::<Vec<_>>(),
+    }))
+}
+
 /// The robot's node poses as a TUM trajectory (`t x y z qx qy qz qw`, t in s), as evo reads it.
 async fn trajectory_tum(
     State(api): State<Api>,
@@ -635,17 +710,26 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
     ),
 ];
 
+/// Set to a `web/` folder, the dashboard's files are read from it on every request instead
+/// of the compiled-in copies (for working on the page without rebuilding the mapper).
+pub const WEB_DIR_ENV: &str = "LEVELMAP_WEB_DIR";
+
 fn web_reply(file: &str) -> Reply {
-    let (_, content_type, body) = WEB_FILES
+    let (name, content_type, body) = WEB_FILES
         .iter()
         .find(|(name, _, _)| *name == file)
         .ok_or_else(|| not_found(format!("no file {file:?} in the dashboard")))?;
+    let body = match std::env::var_os(WEB_DIR_ENV) {
+        Some(dir) => std::fs::read_to_string(std::path::Path::new(&dir).join(name))
+            .map_err(|e| internal(format!("{WEB_DIR_ENV}: {name}: {e}")))?,
+        None => body.to_string(),
+    };
     Ok((
         [
             (header::CONTENT_TYPE, *content_type),
             (header::CACHE_CONTROL, "no-cache"),
         ],
-        *body,
+        body,
     )
         .into_response())
 }
@@ -677,6 +761,17 @@ fn authorized(api: &Api, headers: &HeaderMap) -> Result<(), (StatusCode, String)
         ));
     }
     Ok(())
+}
+
+/// Whether the request's bearer token would be taken by the write routes, asked without
+/// writing (a page checks its stored token this way instead of meeting a 401).
+async fn auth(State(api): State<Api>, headers: HeaderMap) -> Reply {
+    let verdict = authorized(&api, &headers);
+    json_reply(json!({
+        "write_routes": !api.shared.token.is_empty(),
+        "authorized": verdict.is_ok(),
+        "reason": verdict.err().map(|(_, why)| why),
+    }))
 }
 
 async fn optimize(State(api): State<Api>, Path(fleet): Path<String>, headers: HeaderMap) -> Reply {
@@ -731,6 +826,7 @@ async fn openapi() -> Reply {
             "/healthz": {"get": {"summary": "Liveness", "responses": {"200": {"description": "ok"}}}},
             "/metrics": {"get": {"summary": "Prometheus text: accepted, duplicate and rejected messages by reason", "responses": {"200": {"description": "text"}}}},
             "/api/v1/fleets": get_json("Fleets with a map"),
+            "/api/v1/auth": {"get": {"summary": "Whether the bearer token sent would be taken by the write routes: write_routes (a token is configured), authorized, reason", "security": [{"bearer": []}], "responses": {"200": {"description": "JSON"}}}},
             "/api/v1/fleets/{fleet}/summary": get_json("Map summary: nodes, edges, closures, last optimization"),
             "/api/v1/fleets/{fleet}/robots": get_json("Robots with live map pose and last-seen time"),
             "/api/v1/fleets/{fleet}/robots/{robot}/pose": get_json("One robot's live map pose"),
@@ -742,6 +838,7 @@ async fn openapi() -> Reply {
             "/api/v1/fleets/{fleet}/map.json": get_json("Where map.png lies: resolution_m, origin_m (lower-left corner of cell (0, 0)), width, height (cells), nodes"),
             "/api/v1/fleets/{fleet}/map.geojson": {"get": {"summary": "Nodes and trajectories in WGS84 (RFC 7946)", "responses": {"200": {"description": "application/geo+json"}, "404": {"description": "no datum yet"}}}},
             "/api/v1/fleets/{fleet}/graph.g2o": {"get": {"summary": "Pose network as g2o text", "responses": {"200": {"description": "text"}}}},
+            "/api/v1/fleets/{fleet}/covariances": get_json("Marginal covariances of ?nodes=1,2,3 (at most 500): 3 × 3 over (x, y, θ), row-major; null for the node fixing the gauge"),
             "/api/v1/fleets/{fleet}/nodes/{node}": get_json("Node detail with its leveled scan and GPS fixes (oldest first: position and lever arm in the node frame, m)"),
             "/api/v1/fleets/{fleet}/optimize": {"post": {"summary": "Re-optimize the fleet's network now", "security": [{"bearer": []}],
                 "responses": {"200": {"description": "the optimizer's report"}, "401": {"description": "no or wrong token"}, "403": {"description": "no token configured"}}}},

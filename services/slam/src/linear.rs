@@ -219,6 +219,41 @@ impl SparsePattern {
     }
 }
 
+impl SparsePattern {
+    /// Solves A X = B for the `columns` right-hand sides in `b` (column-major, `dim()` rows
+    /// each) at once with the last factor; X in the same layout.
+    ///
+    /// # Panics
+    /// If the last [`Self::factorize`] did not succeed, or `b` is not `columns` columns.
+    pub fn solve_columns(&mut self, b: &[f64], columns: usize) -> Vec<f64> {
+        assert!(self.factored, "solve needs a successful factorize");
+        assert_eq!(b.len(), self.n * columns, "columns of dim() values");
+        let mut permuted = vec![0.0; b.len()];
+        for (out, col) in permuted.chunks_mut(self.n).zip(b.chunks(self.n)) {
+            for (&place, &value) in self.inverse.iter().zip(col) {
+                out[place] = value;
+            }
+        }
+        let mut scratch = MemBuffer::new(
+            self.symbolic
+                .solve_in_place_scratch::<f64>(columns, Par::Seq),
+        );
+        LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(&mut permuted, self.n, columns),
+            Par::Seq,
+            MemStack::new(&mut scratch),
+        );
+        let mut x = vec![0.0; b.len()];
+        for (out, col) in x.chunks_mut(self.n).zip(permuted.chunks(self.n)) {
+            for (o, &place) in out.iter_mut().zip(&self.inverse) {
+                *o = col[place];
+            }
+        }
+        x
+    }
+}
+
 /// The lower triangle of a block pattern from its `(row, col)` block pairs (duplicates
 /// allowed): for each block column, the diagonal block first, then the block rows below it
 /// in increasing order.

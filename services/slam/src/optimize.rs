@@ -344,6 +344,19 @@ impl Optimizer {
         graph: &PoseGraph,
         node: usize,
     ) -> Result<Option<Matrix3<f64>>, GraphError> {
+        Ok(self.marginal_covariances(graph, &[node])?[0])
+    }
+
+    /// [`Optimizer::marginal_covariance`] of several nodes: one factorization, and one solve
+    /// with three right-hand sides per node.
+    ///
+    /// # Panics
+    /// If a node is not in the graph.
+    pub fn marginal_covariances(
+        &mut self,
+        graph: &PoseGraph,
+        nodes: &[usize],
+    ) -> Result<Vec<Option<Matrix3<f64>>>, GraphError> {
         graph.validate()?;
         if self
             .structure
@@ -353,25 +366,36 @@ impl Optimizer {
             self.structure = Some(Structure::build(graph));
         }
         let structure = self.structure.as_mut().expect("built above");
-        let Some(v) = structure.var_of[node] else {
-            return Ok(None);
-        };
+        let vars: Vec<Option<usize>> = nodes.iter().map(|&n| structure.var_of[n]).collect();
+        let solved: Vec<usize> = vars.iter().flatten().copied().collect();
+        if solved.is_empty() {
+            return Ok(vec![None; nodes.len()]);
+        }
         let mut lin = Linearization::default();
         linearize(graph, structure, &mut lin);
         structure
             .pattern
             .factorize(&lin.values)
             .map_err(|_| GraphError::Singular)?;
-        let mut cov = Matrix3::zeros();
-        for c in 0..3 {
-            let mut unit = vec![0.0; structure.pattern.dim()];
-            unit[v + c] = 1.0;
-            let x = structure.pattern.solve(&unit);
-            for r in 0..3 {
-                cov[(r, c)] = x[v + r];
+        let dim = structure.pattern.dim();
+        // A few nodes per solve: the right-hand sides are dense, dim() values each.
+        let mut blocks = Vec::with_capacity(solved.len());
+        for chunk in solved.chunks(32) {
+            let mut units = vec![0.0; dim * 3 * chunk.len()];
+            for (k, &v) in chunk.iter().enumerate() {
+                for c in 0..3 {
+                    units[(3 * k + c) * dim + v + c] = 1.0;
+                }
+            }
+            let x = structure.pattern.solve_columns(&units, 3 * chunk.len());
+            for (k, &v) in chunk.iter().enumerate() {
+                let block = Matrix3::from_fn(|r, c| x[(3 * k + c) * dim + v + r]);
+                // Symmetric up to rounding: made exactly so.
+                blocks.push((block + block.transpose()) * 0.5);
             }
         }
-        Ok(Some(cov))
+        let mut blocks = blocks.into_iter();
+        Ok(vars.iter().map(|v| v.and_then(|_| blocks.next())).collect())
     }
 }
 
