@@ -123,6 +123,7 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
     assert_eq!(page.0, 200);
     assert!(page.1.contains("/web/app.js"), "the page loads its module");
     assert_eq!(http_get(http, "/web/app.js").unwrap().0, 200);
+    assert_eq!(http_get(http, "/web/cloud.js").unwrap().0, 200);
     assert_eq!(http_get(http, "/web/nope.js").unwrap().0, 404);
     // GeoJSON in WGS84 near the simulated park's datum (lon 9.71, lat 52.39).
     let geo = json(&format!("{base}/map.geojson"));
@@ -174,6 +175,9 @@ fn check_clouds(http: &str, node1: &serde_json::Value, sent: &wire::v1::Segmente
     let scan = &node1["counts"];
     let valid = ["ground", "landmark", "overhang"].map(|k| scan[k].as_u64().unwrap());
     assert_eq!(c["source_points"].as_u64(), Some(valid.iter().sum()));
+    for (k, n) in ["ground", "landmark", "overhang"].iter().zip(valid) {
+        assert_eq!(c["source_counts"][k].as_u64(), Some(n), "{k}");
+    }
     assert_eq!(
         (c["max_points"].as_u64(), c["voxel_m"].as_f64()),
         (Some(6000), Some(0.1))

@@ -358,6 +358,10 @@ async fn node_cloud(State(api): State<Api>, Path((fleet, node)): Path<(String, u
         "counts": {"ground": counts.ground, "landmark": counts.landmark, "overhang": counts.overhang},
         "kept": cloud.classes.len(),
         "source_points": cloud.source_points,
+        // The scan's points per class before the reduction, when the robot sent its counts.
+        "source_counts": n.counts.map(|c| json!({
+            "ground": c.ground, "landmark": c.landmark, "overhang": c.overhang,
+        })),
         // The f32's shortest decimal (0.1, not 0.10000000149011612).
         "voxel_m": cloud.voxel_m.to_string().parse::<f64>().unwrap_or(0.0),
         "max_points": cloud.max_points,
@@ -528,6 +532,11 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
         include_str!("../../../web/app.js"),
     ),
     (
+        "cloud.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../web/cloud.js"),
+    ),
+    (
         "geo.js",
         "text/javascript; charset=utf-8",
         include_str!("../../../web/geo.js"),
@@ -652,7 +661,7 @@ async fn openapi() -> Reply {
             "/api/v1/fleets/{fleet}/map.geojson": {"get": {"summary": "Nodes and trajectories in WGS84 (RFC 7946)", "responses": {"200": {"description": "application/geo+json"}, "404": {"description": "no datum yet"}}}},
             "/api/v1/fleets/{fleet}/graph.g2o": {"get": {"summary": "Pose network as g2o text", "responses": {"200": {"description": "text"}}}},
             "/api/v1/fleets/{fleet}/nodes/{node}": get_json("Node detail with its leveled scan and GPS fixes (oldest first: position and lever arm in the node frame, m); cloud: whether …/cloud has its 3D cloud"),
-            "/api/v1/fleets/{fleet}/nodes/{node}/cloud": {"get": {"summary": "The node's segmented 3D cloud as its robot reduced it: points (flat x, y, z in m, the leveled frame of its scan, to the cm), classes (one per point: 1 ground, 2 landmark, 3 overhang), counts per class, kept, source_points, voxel_m, max_points",
+            "/api/v1/fleets/{fleet}/nodes/{node}/cloud": {"get": {"summary": "The node's segmented 3D cloud as its robot reduced it: points (flat x, y, z in m, the leveled frame of its scan, to the cm), classes (one per point: 1 ground, 2 landmark, 3 overhang), counts per class, kept, source_points and source_counts (before the reduction), voxel_m, max_points",
                 "responses": {"200": {"description": "JSON"}, "404": {"description": "unknown fleet or node, or the node has no cloud (its robot keeps none)"}}}},
             "/api/v1/fleets/{fleet}/optimize": {"post": {"summary": "Re-optimize the fleet's network now", "security": [{"bearer": []}],
                 "responses": {"200": {"description": "the optimizer's report"}, "401": {"description": "no or wrong token"}, "403": {"description": "no token configured"}}}},
