@@ -617,10 +617,7 @@ impl NodeContext<'_> {
         match map.ingest(&node) {
             Ok(ingested) => {
                 // The cloud goes to its own table: the node is stored (and replayed) without.
-                let (payload, cloud) = match node.cloud.take() {
-                    Some(cloud) => (node.encode_to_vec(), Some(cloud.encode_to_vec())),
-                    None => (payload, None),
-                };
+                let (payload, cloud) = crate::store::split_cloud(&mut node, payload);
                 Some(Accepted {
                     fleet,
                     robot,

@@ -7,6 +7,7 @@
 
 use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
 use std::path::Path;
+use wire::{Message, v1};
 
 /// (fleet, arrival index) → encoded `v1::Node`, without `Node.cloud`.
 const NODES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("nodes");
@@ -68,6 +69,15 @@ pub struct FleetBatch<'a> {
     pub edges: Vec<Vec<u8>>,
     /// The network was optimized after the node of this arrival index.
     pub solved_after: Option<u64>,
+}
+
+/// What is stored of a received node (`payload`, decoded as `node`): the node without its
+/// cloud (the payload itself when it has none) and the encoded cloud, taken out of `node`.
+pub fn split_cloud(node: &mut v1::Node, payload: Vec<u8>) -> (Vec<u8>, Option<Vec<u8>>) {
+    match node.cloud.take() {
+        Some(cloud) => (node.encode_to_vec(), Some(cloud.encode_to_vec())),
+        None => (payload, None),
+    }
 }
 
 impl Store {
@@ -156,6 +166,32 @@ impl Store {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_node_is_stored_without_its_cloud() {
+        let cloud = v1::SegmentedCloud {
+            xyz_cm: vec![100, -200, 30],
+            classes: vec![2],
+            source_points: 10,
+            voxel_m: 0.1,
+            max_points: 6000,
+        };
+        let mut node = v1::Node {
+            node_seq: 7,
+            cloud: Some(cloud.clone()),
+            ..Default::default()
+        };
+        let payload = node.encode_to_vec();
+        let (stored, apart) = split_cloud(&mut node, payload.clone());
+        assert!(node.cloud.is_none());
+        let back = v1::Node::decode(stored.as_slice()).unwrap();
+        assert_eq!((back.node_seq, back.cloud), (7, None));
+        assert!(stored.len() < payload.len());
+        let apart = v1::SegmentedCloud::decode(apart.unwrap().as_slice()).unwrap();
+        assert_eq!(apart, cloud);
+        // Without a cloud: the payload as received.
+        assert_eq!(split_cloud(&mut node, stored.clone()), (stored, None));
+    }
 
     #[test]
     fn clouds_are_kept_apart_and_survive_reopening() {
