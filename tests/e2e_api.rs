@@ -1,6 +1,6 @@
 //! The HTTP API over a real mapper fed real nodes over Zenoh: every route answers in the
-//! format users' tools read (JSON, TUM, g2o, PNG, PGM + YAML for map_server, GeoJSON), and
-//! write routes need the token.
+//! format users' tools read (JSON, TUM, g2o, PNG, PGM + YAML for map_server, GeoJSON), a
+//! node's 3D cloud is served when it came with one, and write routes need the token.
 
 mod common;
 
@@ -30,7 +30,10 @@ async fn every_route_answers_in_its_format() {
     let dir = temp_dir("api");
     let (mapper, session, http) = in_process_mapper(&dir, TOKEN).await;
     let key = wire::node_key("park", "robot0").unwrap();
-    let nodes = real_nodes(3);
+    let mut nodes = real_nodes(3);
+    // Nodes 0 and 1 come with their segmented cloud, node 2 without.
+    let cloud = nodes[1].cloud.clone().expect("a cloud");
+    nodes[2].cloud = None;
     // Re-sent until all are in, as the edge does.
     loop {
         for n in &nodes {
@@ -46,7 +49,7 @@ async fn every_route_answers_in_its_format() {
         }
     }
     let h = http.clone();
-    tokio::task::spawn_blocking(move || check_routes(&h))
+    tokio::task::spawn_blocking(move || check_routes(&h, &cloud))
         .await
         .unwrap();
     session.close().await.unwrap();
@@ -54,7 +57,7 @@ async fn every_route_answers_in_its_format() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-fn check_routes(http: &str) {
+fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
     let base = "/api/v1/fleets/park";
     let get = |path: &str| {
         let (status, body) = http_get(http, path).unwrap_or_else(|| panic!("{path}: no answer"));
@@ -116,6 +119,7 @@ fn check_routes(http: &str) {
     assert_eq!(node["node_seq"], 1);
     assert!(!node["scan"]["range_m"].as_array().unwrap().is_empty());
     assert_eq!(http_get(http, &format!("{base}/nodes/99")).unwrap().0, 404);
+    check_clouds(http, &node, sent_cloud);
     assert_eq!(
         http_get(http, "/api/v1/fleets/nowhere/summary").unwrap().0,
         404
@@ -190,6 +194,7 @@ fn check_routes(http: &str) {
     assert_eq!(page.0, 200);
     assert!(page.1.contains("/web/app.js"), "the page loads its module");
     assert_eq!(http_get(http, "/web/app.js").unwrap().0, 200);
+    assert_eq!(http_get(http, "/web/cloud.js").unwrap().0, 200);
     assert_eq!(http_get(http, "/web/nope.js").unwrap().0, 404);
     // GeoJSON in WGS84 near the simulated park's datum (lon 9.71, lat 52.39).
     let geo = json(&format!("{base}/map.geojson"));
@@ -200,6 +205,7 @@ fn check_routes(http: &str) {
     // OpenAPI names the routes; metrics are Prometheus text.
     let openapi = json("/api/v1/openapi.json");
     assert!(openapi["paths"]["/api/v1/fleets/{fleet}/summary"].is_object());
+    assert!(openapi["paths"]["/api/v1/fleets/{fleet}/nodes/{node}/cloud"].is_object());
     assert!(get("/metrics").contains("levelmap_nodes_accepted_total 3"));
     // Write routes need the token.
     let optimize = format!("{base}/optimize");
@@ -210,4 +216,55 @@ fn check_routes(http: &str) {
     let auth = json("/api/v1/auth");
     assert_eq!(auth["write_routes"], true);
     assert_eq!(auth["authorized"], false, "{auth}");
+}
+
+/// Node 1's cloud as sent (to the centimetre, in the leveled frame, classes 1..3); node 2 came
+/// without one: 404 with the reason, and its detail says so.
+fn check_clouds(http: &str, node1: &serde_json::Value, sent: &wire::v1::SegmentedCloud) {
+    let base = "/api/v1/fleets/park/nodes";
+    assert_eq!(node1["cloud"], true, "{node1}");
+    let (status, body) = http_get(http, &format!("{base}/1/cloud")).unwrap();
+    assert_eq!(status, 200, "{body}");
+    let c: serde_json::Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(
+        (c["id"].as_u64(), c["frame"].as_str()),
+        (Some(1), Some("leveled"))
+    );
+    let points = c["points"].as_array().unwrap();
+    let classes = c["classes"].as_array().unwrap();
+    let kept = c["kept"].as_u64().unwrap() as usize;
+    assert!(kept > 0 && kept <= 6000, "{kept}");
+    assert_eq!((points.len(), classes.len()), (3 * kept, kept));
+    for (got, sent) in points.iter().zip(&sent.xyz_cm) {
+        assert_eq!(got.as_f64().unwrap(), f64::from(*sent) / 100.0);
+    }
+    let sent_classes: Vec<u64> = sent.classes.iter().map(|&b| b.into()).collect();
+    let classes: Vec<u64> = classes.iter().map(|v| v.as_u64().unwrap()).collect();
+    assert_eq!(classes, sent_classes);
+    let counts = &c["counts"];
+    for (name, code) in [("ground", 1), ("landmark", 2), ("overhang", 3)] {
+        let n = counts[name].as_u64().unwrap();
+        assert!(n > 0, "{name}: {counts}");
+        assert_eq!(n as usize, classes.iter().filter(|&&k| k == code).count());
+    }
+    let scan = &node1["counts"];
+    let valid = ["ground", "landmark", "overhang"].map(|k| scan[k].as_u64().unwrap());
+    assert_eq!(c["source_points"].as_u64(), Some(valid.iter().sum()));
+    for (k, n) in ["ground", "landmark", "overhang"].iter().zip(valid) {
+        assert_eq!(c["source_counts"][k].as_u64(), Some(n), "{k}");
+    }
+    assert_eq!(
+        (c["max_points"].as_u64(), c["voxel_m"].as_f64()),
+        (Some(6000), Some(0.1))
+    );
+
+    let node2 = get_json(http, &format!("{base}/2")).unwrap();
+    assert_eq!(node2["cloud"], false);
+    let (status, body) = http_get(http, &format!("{base}/2/cloud")).unwrap();
+    assert_eq!(status, 404);
+    assert!(
+        body.contains("node 2") && body.contains("no 3D cloud"),
+        "{body}"
+    );
+    assert_eq!(http_get(http, &format!("{base}/99/cloud")).unwrap().0, 404);
 }

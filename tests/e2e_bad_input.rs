@@ -1,5 +1,6 @@
-//! Bad input on the wire: garbage bytes, a wrong wire version, NaN ranges, a duplicate and an
-//! out-of-order node, an unknown fleet, a key that disagrees with the header. Each is
+//! Bad input on the wire: garbage bytes, a wrong wire version, NaN ranges, a cloud with fewer
+//! classes than points, a duplicate and an out-of-order node, an unknown fleet, a key that
+//! disagrees with the header. Each is
 //! rejected and counted by reason on /metrics, the mapper keeps running, and the nodes it had
 //! accepted are all still in the map. A real mapper and a real Zenoh client over TCP on
 //! loopback; the outcome is read through HTTP only.
@@ -51,6 +52,8 @@ async fn bad_messages_are_counted_and_rejected_and_nothing_accepted_is_lost() {
     version.header.as_mut().unwrap().version = 2;
     let mut nan = nodes[1].clone();
     nan.scan.as_mut().unwrap().range_m[3] = f32::NAN;
+    let mut bad_cloud = nodes[1].clone();
+    bad_cloud.cloud.as_mut().expect("a cloud").classes.pop();
     let mut ahead = nodes[1].clone();
     ahead.node_seq = 5;
     // A well-formed node of robot9, sent on robot0's key.
@@ -62,6 +65,7 @@ async fn bad_messages_are_counted_and_rejected_and_nothing_accepted_is_lost() {
         (key.clone(), b"\xff\x00garbage".to_vec(), "malformed"),
         (key.clone(), version.encode_to_vec(), "version"),
         (key.clone(), nan.encode_to_vec(), "invalid_value"),
+        (key.clone(), bad_cloud.encode_to_vec(), "inconsistent"),
         (key.clone(), ahead.encode_to_vec(), "out_of_order"),
         (
             wire::node_key("elsewhere", "robot0").unwrap(),

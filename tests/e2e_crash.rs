@@ -1,6 +1,7 @@
 //! Crash: the mapper is killed (SIGKILL) while two robots publish, then restarted on the same
 //! store. Every node it had acked is in the restored map, and every node the robots made
-//! reaches the map (their outboxes replay what was not acked). Checked through HTTP only.
+//! reaches the map (their outboxes replay what was not acked), each with its 3D cloud.
+//! Checked through HTTP only.
 
 mod common;
 
@@ -56,6 +57,17 @@ fn every_acked_node_survives_a_mapper_kill_and_every_node_arrives() {
     }
     let summary = get_json(&mapper.http, "/api/v1/fleets/park/summary").expect("summary");
     assert_eq!(summary["robots"], ROBOTS);
+    // Every node's cloud, those stored before the kill too, under the node's own id.
+    let graph = get_json(&mapper.http, "/api/v1/fleets/park/graph").expect("graph");
+    for node in graph["nodes"].as_array().expect("nodes") {
+        let path = format!("/api/v1/fleets/park/nodes/{}/cloud", node["id"]);
+        let cloud = get_json(&mapper.http, &path).unwrap_or_else(|| panic!("{path}"));
+        assert_eq!(
+            (&cloud["robot"], &cloud["node_seq"]),
+            (&node["robot"], &node["node_seq"])
+        );
+        assert!(cloud["kept"].as_u64().unwrap() > 0, "{path}");
+    }
     drop(mapper);
     std::fs::remove_dir_all(&dir).ok();
 }

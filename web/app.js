@@ -3,6 +3,7 @@
 
 import { View, scaleBarMetres, formatMetres } from "./view.js";
 import { enuToGeodetic, formatLatLon } from "./geo.js";
+import { showCloud } from "./cloud.js";
 
 const API = "/api/v1";
 const PALETTE = ["#e6550d", "#3182bd", "#31a354", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf"];
@@ -409,6 +410,9 @@ async function inspect(id) {
     ["edges", n.edges.map((e) => `${e.kind} ${e.from}→${e.to}`).join(", ") || "—"],
   ]);
   redraw();
+  // The segmented 3D cloud (cloud.js): state.inspector.cloud = {points, ground, landmark, overhang, …}.
+  const cloud = await showCloud(n.cloud ? `${API}/fleets/${state.fleet}/nodes/${id}/cloud` : null);
+  if (state.inspector?.id === id) state.inspector.cloud = cloud;
 }
 
 /// The leveled scan in the robot frame, forward (x) up, fitted to the canvas.

@@ -306,11 +306,12 @@ impl Relay {
     }
 }
 
-/// The first `n` nodes of a simulated robot.
+/// The first `n` nodes of a simulated robot, with their clouds (the edge's default).
 pub fn real_nodes(n: usize) -> Vec<wire::v1::Node> {
     let mut source = SimSource::new(&SimSourceConfig::default(), 1_700_000_000_000_000_000, 10.0)
         .expect("loop 0");
-    let mut builder = NodeBuilder::new("park", "robot0", Default::default(), Default::default(), 0);
+    let mut builder = NodeBuilder::new("park", "robot0", Default::default(), Default::default(), 0)
+        .with_cloud(&Default::default());
     let mut nodes = Vec::new();
     while nodes.len() < n {
         match source.next_event().expect("enough scans") {

@@ -4,6 +4,7 @@
 //   LEVELMAP_BIN=…/debug/levelmap node --test tests/
 //
 // Screenshots go to LEVELMAP_WEB_ARTIFACTS (default ../target/web-artifacts).
+// The inspector test prints how long the 3D cloud took to show after the click.
 
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
@@ -171,6 +172,10 @@ test("clicking a node opens the inspector with its scan", async () => {
   await page.mouse.wheel(0, -1);
   const at = await page.evaluate(() => window.levelmapState.nodeOnPage(0));
   assert.ok(at, "node 0 is on the page");
+  // When the click ended, in the page's clock (the cloud's time to show is measured from it).
+  await page.evaluate(() =>
+    document.getElementById("map").addEventListener("pointerup", () => (window.clickedAt = performance.now()), { once: true }),
+  );
   await page.mouse.click(at.x, at.y);
   await waitFor("the inspector", () => page.evaluate(() => window.levelmapState.inspector?.points > 0), 10_000);
   const inspected = await page.evaluate(() => window.levelmapState.inspector);
@@ -254,6 +259,66 @@ test("a tablet: panels under the map, tap to inspect, pinch to zoom", async () =
   } finally {
     await tablet.close();
   }
+});
+
+// The class colours of web/cloud.js, as RGB.
+const CLASS_RGB = { ground: [0xb5, 0x9a, 0x6a], landmark: [0xc0, 0x39, 0x2b], overhang: [0x27, 0xae, 0x60] };
+
+test("the inspector shows the node's segmented 3D cloud, which orbits and zooms", async () => {
+  await page.waitForFunction(() => window.levelmapState.inspector?.cloud?.points > 0, null, {
+    timeout: 10_000,
+    polling: "raf",
+  });
+  const cloud = await page.evaluate(() => {
+    const c = window.levelmapState.inspector.cloud;
+    return { ...c, camera: { ...c.camera }, openMs: c.shownAt - window.clickedAt };
+  });
+  assert.equal(cloud.id, 0);
+  for (const k of ["ground", "landmark", "overhang"]) assert.ok(cloud[k] > 0, `${k} points: ${JSON.stringify(cloud)}`);
+  assert.equal(cloud.ground + cloud.landmark + cloud.overhang, cloud.points);
+  assert.ok(cloud.points <= 6000 && cloud.source_points >= cloud.points, JSON.stringify(cloud));
+  assert.ok(cloud.drawn > cloud.points * 0.8, `most points on the canvas: ${cloud.drawn} of ${cloud.points}`);
+  await page.locator("#cloud").scrollIntoViewIfNeeded();
+  assert.equal(await page.isVisible("#cloud"), true);
+  assert.match(await page.textContent("#cloud-legend"), /ground.*landmark.*overhang/);
+  assert.match(await page.textContent("#cloud-list"), /ground\d+ of \d+ \(\d+ %\)landmark\d+ of \d+/);
+  // Each class's colour is on the canvas.
+  const pixels = () =>
+    page.evaluate((rgb) => {
+      const c = document.getElementById("cloud");
+      const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+      const n = Object.fromEntries(Object.keys(rgb).map((k) => [k, 0]));
+      for (let i = 0; i < d.length; i += 4) {
+        if (d[i + 3] < 128) continue;
+        for (const [k, [r, g, b]] of Object.entries(rgb)) {
+          if (Math.abs(d[i] - r) + Math.abs(d[i + 1] - g) + Math.abs(d[i + 2] - b) < 12) n[k] += 1;
+        }
+      }
+      return n;
+    }, CLASS_RGB);
+  const before = await pixels();
+  for (const [k, n] of Object.entries(before)) assert.ok(n > 0, `${k} pixels on the canvas: ${JSON.stringify(before)}`);
+  await page.screenshot({ path: path.join(artifacts, "7-cloud.png") });
+  // Drag to orbit, wheel to zoom: the camera moves and the picture changes.
+  const box = await page.locator("#cloud").boundingBox();
+  const [cx, cy] = [box.x + box.width / 2, box.y + box.height / 2];
+  await page.mouse.move(cx, cy);
+  await page.mouse.down();
+  await page.mouse.move(cx + 80, cy + 30, { steps: 8 });
+  await page.mouse.up();
+  await page.mouse.wheel(0, -400);
+  await page.waitForFunction(() => window.levelmapState.inspector.cloud.camera.zoom > 1.5, null, { timeout: 5000 });
+  const camera = await page.evaluate(() => ({ ...window.levelmapState.inspector.cloud.camera }));
+  assert.ok(Math.abs(camera.yaw - cloud.camera.yaw) > 0.5, `orbited: ${JSON.stringify([cloud.camera, camera])}`);
+  assert.ok(camera.pitch !== cloud.camera.pitch, "tilted");
+  await sleep(100);
+  assert.notDeepEqual(await pixels(), before, "redrawn from the new viewpoint");
+  await page.screenshot({ path: path.join(artifacts, "8-cloud-orbited.png") });
+  console.log(
+    `inspector cloud: ${cloud.points} of ${cloud.source_points} points (ground ${cloud.ground}, landmark ` +
+      `${cloud.landmark}, overhang ${cloud.overhang}); shown ${cloud.openMs.toFixed(0)} ms after the click, of which ` +
+      `fetch + parse + first draw ${cloud.loadMs.toFixed(0)} ms (draw ${cloud.drawMs.toFixed(1)} ms)`,
+  );
 });
 
 test("no console errors", () => {

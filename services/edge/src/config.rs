@@ -1,6 +1,7 @@
 //! The edge service's configuration (TOML). Every field has a default; `deploy/edge.toml`
 //! shows them all.
 
+use crate::cloud::CloudParams;
 use crate::node::NodeParams;
 use crate::source::{FilesSourceConfig, SimSourceConfig};
 use leveling::SegmentParams;
@@ -23,6 +24,8 @@ pub struct EdgeConfig {
     pub node: NodeParams,
     /// Segmentation thresholds (paper 3.1); see deploy/leveling.toml.
     pub leveling: SegmentParams,
+    /// Whether nodes carry their segmented 3D cloud, and how it is reduced.
+    pub cloud: CloudParams,
     /// Live odometry publication rate (Hz).
     pub odometry_rate_hz: f64,
     /// Re-send every unacked node after this long without ack progress (ms).
@@ -60,6 +63,7 @@ impl Default for EdgeConfig {
             outbox_path: PathBuf::from("levelmap-edge-outbox.redb"),
             node: NodeParams::default(),
             leveling: SegmentParams::default(),
+            cloud: CloudParams::default(),
             odometry_rate_hz: 10.0,
             resend_after_ms: 1000,
             speed: 1.0,

@@ -2,14 +2,17 @@
 //! started every few metres or degrees, committed to an on-disk outbox and published over
 //! Zenoh until the mapper acks it; live odometry is published best effort.
 //!
-//! [`node`] and [`source`] are pure; [`outbox`] is the disk; [`service`] is the thin async shell.
+//! [`node`], [`cloud`] and [`source`] are pure; [`outbox`] is the disk; [`service`] is the thin
+//! async shell.
 
+pub mod cloud;
 pub mod config;
 pub mod node;
 pub mod outbox;
 pub mod service;
 pub mod source;
 
+pub use cloud::CloudParams;
 pub use config::{EdgeConfig, SourceConfig};
 pub use node::{GpsReading, NodeBuilder, NodeError, NodeParams, PlanarScan, SensorScan};
 pub use outbox::{Outbox, OutboxError};

@@ -1,7 +1,9 @@
 //! From 3D scans with odometry and GPS to the nodes a robot sends (pure, no I/O): a node
 //! every few metres or degrees, its scan leveled (paper 2.1–3.2), every GPS fix since the
-//! previous node carried to the scan's start.
+//! previous node carried to the scan's start, and, when kept, the segmented 3D cloud reduced
+//! ([`crate::cloud`]).
 
+use crate::cloud::{self, CloudParams};
 use leveling::nalgebra::{Isometry3, Point3, Vector3};
 use leveling::{DeskewError, Leveler, PoseTrack, Scan3d, SegmentParams, leveled_frame};
 use serde::{Deserialize, Serialize};
@@ -102,6 +104,8 @@ pub struct NodeBuilder {
     pending_gps: Vec<GpsReading>,
     /// The stamp of the latest fix taken (a fix a source repeats is taken once).
     last_gps_ns: Option<u64>,
+    /// How the segmented cloud is reduced, when nodes carry it.
+    cloud: Option<CloudParams>,
 }
 
 impl NodeBuilder {
@@ -121,7 +125,15 @@ impl NodeBuilder {
             last: None,
             pending_gps: Vec::new(),
             last_gps_ns: None,
+            cloud: None,
         }
+    }
+
+    /// Nodes of leveled scans carry their segmented cloud, reduced by `params`, when
+    /// `params.keep` (without this call, none do).
+    pub fn with_cloud(mut self, params: &CloudParams) -> NodeBuilder {
+        self.cloud = params.keep.then(|| params.clone());
+        self
     }
 
     /// The node of `scan` when the robot moved far enough since the last node (or there is
@@ -145,12 +157,12 @@ impl NodeBuilder {
             Pose2::from_isometry3(&leveled_frame(&robot_at_start, &scan.sensor_in_robot).inverse());
         let wire_scan =
             wire::leveled_scan_to_wire(&leveled.scan, &leveled.counts, self.header(start_ns));
-        Ok(Some(self.assemble(
-            start_ns,
-            &robot_at_start,
-            scan_frame,
-            wire_scan,
-        )))
+        let cloud = self.cloud.as_ref().map(|params| {
+            wire::cloud_to_wire(&cloud::reduce(&leveled.cloud, &leveled.classes, params))
+        });
+        let mut node = self.assemble(start_ns, &robot_at_start, scan_frame, wire_scan);
+        node.cloud = cloud;
+        Ok(Some(node))
     }
 
     /// The node of a scan from a fixed 2D scanner (no leveling: its frame tilts with the
@@ -231,6 +243,7 @@ impl NodeBuilder {
                 .map(|last| pose2_to_wire(last.between(&robot2))),
             scan_origin_in_robot: Some(pose2_to_wire(robot2.between(&scan_frame))),
             earlier_gps: fixes,
+            cloud: None,
         };
         self.next_node_seq += 1;
         self.last = Some(robot2);
@@ -350,5 +363,58 @@ mod tests {
         assert_eq!(stamps(&node), [7, 8, 9, 10, 11]);
         let node = builder.offer_planar(&scan(15 * S, Vec::new())).unwrap();
         assert!(node.gps.is_none() && node.earlier_gps.is_empty());
+    }
+
+    #[test]
+    fn nodes_of_the_simulated_robot_carry_their_cloud_when_kept() {
+        use crate::{SimSource, SimSourceConfig, Source, SourceEvent};
+        use wire::Message;
+        let mut source = SimSource::new(&SimSourceConfig::default(), 0, 10.0).unwrap();
+        let new = || NodeBuilder::new("park", "robot0", Default::default(), Default::default(), 0);
+        let mut with = new().with_cloud(&CloudParams::default());
+        let mut without = new();
+        let mut plain = new().with_cloud(&CloudParams {
+            keep: false,
+            ..CloudParams::default()
+        });
+        let (mut sizes, mut nodes) = (Vec::new(), 0);
+        while nodes < 3 {
+            let Some(SourceEvent::Scan(scan)) = source.next_event() else {
+                continue;
+            };
+            let node = with.offer(&scan).unwrap();
+            let bare = without.offer(&scan).unwrap();
+            assert_eq!(plain.offer(&scan).unwrap(), bare, "keep = false: no cloud");
+            let (Some(node), Some(bare)) = (node, bare) else {
+                continue;
+            };
+            nodes += 1;
+            wire::validate_node(&node).unwrap();
+            assert!(bare.cloud.is_none());
+            let cloud = node.cloud.as_ref().unwrap();
+            let kept = wire::validate_cloud(cloud).unwrap();
+            // Every class is there, the cap holds, and nothing else differs.
+            assert!(
+                kept.ground > 0 && kept.landmark > 0 && kept.overhang > 0,
+                "{kept:?}"
+            );
+            assert!(cloud.classes.len() <= 6000);
+            let counts = node.scan.as_ref().unwrap().counts.unwrap();
+            assert_eq!(
+                cloud.source_points,
+                counts.ground + counts.landmark + counts.overhang
+            );
+            assert_eq!(
+                v1::Node {
+                    cloud: None,
+                    ..node.clone()
+                },
+                bare
+            );
+            sizes.push((bare.encoded_len(), node.encoded_len(), cloud.classes.len()));
+        }
+        // Well under 100 KB a node with its cloud (printed with --nocapture).
+        eprintln!("node bytes without cloud, with cloud, cloud points: {sizes:?}");
+        assert!(sizes.iter().all(|&(_, with, _)| with < 60_000), "{sizes:?}");
     }
 }

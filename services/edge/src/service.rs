@@ -231,7 +231,8 @@ fn produce(
         config.node.clone(),
         config.leveling,
         first_seq,
-    );
+    )
+    .with_cloud(&config.cloud);
     let started = Instant::now();
     let mut first_stamp = None;
     let odometry_period_ns = (1e9 / config.odometry_rate_hz.max(0.1)) as u64;

@@ -3,6 +3,7 @@
 
 use crate::server::Work;
 use crate::state::{FleetView, Shared};
+use crate::store::Store;
 use axum::Router;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderMap, StatusCode, header};
@@ -15,6 +16,7 @@ use std::fmt::Write as _;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::sync::mpsc;
+use wire::Message;
 use wire::session::now_ns;
 
 #[derive(Clone)]
@@ -24,9 +26,11 @@ struct Api {
     /// Per fleet, the optimizer that answers covariance queries: it keeps the network's
     /// symbolic factorization while the structure stays the same.
     marginals: Arc<std::sync::Mutex<std::collections::HashMap<String, slam::Optimizer>>>,
+    /// Read for the nodes' clouds, which no view holds.
+    store: Arc<Store>,
 }
 
-pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>) -> Router {
+pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>, store: Arc<Store>) -> Router {
     Router::new()
         .route("/healthz", get(healthz))
         .route("/metrics", get(metrics))
@@ -54,12 +58,14 @@ pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>) -> Router {
         .route("/api/v1/fleets/{fleet}/optimize", post(optimize))
         .route("/api/v1/events", get(events))
         .route("/api/v1/fleets/{fleet}/map.json", get(map_json))
+        .route("/api/v1/fleets/{fleet}/nodes/{node}/cloud", get(node_cloud))
         .route("/", get(web_index))
         .route("/web/{file}", get(web_file))
         .with_state(Api {
             shared,
             work,
             marginals: Arc::default(),
+            store,
         })
 }
 
@@ -391,7 +397,9 @@ async fn node_detail(State(api): State<Api>, Path((fleet, node)): Path<(String, 
         .nodes
         .get(node)
         .ok_or_else(|| not_found(format!("no node {node} in fleet {fleet:?}")))?;
+    let cloud = stored_cloud(&api, &fleet, node).await?.is_some();
     json_reply(json!({
+        "cloud": cloud,
         "id": node,
         "robot": v.robots[n.robot].id,
         "node_seq": n.node_seq,
@@ -475,6 +483,60 @@ async fn covariances(
         "fleet": fleet,
         "nodes": nodes,
         "covariance": covs.iter().map(|c| c.as_ref().map(rows)).collect::<Vec<_>>(),
+    }))
+}
+
+/// A node's encoded cloud from the store (a blocking read, off the async threads).
+async fn stored_cloud(
+    api: &Api,
+    fleet: &str,
+    node: usize,
+) -> Result<Option<Vec<u8>>, (StatusCode, String)> {
+    let (store, fleet) = (api.store.clone(), fleet.to_owned());
+    tokio::task::spawn_blocking(move || store.cloud(&fleet, node as u64))
+        .await
+        .map_err(internal)?
+        .map_err(internal)
+}
+
+/// The node's segmented 3D cloud: points in the leveled frame of its scan (m, flat x, y, z),
+/// the class of each (1 ground, 2 landmark, 3 overhang), counts per class, and how the robot
+/// reduced it. Read from the store on request (no view holds clouds).
+async fn node_cloud(State(api): State<Api>, Path((fleet, node)): Path<(String, usize)>) -> Reply {
+    let v = view(&api, &fleet)?;
+    let n = v
+        .nodes
+        .get(node)
+        .ok_or_else(|| not_found(format!("no node {node} in fleet {fleet:?}")))?;
+    let bytes = stored_cloud(&api, &fleet, node).await?.ok_or_else(|| {
+        not_found(format!(
+            "node {node} of fleet {fleet:?} has no 3D cloud: robot {} sent none (edge config \
+             [cloud] keep = false, or a fixed 2D scanner)",
+            v.robots[n.robot].id
+        ))
+    })?;
+    let cloud = wire::v1::SegmentedCloud::decode(bytes.as_slice()).map_err(internal)?;
+    // Checked when the node came; checked again, as the store is a file.
+    let counts = wire::validate_cloud(&cloud).map_err(internal)?;
+    let points: Vec<f64> = cloud.xyz_cm.iter().map(|&c| f64::from(c) / 100.0).collect();
+    json_reply(json!({
+        "fleet": v.id,
+        "id": node,
+        "robot": v.robots[n.robot].id,
+        "node_seq": n.node_seq,
+        "frame": "leveled",
+        "points": points,
+        "classes": cloud.classes,
+        "counts": {"ground": counts.ground, "landmark": counts.landmark, "overhang": counts.overhang},
+        "kept": cloud.classes.len(),
+        "source_points": cloud.source_points,
+        // The scan's points per class before the reduction, when the robot sent its counts.
+        "source_counts": n.counts.map(|c| json!({
+            "ground": c.ground, "landmark": c.landmark, "overhang": c.overhang,
+        })),
+        // The f32's shortest decimal (0.1, not 0.10000000149011612).
+        "voxel_m": cloud.voxel_m.to_string().parse::<f64>().unwrap_or(0.0),
+        "max_points": cloud.max_points,
     }))
 }
 
@@ -694,6 +756,11 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
         include_str!("../../../web/app.js"),
     ),
     (
+        "cloud.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../web/cloud.js"),
+    ),
+    (
         "geo.js",
         "text/javascript; charset=utf-8",
         include_str!("../../../web/geo.js"),
@@ -840,6 +907,9 @@ async fn openapi() -> Reply {
             "/api/v1/fleets/{fleet}/graph.g2o": {"get": {"summary": "Pose network as g2o text", "responses": {"200": {"description": "text"}}}},
             "/api/v1/fleets/{fleet}/covariances": get_json("Marginal covariances of ?nodes=1,2,3 (at most 500): 3 × 3 over (x, y, θ), row-major; null for the node fixing the gauge"),
             "/api/v1/fleets/{fleet}/nodes/{node}": get_json("Node detail with its leveled scan and GPS fixes (oldest first: position and lever arm in the node frame, m)"),
+            "/api/v1/fleets/{fleet}/nodes/{node}": get_json("Node detail with its leveled scan and GPS fixes (oldest first: position and lever arm in the node frame, m); cloud: whether …/cloud has its 3D cloud"),
+            "/api/v1/fleets/{fleet}/nodes/{node}/cloud": {"get": {"summary": "The node's segmented 3D cloud as its robot reduced it: points (flat x, y, z in m, the leveled frame of its scan, to the cm), classes (one per point: 1 ground, 2 landmark, 3 overhang), counts per class, kept, source_points and source_counts (before the reduction), voxel_m, max_points",
+                "responses": {"200": {"description": "JSON"}, "404": {"description": "unknown fleet or node, or the node has no cloud (its robot keeps none)"}}}},
             "/api/v1/fleets/{fleet}/optimize": {"post": {"summary": "Re-optimize the fleet's network now", "security": [{"bearer": []}],
                 "responses": {"200": {"description": "the optimizer's report"}, "401": {"description": "no or wrong token"}, "403": {"description": "no token configured"}}}},
             "/api/v1/events": {"get": {"summary": "Server-sent events: node mapped, poses optimized (JSON data)", "responses": {"200": {"description": "text/event-stream"}}}}

@@ -86,6 +86,8 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     }
     let store = Store::open(&config.store_path)
         .with_context(|| format!("{}: cannot open the store", config.store_path.display()))?;
+    // The worker writes; the HTTP side reads clouds (redb: readers never wait on the writer).
+    let store = Arc::new(store);
     let shared = Arc::new(Shared::new(config.token.clone(), now_ns()));
     let fleets = restore(&config, &store, &shared)?;
 
@@ -133,6 +135,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
 
     let worker = {
         let shared = shared.clone();
+        let store = store.clone();
         let session = session.clone();
         let config = config.clone();
         std::thread::Builder::new()
@@ -148,7 +151,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
-    let app = crate::api::router(shared.clone(), work_tx.clone());
+    let app = crate::api::router(shared.clone(), work_tx.clone(), store);
     let http = tokio::spawn(async move {
         if let Err(e) = axum::serve(listener, app).await {
             tracing::error!("HTTP server: {e}");
@@ -317,7 +320,10 @@ struct Accepted {
     node_seq: u64,
     node: usize,
     arrival: u64,
+    /// The node as stored: as received, without its cloud.
     payload: Vec<u8>,
+    /// Its encoded `Node.cloud`, stored apart.
+    cloud: Option<Vec<u8>>,
 }
 
 /// Takes what arrived, maps every node, solves each touched fleet once, commits it all in one
@@ -325,7 +331,7 @@ struct Accepted {
 /// behind one solve each.
 fn worker(
     config: MapperConfig,
-    store: Store,
+    store: Arc<Store>,
     mut fleets: HashMap<String, FleetMap>,
     shared: Arc<Shared>,
     session: zenoh::Session,
@@ -387,10 +393,16 @@ fn worker(
                 .filter(|a| a.fleet == fleet)
                 .map(|a| (a.arrival, a.payload.as_slice()))
                 .collect();
+            let clouds: Vec<(u64, &[u8])> = accepted
+                .iter()
+                .filter(|a| a.fleet == fleet)
+                .filter_map(|a| Some((a.node as u64, a.cloud.as_deref()?)))
+                .collect();
             batches.push(crate::store::FleetBatch {
                 fleet,
                 solved_after: None,
                 nodes,
+                clouds,
                 first_edge: *stored as u64,
                 edges,
             });
@@ -563,7 +575,7 @@ impl NodeContext<'_> {
             );
             return None;
         }
-        let node = match wire::decode_node(&payload) {
+        let mut node = match wire::decode_node(&payload) {
             Ok(n) => n,
             Err(e) => {
                 self.reject(e.reason(), key, &e);
@@ -603,14 +615,19 @@ impl NodeContext<'_> {
         }
         let arrival = map.nodes().len() as u64;
         match map.ingest(&node) {
-            Ok(ingested) => Some(Accepted {
-                fleet,
-                robot,
-                node_seq: node.node_seq,
-                node: ingested.node,
-                arrival,
-                payload,
-            }),
+            Ok(ingested) => {
+                // The cloud goes to its own table: the node is stored (and replayed) without.
+                let (payload, cloud) = crate::store::split_cloud(&mut node, payload);
+                Some(Accepted {
+                    fleet,
+                    robot,
+                    node_seq: node.node_seq,
+                    node: ingested.node,
+                    arrival,
+                    payload,
+                    cloud,
+                })
+            }
             Err(IngestError::Graph(e)) => {
                 tracing::error!(key, "node not mapped: {e}");
                 self.shared.metrics.reject("node", "graph");

@@ -8,7 +8,8 @@
 //! Receiving: [`decode_node`], [`decode_odometry`] and [`decode_ack`] reject malformed bytes,
 //! a missing header, a foreign wire version and out-of-domain numbers with a [`WireError`]
 //! naming the field; [`leveled_scan_from_wire`] and [`pose3d_from_wire`] then give the
-//! algorithm types.
+//! algorithm types. A node may carry its segmented 3D cloud ([`cloud_to_wire`],
+//! [`cloud_from_wire`], checked by [`validate_cloud`]).
 
 mod convert;
 mod error;
@@ -20,10 +21,11 @@ pub mod v1 {
 }
 
 pub use convert::{
-    check_header, counts_from_wire, counts_to_wire, decode_ack, decode_node, decode_odometry,
+    CLOUD_MAX_COORD_CM, CLOUD_MAX_POINTS, ClassifiedCloud, check_header, cloud_from_wire,
+    cloud_to_wire, counts_from_wire, counts_to_wire, decode_ack, decode_node, decode_odometry,
     leveled_scan_from_wire, leveled_scan_to_wire, odometry_from_wire, odometry_to_wire,
-    pose2d_from_wire, pose2d_to_wire, pose3d_from_wire, pose3d_to_wire, validate_ack,
-    validate_gps_fix, validate_node,
+    point_class_from_wire, pose2d_from_wire, pose2d_to_wire, pose3d_from_wire, pose3d_to_wire,
+    validate_ack, validate_cloud, validate_gps_fix, validate_node,
 };
 pub use error::WireError;
 pub use keys::{
