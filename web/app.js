@@ -489,12 +489,13 @@ function draw() {
 
 // The map's static picture (trajectories and the pose network: thousands of paths) is drawn
 // into a layer twice the canvas's size and moved with the view, so panning costs one image
-// copy. It is drawn again when the view leaves it, when what it shows is toggled, and, at most
-// every LAYER_REFRESH_MS, when the data or the zoom changed (meanwhile the old one is moved
-// and scaled).
+// copy. It is drawn again when the view leaves it, when what it shows is toggled, and when the
+// data or the zoom changed, then no sooner than ten times its last drawing time (at most
+// LAYER_REFRESH_MS) after the last: a live big map spends at most a tenth of its time on it.
+// Meanwhile the old layer is moved and scaled.
 const LAYER_REFRESH_MS = 500;
 let layerData = 0; // bumped whenever the data the layer shows changes
-const layer = { canvas: document.createElement("canvas"), view: null, data: -1, style: "", madeAt: -Infinity };
+const layer = { canvas: document.createElement("canvas"), view: null, data: -1, style: "", madeAt: -Infinity, drawMs: 0 };
 layer.ctx = layer.canvas.getContext("2d");
 
 function drawLayer(dpr, style) {
@@ -514,7 +515,7 @@ function drawLayer(dpr, style) {
   drawTrajectories(g, lv, box);
   const now = performance.now();
   state.timings.layer_draw_ms = now - t0;
-  Object.assign(layer, { view: lv, data: layerData, style, madeAt: now });
+  Object.assign(layer, { view: lv, data: layerData, style, madeAt: now, drawMs: now - t0 });
   state.layerDraws += 1;
 }
 
@@ -533,7 +534,8 @@ function drawLayerAndBlit(dpr) {
   const style = `${state.showNetwork}|${dpr}`;
   const lv = layer.view;
   const age = performance.now() - layer.madeAt;
-  const young = age < LAYER_REFRESH_MS;
+  const wait = Math.min(LAYER_REFRESH_MS, 10 * layer.drawMs);
+  const young = age < wait;
   const sameScale = lv && lv.scale === view.scale;
   const exact = sameScale && layer.data === layerData;
   if (!lv || layer.style !== style || (!exact && !young) || (!layerCovers() && (sameScale || !young))) {
@@ -542,7 +544,7 @@ function drawLayerAndBlit(dpr) {
     layerTimer = setTimeout(() => {
       layerTimer = null;
       redraw();
-    }, LAYER_REFRESH_MS - age);
+    }, wait - age);
   }
   const l = layer.view;
   const k = view.scale / l.scale;

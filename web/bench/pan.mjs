@@ -89,11 +89,27 @@ try {
   await page.click("#fit");
   await sleep(500);
   const panNetwork = await pan("whole map (fit), pose network on");
-  // Zoomed in to a park: most of the map is culled.
+  // Zoomed in to a park (about the middle node's): most of the map is culled.
+  const at = await page.evaluate(() => window.levelmapState.nodeOnPage(Math.floor(window.levelmapState.nodes.length / 2)));
+  await page.mouse.move(at.x, at.y);
   for (let i = 0; i < 12; i++) await page.mouse.wheel(0, -300);
   await sleep(300);
   const panZoomed = await pan("zoomed in, pose network on");
-  console.log(JSON.stringify({ url: base, ...loaded, pan: [panAll, panNetwork, panZoomed], errors }, null, 2));
+  // What the zoomed-in view got besides: the grid's detail and the nodes' ellipses.
+  await sleep(1500);
+  const zoomed = await page.evaluate(() => {
+    const s = window.levelmapState;
+    const grid = (g) => g && { resolution_m: +g.resolution_m.toFixed(3), width: g.width, height: g.height };
+    return {
+      grid_overview: grid(s.grid),
+      grid_detail: grid(s.gridDetail),
+      grid_detail_loads: s.gridDetailLoads,
+      covariances: s.covariances.size,
+      ellipses: s.ellipses,
+      layer_draw_ms: s.timings.layer_draw_ms,
+    };
+  });
+  console.log(JSON.stringify({ url: base, ...loaded, pan: [panAll, panNetwork, panZoomed], zoomed, errors }, null, 2));
 } finally {
   await browser.close();
 }
