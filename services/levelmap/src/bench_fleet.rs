@@ -56,6 +56,10 @@ pub struct BenchFleetArgs {
     /// Keep the mapper serving (HTTP API and dashboard) after the run, until Ctrl-C.
     #[arg(long)]
     pub serve: bool,
+    /// Nodes carry their segmented 3D cloud as the edge's defaults reduce it (`[cloud]` of
+    /// deploy/edge.toml: about 40 KB a node); without it, none do.
+    #[arg(long)]
+    pub clouds: bool,
 }
 
 #[derive(Serialize, Default)]
@@ -104,7 +108,7 @@ struct BenchReport {
 }
 
 /// The nodes of the park's three loops, each a node per scan, to be replayed.
-fn node_pool(per_loop: usize) -> Vec<Vec<v1::Node>> {
+fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<v1::Node>> {
     (0..3)
         .map(|loop_index| {
             let config = SimSourceConfig {
@@ -115,6 +119,9 @@ fn node_pool(per_loop: usize) -> Vec<Vec<v1::Node>> {
             let mut source = SimSource::new(&config, 0, 10.0).expect("park loop");
             let mut builder =
                 NodeBuilder::new(FLEET, "r", Default::default(), Default::default(), 0);
+            if clouds {
+                builder = builder.with_cloud(&edge::CloudParams::default());
+            }
             let mut nodes = Vec::new();
             while nodes.len() < per_loop {
                 let Some(event) = source.next_event() else {
@@ -181,7 +188,8 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     if !args.json {
         eprintln!("simulating the park's loops for {nodes_per_robot} nodes each…");
     }
-    let pool = tokio::task::spawn_blocking(move || node_pool(nodes_per_robot)).await?;
+    let clouds = args.clouds;
+    let pool = tokio::task::spawn_blocking(move || node_pool(nodes_per_robot, clouds)).await?;
 
     if args.dir.exists() {
         std::fs::remove_dir_all(&args.dir)?;
