@@ -90,6 +90,8 @@ try {
   await sleep(500);
   const panNetwork = await pan("whole map (fit), pose network on");
   // Zoomed in to a park (about the middle node's): most of the map is culled.
+  await page.click("#fit");
+  await sleep(300);
   const at = await page.evaluate(() => window.levelmapState.nodeOnPage(Math.floor(window.levelmapState.nodes.length / 2)));
   await page.mouse.move(at.x, at.y);
   for (let i = 0; i < 12; i++) await page.mouse.wheel(0, -300);
