@@ -4,6 +4,7 @@
 import { View, scaleBarMetres, formatMetres } from "./view.js";
 import { enuToGeodetic, formatLatLon } from "./geo.js";
 import { showCloud } from "./cloud.js";
+import { fillList } from "./panel.js";
 
 const API = "/api/v1";
 const PALETTE = ["#e6550d", "#3182bd", "#31a354", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf"];
@@ -336,17 +337,6 @@ function onEvent(msg) {
 }
 
 // ---- panels ------------------------------------------------------------------------------
-
-function fillList(dl, rows) {
-  dl.replaceChildren();
-  for (const [k, v] of rows) {
-    const dt = document.createElement("dt");
-    dt.textContent = k;
-    const dd = document.createElement("dd");
-    dd.textContent = v;
-    dl.append(dt, dd);
-  }
-}
 
 function renderSummary() {
   const s = state.summary;

@@ -6,6 +6,8 @@
 // frame of the node's scan: x forward, y left, z up) and one class per point (1 ground,
 // 2 landmark, 3 overhang).
 
+import { fillList } from "./panel.js";
+
 export const CLASSES = [
   { code: 1, name: "ground", colour: "#b59a6a" },
   { code: 2, name: "landmark", colour: "#c0392b" },
@@ -184,17 +186,6 @@ export class CloudView {
 
 let view = null;
 let request = 0;
-
-function fillList(dl, rows) {
-  dl.replaceChildren();
-  for (const [k, v] of rows) {
-    const dt = document.createElement("dt");
-    dt.textContent = k;
-    const dd = document.createElement("dd");
-    dd.textContent = v;
-    dl.append(dt, dd);
-  }
-}
 
 /// Loads and shows a node's cloud in the inspector (`url`: its …/cloud route; null: the node
 /// has none). Resolves to what is shown, `{points, ground, landmark, overhang, source_points,

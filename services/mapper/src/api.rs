@@ -766,6 +766,11 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
         include_str!("../../../web/geo.js"),
     ),
     (
+        "panel.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../web/panel.js"),
+    ),
+    (
         "view.js",
         "text/javascript; charset=utf-8",
         include_str!("../../../web/view.js"),
