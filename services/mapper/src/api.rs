@@ -271,12 +271,6 @@ struct GpsColumns {
 }
 
 fn graph_columns(v: &FleetView) -> GraphColumns<'_> {
-    const KINDS: [slam::EdgeKind; 4] = [
-        slam::EdgeKind::Odometry,
-        slam::EdgeKind::ScanMatch,
-        slam::EdgeKind::LoopClosure,
-        slam::EdgeKind::InterRobot,
-    ];
     let residuals: Vec<[f64; 2]> = v
         .gps
         .iter()
@@ -288,7 +282,7 @@ fn graph_columns(v: &FleetView) -> GraphColumns<'_> {
     GraphColumns {
         fleet: &v.id,
         robots: v.robots.iter().map(|r| r.id.as_str()).collect(),
-        kinds: KINDS,
+        kinds: slam::EdgeKind::ALL,
         nodes: NodeColumns {
             robot: v.nodes.iter().map(|n| n.robot).collect(),
             node_seq: v.nodes.iter().map(|n| n.node_seq).collect(),
@@ -303,7 +297,7 @@ fn graph_columns(v: &FleetView) -> GraphColumns<'_> {
                 .edges
                 .iter()
                 .map(|e| {
-                    KINDS
+                    slam::EdgeKind::ALL
                         .iter()
                         .position(|k| *k == e.kind)
                         .expect("every kind listed")

@@ -29,7 +29,7 @@ pub struct SparsePattern {
     symbolic: SymbolicCholesky<usize>,
     factor: Vec<f64>,
     factored: bool,
-    rhs: Vec<f64>,
+    /// Scratch of the numeric factorization and of a one-column solve.
     workspace: MemBuffer,
 }
 
@@ -161,7 +161,6 @@ impl SparsePattern {
             factor: vec![0.0; symbolic.len_val()],
             symbolic,
             factored: false,
-            rhs: vec![0.0; n],
             workspace,
         }
     }
@@ -205,21 +204,9 @@ impl SparsePattern {
     /// # Panics
     /// If the last [`Self::factorize`] did not succeed.
     pub fn solve(&mut self, b: &[f64]) -> Vec<f64> {
-        assert!(self.factored, "solve needs a successful factorize");
-        for (&place, &value) in self.inverse.iter().zip(b) {
-            self.rhs[place] = value;
-        }
-        LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(&mut self.rhs, self.n, 1),
-            Par::Seq,
-            MemStack::new(&mut self.workspace),
-        );
-        self.inverse.iter().map(|&place| self.rhs[place]).collect()
+        self.solve_columns(b, 1)
     }
-}
 
-impl SparsePattern {
     /// Solves A X = B for the `columns` right-hand sides in `b` (column-major, `dim()` rows
     /// each) at once with the last factor; X in the same layout.
     ///
@@ -234,15 +221,18 @@ impl SparsePattern {
                 out[place] = value;
             }
         }
-        let mut scratch = MemBuffer::new(
-            self.symbolic
-                .solve_in_place_scratch::<f64>(columns, Par::Seq),
-        );
+        // One column fits the kept workspace; more need their own scratch.
+        let mut wide = (columns > 1).then(|| {
+            MemBuffer::new(
+                self.symbolic
+                    .solve_in_place_scratch::<f64>(columns, Par::Seq),
+            )
+        });
         LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(
             Conj::No,
             MatMut::from_column_major_slice_mut(&mut permuted, self.n, columns),
             Par::Seq,
-            MemStack::new(&mut scratch),
+            MemStack::new(wide.as_mut().unwrap_or(&mut self.workspace)),
         );
         let mut x = vec![0.0; b.len()];
         for (out, col) in x.chunks_mut(self.n).zip(permuted.chunks(self.n)) {

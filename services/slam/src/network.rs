@@ -16,6 +16,16 @@ pub enum EdgeKind {
     InterRobot,
 }
 
+impl EdgeKind {
+    /// Every kind, in declaration order.
+    pub const ALL: [EdgeKind; 4] = [
+        EdgeKind::Odometry,
+        EdgeKind::ScanMatch,
+        EdgeKind::LoopClosure,
+        EdgeKind::InterRobot,
+    ];
+}
+
 /// A relative pose measurement: pose `to` seen from pose `from`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RelativeEdge {
