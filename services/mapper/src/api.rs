@@ -781,15 +781,38 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
 pub const WEB_DIR_ENV: &str = "LEVELMAP_WEB_DIR";
 
 fn web_reply(file: &str) -> Reply {
-    let (name, content_type, body) = WEB_FILES
+    if let Some(dir) = std::env::var_os(WEB_DIR_ENV) {
+        return web_reply_from_disk(std::path::Path::new(&dir), file);
+    }
+    let (_, content_type, body) = WEB_FILES
         .iter()
         .find(|(name, _, _)| *name == file)
         .ok_or_else(|| not_found(format!("no file {file:?} in the dashboard")))?;
-    let body = match std::env::var_os(WEB_DIR_ENV) {
-        Some(dir) => std::fs::read_to_string(std::path::Path::new(&dir).join(name))
-            .map_err(|e| internal(format!("{WEB_DIR_ENV}: {name}: {e}")))?,
-        None => body.to_string(),
-    };
+    Ok((
+        [
+            (header::CONTENT_TYPE, *content_type),
+            (header::CACHE_CONTROL, "no-cache"),
+        ],
+        body.to_string(),
+    )
+        .into_response())
+}
+
+/// A page file read from `dir` (any `.html`, `.js` or `.css` name in it, so a new module
+/// works before it is compiled in).
+fn web_reply_from_disk(dir: &std::path::Path, file: &str) -> Reply {
+    let content_type = [
+        (".html", "text/html; charset=utf-8"),
+        (".js", "text/javascript; charset=utf-8"),
+        (".css", "text/css; charset=utf-8"),
+    ]
+    .iter()
+    .find(|(ext, _)| file.ends_with(ext))
+    .map(|(_, t)| *t)
+    .filter(|_| !file.contains(['/', '\\']) && !file.starts_with('.'))
+    .ok_or_else(|| not_found(format!("no file {file:?} in the dashboard")))?;
+    let body = std::fs::read_to_string(dir.join(file))
+        .map_err(|e| not_found(format!("{WEB_DIR_ENV}: {file}: {e}")))?;
     Ok((
         [
             (header::CONTENT_TYPE, *content_type),
