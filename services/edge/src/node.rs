@@ -4,11 +4,13 @@
 //! ([`crate::cloud`]).
 
 use crate::cloud::{self, CloudParams};
-use leveling::nalgebra::{Isometry3, Point3, Vector3};
+use leveling::nalgebra::{Isometry3, Matrix3, Vector3};
 use leveling::{DeskewError, Leveler, PoseTrack, Scan3d, SegmentParams, leveled_frame};
 use serde::{Deserialize, Serialize};
 use slam::Pose2;
-use wire::v1;
+use slam::geodesy::Geodetic;
+use slam::gnss::{FixStatus, GpsFix, carry_antenna_to_node};
+use wire::{pose2_to_wire, v1};
 
 /// When the robot starts a new node.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -44,7 +46,7 @@ pub struct GpsReading {
     /// The receiver's standard deviations, horizontal and vertical (m).
     pub sigma_horizontal_m: f64,
     pub sigma_vertical_m: f64,
-    pub status: v1::FixStatus,
+    pub status: FixStatus,
     /// The antenna in the robot frame (m).
     pub antenna_in_robot_m: Vector3<f64>,
     /// The dead-reckoning pose at `stamp_ns` (odometry frame).
@@ -240,8 +242,8 @@ impl NodeBuilder {
             gps,
             odometry_delta_from_previous: self
                 .last
-                .map(|last| pose2_to_wire(last.between(&robot2))),
-            scan_origin_in_robot: Some(pose2_to_wire(robot2.between(&scan_frame))),
+                .map(|last| pose2_to_wire(&last.between(&robot2))),
+            scan_origin_in_robot: Some(pose2_to_wire(&robot2.between(&scan_frame))),
             earlier_gps: fixes,
             cloud: None,
         };
@@ -251,38 +253,26 @@ impl NodeBuilder {
     }
 }
 
-pub fn pose2_to_wire(p: Pose2) -> v1::Pose2D {
-    v1::Pose2D {
-        x_m: p.x,
-        y_m: p.y,
-        yaw_rad: p.theta,
-    }
-}
-
-/// The fix on the wire, with the robot's motion from the fix to the scan's start folded into
-/// the antenna offset (see `Node.gps` in node.proto): where the antenna was at the fix's time,
-/// in the robot frame at the scan's start.
+/// The fix on the wire, carried to the scan's start by dead reckoning
+/// ([`slam::gnss::carry_antenna_to_node`]; see `Node.gps` in node.proto).
 fn gps_to_wire(g: &GpsReading, robot_at_start: &Isometry3<f64>, header: v1::Header) -> v1::GpsFix {
-    let antenna_at_fix = g.odometry_at_fix * Point3::from(g.antenna_in_robot_m);
-    let offset = robot_at_start.inverse() * antenna_at_fix;
     let (h, v) = (g.sigma_horizontal_m.powi(2), g.sigma_vertical_m.powi(2));
-    v1::GpsFix {
-        header: Some(v1::Header {
-            stamp_ns: g.stamp_ns,
-            ..header
-        }),
-        latitude_deg: g.latitude_deg,
-        longitude_deg: g.longitude_deg,
-        altitude_m: g.altitude_m,
-        position_covariance_m2: vec![h, 0.0, 0.0, 0.0, h, 0.0, 0.0, 0.0, v],
-        status: g.status.into(),
-        satellites: 0,
-        antenna_offset_m: Some(v1::Vec3 {
-            x: offset.x,
-            y: offset.y,
-            z: offset.z,
-        }),
-    }
+    let fix = GpsFix {
+        stamp_ns: g.stamp_ns,
+        position: Geodetic {
+            latitude_deg: g.latitude_deg,
+            longitude_deg: g.longitude_deg,
+            height_m: g.altitude_m,
+        },
+        covariance_m2: Some(Matrix3::from_diagonal(&Vector3::new(h, h, v))),
+        status: g.status,
+        antenna_offset_m: carry_antenna_to_node(
+            &g.antenna_in_robot_m,
+            &g.odometry_at_fix,
+            robot_at_start,
+        ),
+    };
+    wire::gps_fix_to_wire(&fix, header)
 }
 
 #[cfg(test)]
@@ -308,7 +298,7 @@ mod tests {
             altitude_m: 60.0,
             sigma_horizontal_m: 0.5,
             sigma_vertical_m: 1.0,
-            status: v1::FixStatus::Fix,
+            status: FixStatus::Fix,
             antenna_in_robot_m: Vector3::new(-0.5, 0.0, 1.0),
             odometry_at_fix: robot_at(t_ns),
         }

@@ -150,15 +150,15 @@ pub async fn run(
             }
             sample = map_poses.recv_async() => {
                 let Ok(sample) = sample else { break };
-                // The mapper's corrected pose of this robot's last node (JSON).
-                let body: serde_json::Value = serde_json::from_slice(&sample.payload().to_bytes())
-                    .unwrap_or_default();
-                let mine = body["poses"].as_array().and_then(|poses| {
-                    poses.iter().find(|p| p["robot"] == config.robot.as_str()).cloned()
-                });
-                if let Some(p) = mine {
-                    report.map_pose_updates += 1;
-                    report.map_pose = serde_json::from_value(p["pose"].clone()).ok();
+                // The mapper's corrected pose of this robot's last node.
+                match wire::decode_map_poses(&sample.payload().to_bytes()) {
+                    Ok((_, poses)) => {
+                        if let Some(p) = poses.into_iter().find(|p| p.robot == config.robot) {
+                            report.map_pose_updates += 1;
+                            report.map_pose = Some(p.pose);
+                        }
+                    }
+                    Err(e) => tracing::warn!(robot = %config.robot, "bad map poses: {e}"),
                 }
             }
             _ = tick.tick() => {

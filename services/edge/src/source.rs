@@ -37,7 +37,7 @@ pub fn sim_gps_reading(robot: &FleetRobot<'_>, fix: &sim::GpsFix, epoch_ns: u64)
         altitude_m: geodetic.height_m,
         sigma_horizontal_m: fix.sigma_horizontal_m,
         sigma_vertical_m: fix.sigma_vertical_m,
-        status: wire::v1::FixStatus::RtkFloat,
+        status: slam::gnss::FixStatus::RtkFloat,
         antenna_in_robot_m: robot.gps().antenna_in_robot_m,
         odometry_at_fix: robot
             .odometry_track(fix.stamp_ns, fix.stamp_ns)

@@ -282,8 +282,7 @@ fn map_fixed2d(args: &DemoArgs) -> Result<(f64, usize)> {
             let Some(node) = builder.offer_planar(&planar) else {
                 continue;
             };
-            wire::validate_node(&node)?;
-            map.ingest(&node)?;
+            map.ingest(&wire::node_input(&node)?)?;
             map.optimize_pending()?;
             truth.push(Pose2::from_isometry3(&(scan.scan.truth_start_pose * mount)));
         }

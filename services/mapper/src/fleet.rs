@@ -3,25 +3,14 @@
 //! Each robot's nodes must arrive in node_seq order without gaps; a duplicate (a re-send) or
 //! a node after a gap is not taken, and the sender learns the highest node taken from the ack.
 
+use leveling::ClassCounts;
 use serde::Serialize;
-use slam::geodesy::{GeoDatum, Geodetic};
+use slam::geodesy::GeoDatum;
 use slam::matching::Scan2;
-use slam::nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
 use slam::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, OptimizeReport, Pose2};
 use std::collections::HashMap;
 use std::sync::Arc;
-use wire::v1;
-
-/// Standard deviation (m) of a fix that carries no covariance, by status.
-fn default_sigma_m(status: v1::FixStatus) -> Option<f64> {
-    match status {
-        v1::FixStatus::Unspecified | v1::FixStatus::NoFix => None,
-        v1::FixStatus::Fix => Some(3.0),
-        v1::FixStatus::Dgps => Some(1.0),
-        v1::FixStatus::RtkFloat => Some(0.3),
-        v1::FixStatus::RtkFixed => Some(0.03),
-    }
-}
+use wire::NodeInput;
 
 /// Where a node stands against its robot's sequence.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -49,10 +38,25 @@ pub struct NodeRecord {
     /// Its GPS fixes as the mapper took them (`Node.earlier_gps` then `Node.gps`: oldest
     /// first), each an edge of the network.
     pub gps: Vec<GpsObservation>,
-    pub counts: Option<v1::SegmentationCounts>,
+    pub counts: Option<ClassCounts>,
     /// The leveled scan: bearings (rad) and ranges (m, 0 = no return).
     pub bearings_rad: Vec<f32>,
     pub ranges_m: Vec<f32>,
+}
+
+impl NodeRecord {
+    /// Every return of the leveled scan, however far (the map shows what the robot saw;
+    /// matching cuts at the mapper's `max_range_m`).
+    pub fn scan(&self) -> Scan2 {
+        let (bearings, ranges): (Vec<f32>, Vec<f32>) = self
+            .bearings_rad
+            .iter()
+            .zip(&self.ranges_m)
+            .filter(|(_, r)| **r > 0.0)
+            .map(|(b, r)| (*b, *r))
+            .unzip();
+        Scan2::from_polar(&bearings, &ranges, f32::MAX).expect("returns come in pairs")
+    }
 }
 
 /// A robot of the fleet.
@@ -78,11 +82,6 @@ pub enum IngestError {
         robot: String,
         node_seq: u64,
         problem: String,
-    },
-    #[error("node of {robot}: {source}")]
-    Wire {
-        robot: String,
-        source: wire::WireError,
     },
     #[error("the pose network: {0}")]
     Graph(#[from] slam::GraphError),
@@ -177,59 +176,42 @@ impl FleetMap {
         }
     }
 
-    /// Adds a node that [`wire::decode_node`] accepted, of this fleet.
-    pub fn ingest(&mut self, node: &v1::Node) -> Result<Ingested, IngestError> {
-        let header = node.header.as_ref().expect("a validated node has a header");
-        let robot_id = header.robot_id.clone();
-        let wire_err = |source| IngestError::Wire {
-            robot: robot_id.clone(),
-            source,
+    /// Adds a node of this fleet.
+    pub fn ingest(&mut self, node: &NodeInput) -> Result<Ingested, IngestError> {
+        let robot_id = &node.robot;
+        let problem = match self.sequence(robot_id, node.node_seq) {
+            Sequence::Next => None,
+            Sequence::Duplicate => Some("taken already".to_owned()),
+            Sequence::Gap { expected } => Some(format!("out of order, expected {expected}")),
         };
-        match self.sequence(&robot_id, node.node_seq) {
-            Sequence::Next => {}
-            Sequence::Duplicate => {
-                return Err(IngestError::Sequence {
-                    robot: robot_id.clone(),
-                    node_seq: node.node_seq,
-                    problem: "taken already".into(),
-                });
-            }
-            Sequence::Gap { expected } => {
-                return Err(IngestError::Sequence {
-                    robot: robot_id.clone(),
-                    node_seq: node.node_seq,
-                    problem: format!("out of order, expected {expected}"),
-                });
-            }
+        if let Some(problem) = problem {
+            return Err(IngestError::Sequence {
+                robot: robot_id.clone(),
+                node_seq: node.node_seq,
+                problem,
+            });
         }
-        let scan_msg = node.scan.as_ref().expect("validated");
-        let leveled = wire::leveled_scan_from_wire(scan_msg).map_err(wire_err)?;
-        let odometry = wire::odometry_from_wire(node.odometry.as_ref().expect("validated"))
-            .map_err(wire_err)?;
-        let robot_odometry = Pose2::from_isometry3(&odometry.pose);
-        let scan_origin = node
-            .scan_origin_in_robot
-            .as_ref()
-            .map_or(Pose2::IDENTITY, |p| Pose2::new(p.x_m, p.y_m, p.yaw_rad));
-        let scan_frame = robot_odometry.compose(&scan_origin);
-        let (bearings, ranges): (Vec<f32>, Vec<f32>) = leveled.returns().unzip();
+        let robot_odometry = Pose2::from_isometry3(&node.odometry.pose);
+        let scan_frame = robot_odometry.compose(&node.scan_origin);
+        let (bearings_rad, ranges_m) = node.polar();
+        let (bearings, ranges): (Vec<f32>, Vec<f32>) = node.scan.returns().unzip();
         let scan =
             Scan2::from_polar(&bearings, &ranges, self.max_range_m).expect("returns come in pairs");
+        let attitude = node.odometry.pose.rotation;
         let gps: Vec<GpsObservation> = node
-            .earlier_gps
+            .gps
             .iter()
-            .chain(&node.gps)
+            .filter(|fix| fix.has_position())
             .filter_map(|fix| {
-                self.gps_observation(
-                    fix,
-                    &odometry.pose.rotation,
-                    robot_odometry.theta,
-                    &scan_origin,
-                )
+                // The first fix sets the datum when none is configured.
+                let datum = *self.datum.get_or_insert(GeoDatum {
+                    origin: fix.position,
+                });
+                fix.observation(&datum, &attitude, robot_odometry.theta, &node.scan_origin)
             })
             .collect();
 
-        let robot = match self.by_id.get(&robot_id) {
+        let robot = match self.by_id.get(robot_id) {
             Some(&r) => r,
             None => {
                 self.robots.push(RobotRecord {
@@ -251,61 +233,16 @@ impl FleetMap {
         self.nodes.push(Arc::new(NodeRecord {
             robot,
             node_seq: node.node_seq,
-            stamp_ns: header.stamp_ns,
+            stamp_ns: node.stamp_ns,
             odometry: scan_frame,
             robot_odometry,
-            scan_origin,
+            scan_origin: node.scan_origin,
             gps,
-            counts: scan_msg.counts,
-            bearings_rad: scan_msg.bearing_rad.clone(),
-            ranges_m: scan_msg.range_m.clone(),
+            counts: node.counts,
+            bearings_rad,
+            ranges_m,
         }));
         Ok(Ingested { node: index })
-    }
-
-    /// A fix as a GPS observation of the node's scan frame; `None` for a fix without
-    /// position (no fix, no covariance nor a status that implies one). The antenna offset is
-    /// in the (tilted) robot frame: the robot's roll and pitch turn it into the horizontal
-    /// lever arm (on a 10° slope a 1 m mast leans 0.17 m).
-    fn gps_observation(
-        &mut self,
-        fix: &v1::GpsFix,
-        attitude: &UnitQuaternion<f64>,
-        heading_rad: f64,
-        scan_origin: &Pose2,
-    ) -> Option<GpsObservation> {
-        let status = v1::FixStatus::try_from(fix.status).unwrap_or(v1::FixStatus::Unspecified);
-        let covariance = if fix.position_covariance_m2.len() == 9 {
-            let c = &fix.position_covariance_m2;
-            Matrix2::new(c[0], c[1], c[3], c[4])
-        } else {
-            let s = default_sigma_m(status)?;
-            Matrix2::identity() * (s * s)
-        };
-        if matches!(status, v1::FixStatus::NoFix) {
-            return None;
-        }
-        let geodetic = Geodetic {
-            latitude_deg: fix.latitude_deg,
-            longitude_deg: fix.longitude_deg,
-            height_m: fix.altitude_m,
-        };
-        let datum = *self.datum.get_or_insert(GeoDatum { origin: geodetic });
-        let enu = datum.geodetic_to_enu(&geodetic);
-        let offset = fix
-            .antenna_offset_m
-            .as_ref()
-            .map_or(Vector3::zeros(), |v| Vector3::new(v.x, v.y, v.z));
-        let heading = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), heading_rad);
-        let leveled = heading.inverse() * (attitude * offset);
-        let lever = scan_origin
-            .inverse()
-            .transform_point([leveled.x, leveled.y]);
-        Some(GpsObservation {
-            position_m: Vector2::new(enu.x, enu.y),
-            covariance_m2: covariance,
-            lever_arm_m: Vector2::new(lever[0], lever[1]),
-        })
     }
 
     /// Solves the network if the nodes added since the last solve call for it (a loop

@@ -2,15 +2,20 @@
 //! network (scan matching within and between robots, GPS), each node committed to the
 //! embedded store before it is acked, and the map served over HTTP.
 //!
-//! [`fleet`] is the pure mapping of wire nodes; [`store`] the disk; [`server`] and [`api`]
-//! the thin Zenoh and HTTP shells.
+//! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
+//! HTTP side reads), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
+//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`api`] (HTTP).
 
 pub mod api;
+pub mod bus;
 pub mod config;
 pub mod fleet;
+pub mod marginals;
+pub mod odometry;
 pub mod server;
 pub mod state;
 pub mod store;
+pub mod worker;
 
 pub use config::{MapperConfig, fleet_mapping_params};
 pub use fleet::{FleetMap, IngestError, Ingested, NodeRecord, Sequence};

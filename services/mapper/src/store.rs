@@ -71,6 +71,14 @@ pub struct FleetBatch<'a> {
     pub solved_after: Option<u64>,
 }
 
+/// Edges as the store keeps them: one JSON document each.
+pub fn encode_edges(edges: &[slam::RelativeEdge]) -> Vec<Vec<u8>> {
+    edges
+        .iter()
+        .map(|e| serde_json::to_vec(e).expect("edges serialize"))
+        .collect()
+}
+
 /// What is stored of a received node (`payload`, decoded as `node`): the node without its
 /// cloud (the payload itself when it has none) and the encoded cloud, taken out of `node`.
 pub fn split_cloud(node: &mut v1::Node, payload: Vec<u8>) -> (Vec<u8>, Option<Vec<u8>>) {

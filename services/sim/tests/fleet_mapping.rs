@@ -4,12 +4,12 @@
 //! trajectory error of the map's nodes against ground truth, and robots that meet share one
 //! map (inter-robot closures).
 
-use leveling::nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+use leveling::nalgebra::Isometry3;
 use leveling::{Leveler, SegmentParams};
 use sim::{FleetRobot, FleetScan, World};
 use slam::matching::Scan2;
 use slam::nalgebra::{Matrix2, Vector2};
-use slam::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Pose2};
+use slam::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Pose2, gnss};
 
 const ROBOTS: usize = 3;
 const DURATION_NS: u64 = 120_000_000_000;
@@ -52,7 +52,7 @@ fn map_fleet(inputs: Vec<NodeInput>) -> (MapperStats, f64) {
 /// second is 1.2 m), as the edge does (the antenna where it was at the fix's time, in the
 /// robot frame at the scan's start).
 fn gps_for(scan: &FleetScan, robot: &FleetRobot, frame_in_robot: [f64; 2]) -> Vec<GpsObservation> {
-    let antenna = Point3::from(robot.gps().antenna_in_robot_m);
+    let antenna = robot.gps().antenna_in_robot_m;
     scan.gps_since_previous
         .iter()
         .map(|fix| {
@@ -61,19 +61,17 @@ fn gps_for(scan: &FleetScan, robot: &FleetRobot, frame_in_robot: [f64; 2]) -> Ve
                 .at(fix.stamp_ns)
                 .expect("the track covers the fix");
             // Where the antenna was at the fix, in the robot frame at the scan's start, turned
-            // level with the robot's roll and pitch (as the mapper does: a leaning mast).
+            // level with the robot's roll and pitch: the one GPS model of edge and mapper.
             let start = &scan.odometry_at_start;
-            let offset = (start.inverse() * (at_fix * antenna)).coords;
-            let heading = UnitQuaternion::from_axis_angle(
-                &Vector3::z_axis(),
-                Pose2::from_isometry3(start).theta,
-            );
-            let lever = heading.inverse() * (start.rotation * offset);
+            let offset = gnss::carry_antenna_to_node(&antenna, &at_fix, start);
+            let heading = Pose2::from_isometry3(start).theta;
+            let origin = Pose2::new(frame_in_robot[0], frame_in_robot[1], 0.0);
+            let lever = gnss::leveled_lever_arm(&offset, &start.rotation, heading, &origin);
             let var = fix.sigma_horizontal_m.powi(2);
             GpsObservation {
                 position_m: Vector2::new(fix.enu_m.x, fix.enu_m.y),
                 covariance_m2: Matrix2::new(var, 0.0, 0.0, var),
-                lever_arm_m: Vector2::new(lever.x - frame_in_robot[0], lever.y - frame_in_robot[1]),
+                lever_arm_m: lever,
             }
         })
         .collect()

@@ -4,6 +4,7 @@
 //! paper's linear solution). Pure library: no I/O, no async.
 
 pub mod geodesy;
+pub mod gnss;
 pub mod grid;
 pub mod init;
 pub mod linear;

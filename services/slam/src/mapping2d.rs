@@ -22,7 +22,7 @@ use crate::network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge, is_
 use crate::optimize::{OptimizeParams, OptimizeReport, Optimizer};
 use crate::robust::Robust;
 use crate::se2::{Pose2, wrap_angle};
-use nalgebra::{Matrix2, Matrix3, Vector2};
+use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 /// Tunables of the 2D mapper, each with its unit.
@@ -134,6 +134,7 @@ pub enum Placed {
 }
 
 /// What the mapper did so far.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct MapperStats {
     pub scans: usize,
@@ -151,18 +152,7 @@ pub struct MapperStats {
     pub deferred_optimizations: usize,
 }
 
-/// A GPS fix for a scan, in the map's east-north frame (see
-/// [`crate::geodesy::GeoDatum::geodetic_to_enu`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct GpsObservation {
-    /// Antenna position east and north of the datum (m).
-    pub position_m: Vector2<f64>,
-    /// Its covariance (m²), from the fix.
-    pub covariance_m2: Matrix2<f64>,
-    /// The antenna in the scan's frame (m). For a fix older than the scan, where the antenna
-    /// was at the fix's time in the scan's frame (dead reckoning carries the fix to the scan).
-    pub lever_arm_m: Vector2<f64>,
-}
+pub use crate::gnss::GpsObservation;
 
 /// One robot's chain of nodes.
 #[derive(Clone, Copy, Debug)]
@@ -559,6 +549,7 @@ impl Mapper2d {
 mod tests {
     use super::*;
     use crate::matching::synthetic::{Scene, uniform_bearings};
+    use nalgebra::{Matrix2, Vector2};
     use std::f64::consts::PI;
 
     fn scan_at(pose: &Pose2, seed: u64) -> Scan2 {

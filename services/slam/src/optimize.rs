@@ -60,6 +60,7 @@ impl Default for OptimizeParams {
 }
 
 /// Why the iteration stopped.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum StopReason {
@@ -73,6 +74,7 @@ pub enum StopReason {
 }
 
 /// What an optimization did.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct OptimizeReport {
     /// Σ eᵀΩe before and after, without robust kernels (g2o's convention).

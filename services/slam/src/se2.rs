@@ -5,6 +5,7 @@ use std::f64::consts::PI;
 
 /// A pose in the plane: position (m) and heading (rad, counter-clockwise from the x axis).
 /// As a motion, it maps a point p of its own frame to `R(theta)·p + (x, y)`.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Pose2 {
     pub x: f64,

@@ -20,13 +20,7 @@ pub mod v1 {
     include!(concat!(env!("OUT_DIR"), "/levelmap.v1.rs"));
 }
 
-pub use convert::{
-    CLOUD_MAX_COORD_CM, CLOUD_MAX_POINTS, ClassifiedCloud, check_header, cloud_from_wire,
-    cloud_to_wire, counts_from_wire, counts_to_wire, decode_ack, decode_node, decode_odometry,
-    leveled_scan_from_wire, leveled_scan_to_wire, odometry_from_wire, odometry_to_wire,
-    point_class_from_wire, pose2d_from_wire, pose2d_to_wire, pose3d_from_wire, pose3d_to_wire,
-    validate_ack, validate_cloud, validate_gps_fix, validate_node,
-};
+pub use convert::*;
 pub use error::WireError;
 pub use keys::{
     KEY_ROOT, RobotKey, Topic, ack_key, all_robots_key_expr, map_key, map_key_expr, node_key,

@@ -1,0 +1,216 @@
+//! The HTTP API (`/api/v1`, JSON), one module per resource: thin handlers over the current
+//! fleet views that call the domain (`slam`, `graphio`) for any work. Every route is
+//! registered through [`utoipa_axum`], so the OpenAPI document served at
+//! `/api/v1/openapi.json` is made from the same list as the router.
+
+mod events;
+mod fleets;
+mod graph;
+mod map;
+mod nodes;
+mod service;
+mod web;
+
+use crate::marginals::Marginals;
+use crate::state::{FleetView, Shared};
+use crate::store::Store;
+use crate::worker::Work;
+use axum::Router;
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use std::sync::{Arc, OnceLock, mpsc};
+use utoipa::OpenApi;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+pub use web::WEB_DIR_ENV;
+
+/// What every handler shares.
+#[derive(Clone)]
+struct Api {
+    shared: Arc<Shared>,
+    work: mpsc::Sender<Work>,
+    /// Covariance queries: one optimizer per fleet, its factorization kept.
+    marginals: Arc<Marginals>,
+    /// Read for the nodes' clouds, which no view holds.
+    store: Arc<Store>,
+    /// The OpenAPI document, made once from the routes.
+    openapi: Arc<OnceLock<String>>,
+}
+
+/// An error answer: its status and a one-line reason as plain text.
+#[derive(Debug)]
+pub enum ApiError {
+    /// 400: a parameter that cannot be read.
+    BadRequest(String),
+    /// 401: no valid bearer token.
+    Unauthorized(String),
+    /// 403: write routes are off (no token configured).
+    Forbidden(String),
+    /// 404: no such fleet, robot, node or file.
+    NotFound(String),
+    /// 422: the map cannot answer this (a grid too large, a network that cannot be solved).
+    Unprocessable(String),
+    /// 503: the mapper is stopping.
+    Unavailable(String),
+    /// 500: a fault of the server (the store, a task).
+    Internal(String),
+}
+
+impl ApiError {
+    fn internal(e: impl std::fmt::Display) -> ApiError {
+        ApiError::Internal(e.to_string())
+    }
+
+    fn status(&self) -> StatusCode {
+        match self {
+            ApiError::BadRequest(_) => StatusCode::BAD_REQUEST,
+            ApiError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
+            ApiError::Forbidden(_) => StatusCode::FORBIDDEN,
+            ApiError::NotFound(_) => StatusCode::NOT_FOUND,
+            ApiError::Unprocessable(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+
+    fn reason(&self) -> &str {
+        match self {
+            ApiError::BadRequest(r)
+            | ApiError::Unauthorized(r)
+            | ApiError::Forbidden(r)
+            | ApiError::NotFound(r)
+            | ApiError::Unprocessable(r)
+            | ApiError::Unavailable(r)
+            | ApiError::Internal(r) => r,
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        (self.status(), self.reason().to_owned()).into_response()
+    }
+}
+
+type Reply<T = Response> = Result<T, ApiError>;
+
+impl Api {
+    /// The fleet's current view.
+    fn view(&self, fleet: &str) -> Reply<Arc<FleetView>> {
+        self.shared.fleet(fleet).ok_or_else(|| {
+            ApiError::NotFound(format!("no fleet {fleet:?} (no node received yet?)"))
+        })
+    }
+}
+
+/// The document's frame; the paths come from the routes.
+#[derive(OpenApi)]
+#[openapi(
+    info(title = "levelmap mapping server", description = "The map of each fleet: robots, pose network, grid, events."),
+    modifiers(&BearerAuth),
+    tags(
+        (name = "service", description = "Health, metrics, this document, the token"),
+        (name = "fleets", description = "Fleets, their summary and robots"),
+        (name = "graph", description = "The pose network"),
+        (name = "map", description = "The occupancy grid and map products"),
+        (name = "nodes", description = "One node of the network"),
+        (name = "events", description = "The event stream"),
+        (name = "web", description = "The dashboard"),
+    )
+)]
+struct ApiDoc;
+
+struct BearerAuth;
+
+impl utoipa::Modify for BearerAuth {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+        let components = openapi.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+        );
+    }
+}
+
+/// Every route with its handler, in one list: the router and the document are both made
+/// from it.
+fn routes() -> OpenApiRouter<Api> {
+    OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .routes(routes!(service::healthz))
+        .routes(routes!(service::metrics))
+        .routes(routes!(service::openapi))
+        .routes(routes!(service::auth))
+        .routes(routes!(fleets::fleets))
+        .routes(routes!(fleets::summary))
+        .routes(routes!(fleets::robots))
+        .routes(routes!(fleets::robot_pose))
+        .routes(routes!(fleets::trajectory_tum))
+        .routes(routes!(fleets::optimize))
+        .routes(routes!(graph::graph))
+        .routes(routes!(graph::graph_g2o))
+        .routes(routes!(graph::covariances))
+        .routes(routes!(map::map_png))
+        .routes(routes!(map::map_pgm))
+        .routes(routes!(map::map_yaml))
+        .routes(routes!(map::map_json))
+        .routes(routes!(map::map_geojson))
+        .routes(routes!(nodes::node_detail))
+        .routes(routes!(nodes::node_cloud))
+        .routes(routes!(events::events))
+        .routes(routes!(web::web_index))
+        .routes(routes!(web::web_file))
+}
+
+/// The OpenAPI document of every route, as JSON.
+pub fn openapi_json() -> String {
+    let (_, doc) = routes().split_for_parts();
+    doc.to_pretty_json().expect("the document serializes")
+}
+
+/// The HTTP API over the mapper's views, its worker and its store.
+pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>, store: Arc<Store>) -> Router {
+    let (router, doc) = routes().split_for_parts();
+    let openapi = Arc::new(OnceLock::new());
+    let _ = openapi.set(doc.to_pretty_json().expect("the document serializes"));
+    router.with_state(Api {
+        shared,
+        work,
+        marginals: Arc::default(),
+        store,
+        openapi,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every route the router serves is in the document, and nothing else: both come from
+    /// [`super::routes`]; this checks the document's side against the list of handlers.
+    #[test]
+    fn the_document_lists_every_route_with_its_parameters() {
+        let doc: serde_json::Value = serde_json::from_str(&super::openapi_json()).unwrap();
+        let paths = doc["paths"].as_object().unwrap();
+        let mut listed: Vec<&str> = paths.keys().map(String::as_str).collect();
+        listed.sort_unstable();
+        assert_eq!(listed.len(), 23, "{listed:?}");
+        for (path, item) in paths {
+            for (method, op) in item.as_object().unwrap() {
+                // Each {param} of the path is a documented path parameter.
+                for name in path.split('{').skip(1).map(|s| &s[..s.find('}').unwrap()]) {
+                    let declared = op["parameters"].as_array().is_some_and(|ps| {
+                        ps.iter().any(|p| p["name"] == name && p["in"] == "path")
+                    });
+                    assert!(
+                        declared,
+                        "{method} {path}: path parameter {name} undocumented"
+                    );
+                }
+                assert!(
+                    op["responses"]["200"].is_object(),
+                    "{method} {path}: no 200"
+                );
+            }
+        }
+    }
+}

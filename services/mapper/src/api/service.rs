@@ -1,0 +1,143 @@
+//! The service itself: health, metrics, the OpenAPI document, the token check.
+
+use super::{Api, ApiError, Reply};
+use axum::Json;
+use axum::extract::State;
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::sync::atomic::Ordering;
+use utoipa::ToSchema;
+
+/// Liveness: 503 once the store failed (a supervisor should restart the mapper).
+#[utoipa::path(get, path = "/healthz", tag = "service", responses(
+    (status = 200, description = "ok", content_type = "text/plain", body = String),
+    (status = 503, description = "the store failed", content_type = "text/plain", body = String),
+))]
+pub(super) async fn healthz(State(api): State<Api>) -> (StatusCode, &'static str) {
+    if api.shared.healthy.load(Ordering::Relaxed) {
+        (StatusCode::OK, "ok\n")
+    } else {
+        (
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the store failed: restart the mapper\n",
+        )
+    }
+}
+
+/// Prometheus text: accepted, duplicate and rejected messages by reason, map sizes.
+#[utoipa::path(get, path = "/metrics", tag = "service", responses(
+    (status = 200, description = "Prometheus text format 0.0.4", content_type = "text/plain", body = String),
+))]
+pub(super) async fn metrics(State(api): State<Api>) -> Response {
+    let m = &api.shared.metrics;
+    let mut out = String::new();
+    let counters = [
+        (
+            "levelmap_nodes_accepted_total",
+            "Nodes mapped and stored.",
+            &m.nodes_accepted,
+        ),
+        (
+            "levelmap_nodes_duplicate_total",
+            "Re-sent nodes taken already (re-acked).",
+            &m.nodes_duplicate,
+        ),
+        (
+            "levelmap_odometry_received_total",
+            "Live odometry messages taken.",
+            &m.odometry_received,
+        ),
+        ("levelmap_acks_sent_total", "Acks published.", &m.acks_sent),
+        (
+            "levelmap_optimizations_total",
+            "Network optimizations run.",
+            &m.optimizations,
+        ),
+    ];
+    for (name, help, value) in counters {
+        let _ = writeln!(
+            out,
+            "# HELP {name} {help}\n# TYPE {name} counter\n{name} {}",
+            value.load(Ordering::Relaxed)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "# HELP levelmap_rejected_total Messages rejected, by topic and reason.\n# TYPE levelmap_rejected_total counter"
+    );
+    for ((topic, reason), n) in m.rejected.lock().expect("metrics lock").iter() {
+        let _ = writeln!(
+            out,
+            "levelmap_rejected_total{{topic=\"{topic}\",reason=\"{reason}\"}} {n}"
+        );
+    }
+    let fleets = api.shared.fleets.read().expect("views lock").clone();
+    let _ = writeln!(
+        out,
+        "# HELP levelmap_map_nodes Nodes in a fleet's map.\n# TYPE levelmap_map_nodes gauge"
+    );
+    for (id, v) in &fleets {
+        let _ = writeln!(
+            out,
+            "levelmap_map_nodes{{fleet=\"{id}\"}} {}",
+            v.poses.len()
+        );
+    }
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response()
+}
+
+/// This document (OpenAPI 3.1), made from the routes.
+#[utoipa::path(get, path = "/api/v1/openapi.json", tag = "service", responses(
+    (status = 200, description = "The OpenAPI document", content_type = "application/json", body = Object),
+))]
+pub(super) async fn openapi(State(api): State<Api>) -> Response {
+    let doc = api.openapi.get().cloned().unwrap_or_default();
+    ([(header::CONTENT_TYPE, "application/json")], doc).into_response()
+}
+
+/// Whether a bearer token would be taken by the write routes.
+#[derive(Serialize, ToSchema)]
+pub(super) struct AuthState {
+    /// A token is configured: the write routes are on.
+    write_routes: bool,
+    /// The request's token would be taken.
+    authorized: bool,
+    /// Why not, when not.
+    reason: Option<String>,
+}
+
+/// Checks the request's bearer token against the configured one.
+pub(super) fn authorized(api: &Api, headers: &HeaderMap) -> Result<(), ApiError> {
+    let token = &api.shared.token;
+    let given = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    if token.is_empty() {
+        return Err(ApiError::Forbidden(
+            "write routes are off: no token in the mapper's config".into(),
+        ));
+    }
+    if given != Some(token.as_str()) {
+        return Err(ApiError::Unauthorized(
+            "a valid bearer token is needed".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Whether the request's bearer token would be taken by the write routes, asked without
+/// writing (a page checks its stored token this way instead of meeting a 401).
+#[utoipa::path(get, path = "/api/v1/auth", tag = "service", security(("bearer" = [])), responses(
+    (status = 200, description = "The token's standing", body = AuthState),
+))]
+pub(super) async fn auth(State(api): State<Api>, headers: HeaderMap) -> Reply<Json<AuthState>> {
+    let verdict = authorized(&api, &headers);
+    Ok(Json(AuthState {
+        write_routes: !api.shared.token.is_empty(),
+        authorized: verdict.is_ok(),
+        reason: verdict.err().map(|e| e.reason().to_owned()),
+    }))
+}

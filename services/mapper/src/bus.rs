@@ -1,0 +1,98 @@
+//! What the mapper puts on the Zenoh bus: acks to robots, the corrected poses after a solve,
+//! and the answers to `levelmap/{fleet}/map/{poses,summary}` queries (protobuf, `map.proto`).
+
+use crate::fleet::FleetMap;
+use crate::state::{Metrics, Shared};
+use wire::session::now_ns;
+use wire::{MapPose, Message, v1};
+use zenoh::Wait;
+
+/// The mapper's side of the bus.
+pub struct Bus {
+    session: zenoh::Session,
+}
+
+impl Bus {
+    pub fn new(session: zenoh::Session) -> Bus {
+        Bus { session }
+    }
+
+    /// Tells a robot the highest node of its sequence that is mapped and stored.
+    pub fn ack(&self, metrics: &Metrics, fleet: &str, robot: &str, acked: u64) {
+        let ack = v1::Ack {
+            header: Some(v1::Header::new(fleet, robot, 0, now_ns(), now_ns())),
+            acked_node_seq: acked,
+        };
+        let Ok(key) = wire::ack_key(fleet, robot) else {
+            return;
+        };
+        match self.session.put(key, ack.encode_to_vec()).wait() {
+            Ok(()) => Metrics::bump(&metrics.acks_sent),
+            Err(e) => tracing::warn!(fleet, robot, "ack not sent: {e}"),
+        }
+    }
+
+    /// Every robot's last node, corrected, on `levelmap/{fleet}/map/poses`.
+    pub fn publish_poses(&self, map: &FleetMap) {
+        let poses: Vec<MapPose> = map
+            .robots()
+            .iter()
+            .filter_map(|r| {
+                let &last = r.nodes.last()?;
+                Some(MapPose {
+                    robot: r.id.clone(),
+                    node_seq: r.last_node_seq,
+                    pose: map.poses()[last],
+                })
+            })
+            .collect();
+        let body = wire::map_poses_to_wire(map.id(), &poses, now_ns()).encode_to_vec();
+        if let Ok(key) = wire::map_key(map.id(), "poses")
+            && let Err(e) = self.session.put(key, body).wait()
+        {
+            tracing::warn!(fleet = map.id(), "poses not published: {e}");
+        }
+    }
+}
+
+/// Answers `levelmap/{fleet}/map/summary` or `…/poses` (every node) from the current view;
+/// nothing for an unknown fleet or item.
+pub fn answer_map_query(shared: &Shared, query: &zenoh::query::Query) {
+    let key = query.key_expr().as_str();
+    let mut chunks = key.split('/').skip(1);
+    let (Some(fleet), Some(_map), Some(item)) = (chunks.next(), chunks.next(), chunks.next())
+    else {
+        return;
+    };
+    let Some(view) = shared.fleet(fleet) else {
+        return;
+    };
+    let body = match item {
+        "summary" => v1::MapSummary {
+            version: wire::WIRE_VERSION,
+            fleet_id: view.id.clone(),
+            sent_ns: now_ns(),
+            robots: u32::try_from(view.robots.len()).unwrap_or(u32::MAX),
+            nodes: view.poses.len() as u64,
+            edges: view.edges.len() as u64,
+            loop_closures: view.stats.loop_closures as u64,
+            inter_robot_closures: view.stats.inter_robot_closures as u64,
+        }
+        .encode_to_vec(),
+        "poses" => {
+            let poses: Vec<MapPose> = view
+                .nodes
+                .iter()
+                .zip(&view.poses)
+                .map(|(n, p)| MapPose {
+                    robot: view.robots[n.robot].id.clone(),
+                    node_seq: n.node_seq,
+                    pose: *p,
+                })
+                .collect();
+            wire::map_poses_to_wire(&view.id, &poses, now_ns()).encode_to_vec()
+        }
+        _ => return,
+    };
+    let _ = query.reply(key, body).wait();
+}

@@ -1,0 +1,32 @@
+//! Marginal covariances of nodes, answered from a fleet's current view. One optimizer per
+//! fleet keeps the network's symbolic factorization while its structure stays the same.
+
+use crate::state::FleetView;
+use slam::nalgebra::Matrix3;
+use std::collections::HashMap;
+use std::sync::Mutex;
+
+/// Per fleet, the optimizer that answers covariance queries.
+#[derive(Debug, Default)]
+pub struct Marginals {
+    optimizers: Mutex<HashMap<String, slam::Optimizer>>,
+}
+
+impl Marginals {
+    /// The (x, y, θ) covariance of each of `nodes` at the view's poses; `None` for the node
+    /// that fixes the gauge. CPU work: call it off the async threads.
+    pub fn of(
+        &self,
+        view: &FleetView,
+        nodes: &[usize],
+    ) -> Result<Vec<Option<Matrix3<f64>>>, slam::GraphError> {
+        let graph = slam::PoseGraph {
+            poses: view.poses.clone(),
+            edges: view.edges.clone(),
+            gps: view.gps.clone(),
+        };
+        let mut optimizers = self.optimizers.lock().expect("marginals lock");
+        let optimizer = optimizers.entry(view.id.clone()).or_default();
+        optimizer.marginal_covariances(&graph, nodes)
+    }
+}

@@ -1,0 +1,72 @@
+//! Live odometry, handled in its Zenoh callback: the robot's latest pose for `GET …/robots`
+//! and, at most [`POSE_EVENT_PERIOD_NS`] apart per robot, a `pose` event in the map frame.
+
+use crate::state::{LiveOdometry, Metrics, Shared};
+use serde_json::json;
+use slam::Pose2;
+use wire::session::now_ns;
+
+/// Live poses go on the event stream at most 2 Hz per robot (odometry arrives at 10 Hz or
+/// more; `GET …/robots` has every one).
+pub const POSE_EVENT_PERIOD_NS: u64 = 500_000_000;
+
+/// Takes one odometry sample of a served fleet, or counts why not.
+pub fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]) {
+    let metrics = &shared.metrics;
+    let Ok(parsed) = wire::parse_robot_key(key) else {
+        metrics.reject("odom", "invalid_key");
+        return;
+    };
+    if !fleets.iter().any(|f| f == parsed.fleet) {
+        metrics.reject("odom", "unknown_fleet");
+        return;
+    }
+    let input = match wire::odometry_input(payload) {
+        Ok(o) => o,
+        Err(e) => {
+            metrics.reject("odom", e.reason());
+            return;
+        }
+    };
+    if input.fleet != parsed.fleet || input.robot != parsed.robot {
+        metrics.reject("odom", "key_mismatch");
+        return;
+    }
+    Metrics::bump(&metrics.odometry_received);
+    let odometry = Pose2::from_isometry3(&input.pose.pose);
+    let stamp_ns = input.pose.stamp_ns;
+    if !remember(shared, &input.fleet, &input.robot, odometry, stamp_ns) {
+        return;
+    }
+    let map_pose = shared
+        .fleet(&input.fleet)
+        .and_then(|view| Some(view.robot(&input.robot)?.live_pose(&odometry)));
+    if let Some(map_pose) = map_pose {
+        shared.event(&json!({
+            "type": "pose",
+            "fleet": input.fleet,
+            "robot": input.robot,
+            "pose": map_pose,
+            "stamp_ns": stamp_ns,
+        }));
+    }
+}
+
+/// Keeps the robot's latest odometry; whether its `pose` event is due.
+fn remember(shared: &Shared, fleet: &str, robot: &str, odometry: Pose2, stamp_ns: u64) -> bool {
+    let now = now_ns();
+    let mut live = shared.live.lock().expect("live lock");
+    let key = (fleet.to_owned(), robot.to_owned());
+    let last_event = live.get(&key).map_or(0, |p| p.evented_ns);
+    let due = now.saturating_sub(last_event) >= POSE_EVENT_PERIOD_NS;
+    live.insert(
+        key,
+        LiveOdometry {
+            odometry,
+            stamp_ns,
+            received_ns: now,
+            evented_ns: if due { now } else { last_event },
+        },
+    );
+    due
+}

@@ -1,0 +1,440 @@
+//! The mapping worker: one thread owns every fleet's map and the store's writer.
+//!
+//! Each turn: take a batch → check each node → map it → commit the batch → ack → publish
+//! views and events → run the solves that are due → answer operator requests. Under load,
+//! nodes batch up (one commit, one solve per fleet) instead of queueing behind one solve each.
+//! A node is acked only once it is committed: a failed commit stops the mapper taking nodes
+//! ([`Worker::store_failed`]), and the robots re-send to the restarted one.
+
+use crate::bus::Bus;
+use crate::config::MapperConfig;
+use crate::fleet::{FleetMap, IngestError, Sequence};
+use crate::state::{FleetView, Metrics, Shared};
+use crate::store::{FleetBatch, Store, StoreError};
+use serde_json::json;
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+use wire::NodeInput;
+use wire::session::now_ns;
+
+/// Most messages taken into one batch (one solve, one store commit).
+const MAX_BATCH: usize = 512;
+
+/// The answer to an operator's optimize request: the report as JSON, or why not.
+pub type OptimizeReply = tokio::sync::oneshot::Sender<Result<serde_json::Value, String>>;
+
+/// Work for the mapping worker.
+pub enum Work {
+    /// A node as it came from the bus.
+    Node { key: String, payload: Vec<u8> },
+    /// Re-optimize a fleet now.
+    Optimize { fleet: String, reply: OptimizeReply },
+}
+
+impl Work {
+    /// The answer when the worker is gone.
+    pub const STOPPED: &str = "the mapping worker stopped";
+
+    /// Asks the worker behind `work` to re-optimize `fleet` now and waits for its report.
+    pub async fn optimize(
+        work: &mpsc::Sender<Work>,
+        fleet: &str,
+    ) -> Result<serde_json::Value, String> {
+        let (reply, answer) = tokio::sync::oneshot::channel();
+        let fleet = fleet.to_owned();
+        work.send(Work::Optimize { fleet, reply })
+            .map_err(|_| Work::STOPPED.to_owned())?;
+        answer.await.map_err(|_| Work::STOPPED.to_owned())?
+    }
+}
+
+/// A node that passed the checks: who sent it, what it holds, what is stored of it.
+struct Checked {
+    input: NodeInput,
+    /// The node as stored: as received, without its cloud.
+    payload: Vec<u8>,
+    /// Its encoded `Node.cloud`, stored apart.
+    cloud: Option<Vec<u8>>,
+}
+
+/// A node mapped in this batch, not yet committed.
+struct Accepted {
+    fleet: String,
+    robot: String,
+    node_seq: u64,
+    /// Its index in the fleet's map.
+    node: usize,
+    /// Its arrival index in the fleet (the store's node key).
+    arrival: u64,
+    payload: Vec<u8>,
+    cloud: Option<Vec<u8>>,
+}
+
+/// What one batch brought.
+#[derive(Default)]
+struct Batch {
+    accepted: Vec<Accepted>,
+    /// Robots to re-ack (a duplicate or a gap): their highest node taken.
+    reacks: Vec<(String, String)>,
+    requests: Vec<(String, OptimizeReply)>,
+}
+
+/// The worker's state: the maps, and what of them is stored.
+pub struct Worker {
+    config: MapperConfig,
+    store: Arc<Store>,
+    fleets: HashMap<String, FleetMap>,
+    shared: Arc<Shared>,
+    bus: Bus,
+    /// Per fleet, how many of its edges are stored.
+    edges_stored: HashMap<String, usize>,
+    last_solve: HashMap<String, Instant>,
+    /// Set by a failed commit: no node is taken until the mapper restarts.
+    store_failed: bool,
+}
+
+impl Worker {
+    /// A worker over the restored `fleets` (all of it stored).
+    pub fn new(
+        config: MapperConfig,
+        store: Arc<Store>,
+        fleets: HashMap<String, FleetMap>,
+        shared: Arc<Shared>,
+        bus: Bus,
+    ) -> Worker {
+        let edges_stored = fleets
+            .iter()
+            .map(|(id, map)| (id.clone(), map.graph().edges.len()))
+            .collect();
+        Worker {
+            config,
+            store,
+            fleets,
+            shared,
+            bus,
+            edges_stored,
+            last_solve: HashMap::new(),
+            store_failed: false,
+        }
+    }
+
+    /// Runs until every sender of `work` is gone.
+    pub fn run(mut self, work: mpsc::Receiver<Work>) {
+        let wake = Duration::from_millis(self.config.solve_interval_ms.max(10));
+        while let Some(jobs) = take_batch(&work, wake) {
+            let started = Instant::now();
+            let batch = self.check_and_map(jobs);
+            if self.commit(&batch.accepted).is_ok() {
+                self.ack(&batch);
+                self.publish(&batch.accepted, started);
+                self.due_solves();
+            }
+            self.operator_requests(batch.requests);
+        }
+    }
+
+    /// Checks and maps every node of the batch; sets the operator requests aside.
+    fn check_and_map(&mut self, jobs: Vec<Work>) -> Batch {
+        let mut batch = Batch::default();
+        for job in jobs {
+            match job {
+                Work::Node { key, .. } if self.store_failed => {
+                    self.reject("store", &key, &"the store failed")
+                }
+                Work::Node { key, payload } => {
+                    if let Some(checked) = self.check(&key, payload) {
+                        batch
+                            .accepted
+                            .extend(self.map(&key, checked, &mut batch.reacks));
+                    }
+                }
+                Work::Optimize { fleet, reply } => batch.requests.push((fleet, reply)),
+            }
+        }
+        batch
+    }
+
+    /// A node from `key`, decoded and checked: a served fleet, a valid message, the sender
+    /// its key names. `None` (counted, logged) otherwise.
+    fn check(&self, key: &str, payload: Vec<u8>) -> Option<Checked> {
+        let Ok(parsed) = wire::parse_robot_key(key) else {
+            self.reject("invalid_key", key, &"not a levelmap node key");
+            return None;
+        };
+        if !self.config.fleets.iter().any(|f| f == parsed.fleet) {
+            let why = format!("fleet {} is not served", parsed.fleet);
+            self.reject("unknown_fleet", key, &why);
+            return None;
+        }
+        let decoded = wire::decode_node(&payload).and_then(|n| Ok((wire::node_input(&n)?, n)));
+        let (input, mut node) = match decoded {
+            Ok(d) => d,
+            Err(e) => {
+                self.reject(e.reason(), key, &e);
+                return None;
+            }
+        };
+        if input.fleet != parsed.fleet || input.robot != parsed.robot {
+            let why = format!("header says {}/{}", input.fleet, input.robot);
+            self.reject("key_mismatch", key, &why);
+            return None;
+        }
+        // The cloud goes to its own table: the node is stored (and replayed) without it.
+        let (payload, cloud) = crate::store::split_cloud(&mut node, payload);
+        Some(Checked {
+            input,
+            payload,
+            cloud,
+        })
+    }
+
+    /// Maps a checked node if it is the next of its robot; a duplicate or a node after a gap
+    /// is not mapped, and its robot is re-acked (the ack says where to re-send from).
+    fn map(
+        &mut self,
+        key: &str,
+        checked: Checked,
+        reacks: &mut Vec<(String, String)>,
+    ) -> Option<Accepted> {
+        let Checked {
+            input,
+            payload,
+            cloud,
+        } = checked;
+        let (fleet, robot) = (input.fleet.clone(), input.robot.clone());
+        let config = &self.config;
+        let map = self
+            .fleets
+            .entry(fleet.clone())
+            .or_insert_with(|| crate::server::new_fleet(config, &fleet));
+        match map.sequence(&robot, input.node_seq) {
+            Sequence::Next => {}
+            Sequence::Duplicate => {
+                // Taken already: its ack was lost, so ack again once this batch is durable.
+                Metrics::bump(&self.shared.metrics.nodes_duplicate);
+                reacks.push((fleet, robot));
+                return None;
+            }
+            Sequence::Gap { expected } => {
+                let why = format!("node {} before {expected}", input.node_seq);
+                self.reject("out_of_order", key, &why);
+                reacks.push((fleet, robot));
+                return None;
+            }
+        }
+        let arrival = map.nodes().len() as u64;
+        match map.ingest(&input) {
+            Ok(ingested) => Some(Accepted {
+                fleet,
+                robot,
+                node_seq: input.node_seq,
+                node: ingested.node,
+                arrival,
+                payload,
+                cloud,
+            }),
+            Err(IngestError::Graph(e)) => {
+                tracing::error!(key, "node not mapped: {e}");
+                self.shared.metrics.reject("node", "graph");
+                None
+            }
+            Err(e) => {
+                self.reject("invalid_value", key, &e);
+                None
+            }
+        }
+    }
+
+    /// Commits the batch's nodes, clouds and new edges in one transaction.
+    fn commit(&mut self, accepted: &[Accepted]) -> Result<(), StoreError> {
+        let mut touched: Vec<&str> = accepted.iter().map(|a| a.fleet.as_str()).collect();
+        touched.sort_unstable();
+        touched.dedup();
+        if touched.is_empty() {
+            return Ok(());
+        }
+        let batches: Vec<FleetBatch> = touched
+            .iter()
+            .map(|&fleet| {
+                let stored = self.edges_stored.get(fleet).copied().unwrap_or(0);
+                let of_fleet = || accepted.iter().filter(move |a| a.fleet == fleet);
+                FleetBatch {
+                    fleet,
+                    solved_after: None,
+                    nodes: of_fleet()
+                        .map(|a| (a.arrival, a.payload.as_slice()))
+                        .collect(),
+                    clouds: of_fleet()
+                        .filter_map(|a| Some((a.node as u64, a.cloud.as_deref()?)))
+                        .collect(),
+                    first_edge: stored as u64,
+                    edges: crate::store::encode_edges(&self.fleets[fleet].graph().edges[stored..]),
+                }
+            })
+            .collect();
+        let result = self.store.commit(&batches);
+        if result.is_ok() {
+            for b in &batches {
+                *self.edges_stored.entry(b.fleet.to_owned()).or_default() += b.edges.len();
+            }
+        }
+        drop(batches);
+        result.map_err(|e| self.store_failed(e))
+    }
+
+    /// Commits that `fleet` was solved after its last node (a replay solves at the same place).
+    fn commit_solve(&mut self, fleet: &str) -> Result<(), StoreError> {
+        let marker = FleetBatch {
+            fleet,
+            solved_after: Some(self.fleets[fleet].nodes().len() as u64 - 1),
+            ..Default::default()
+        };
+        let result = self.store.commit(&[marker]);
+        result.map_err(|e| self.store_failed(e))
+    }
+
+    /// The one way a store failure is handled: not durable, so nothing more is acked; the
+    /// mapper reports unhealthy and stops taking nodes rather than diverge from its store.
+    fn store_failed(&mut self, e: StoreError) -> StoreError {
+        tracing::error!("store commit failed; restart the mapper: {e}");
+        self.store_failed = true;
+        self.shared.healthy.store(false, Ordering::Relaxed);
+        e
+    }
+
+    /// Acks each robot's highest node taken, once per robot.
+    fn ack(&self, batch: &Batch) {
+        let mut acks: HashMap<(&str, &str), u64> = HashMap::new();
+        for (fleet, robot) in &batch.reacks {
+            let map = &self.fleets[fleet];
+            if let Some(r) = map.robot_index(robot) {
+                acks.insert((fleet, robot), map.robots()[r].last_node_seq);
+            }
+        }
+        for a in &batch.accepted {
+            Metrics::bump(&self.shared.metrics.nodes_accepted);
+            let seq = acks.entry((&a.fleet, &a.robot)).or_default();
+            *seq = (*seq).max(a.node_seq);
+        }
+        for ((fleet, robot), seq) in acks {
+            self.bus.ack(&self.shared.metrics, fleet, robot, seq);
+        }
+    }
+
+    /// New views of the fleets that got nodes, and a `node` event per node.
+    fn publish(&self, accepted: &[Accepted], started: Instant) {
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        let mut touched: Vec<&str> = accepted.iter().map(|a| a.fleet.as_str()).collect();
+        touched.sort_unstable();
+        touched.dedup();
+        for fleet in touched {
+            self.shared
+                .publish_view(FleetView::of(&self.fleets[fleet], ms, now_ns()));
+        }
+        for a in accepted {
+            let map = &self.fleets[&a.fleet];
+            self.shared.event(&json!({
+                "type": "node",
+                "fleet": a.fleet,
+                "robot": a.robot,
+                "node": a.node,
+                "node_seq": a.node_seq,
+                "pose": map.poses()[a.node],
+            }));
+        }
+    }
+
+    /// Solves each fleet whose nodes call for it, at most every solve interval: nodes arriving
+    /// meanwhile wait for one solve at most, not for one each. After the batch is visible.
+    fn due_solves(&mut self) {
+        let interval = Duration::from_millis(self.config.solve_interval_ms);
+        let mut ids: Vec<String> = self.fleets.keys().cloned().collect();
+        ids.sort_unstable();
+        for id in ids {
+            if self
+                .last_solve
+                .get(&id)
+                .is_some_and(|t| t.elapsed() < interval)
+            {
+                continue;
+            }
+            let started = Instant::now();
+            match self.fleets.get_mut(&id).expect("listed").optimize_pending() {
+                Ok(false) => continue,
+                Ok(true) => {}
+                Err(e) => {
+                    tracing::error!(fleet = %id, "optimization failed: {e}");
+                    continue;
+                }
+            }
+            self.last_solve.insert(id.clone(), Instant::now());
+            if self.solved(&id, started).is_err() {
+                break;
+            }
+        }
+    }
+
+    /// After a solve: its point committed, the new view, the corrected poses on the bus.
+    fn solved(&mut self, fleet: &str, started: Instant) -> Result<(), StoreError> {
+        Metrics::bump(&self.shared.metrics.optimizations);
+        self.commit_solve(fleet)?;
+        let map = &self.fleets[fleet];
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        self.shared.publish_view(FleetView::of(map, ms, now_ns()));
+        self.bus.publish_poses(map);
+        self.shared
+            .event(&json!({"type": "optimized", "fleet": map.id()}));
+        Ok(())
+    }
+
+    /// Operators' optimize requests: solved now, pending or not.
+    fn operator_requests(&mut self, requests: Vec<(String, OptimizeReply)>) {
+        for (fleet, reply) in requests {
+            let _ = reply.send(self.optimize_now(&fleet));
+        }
+    }
+
+    fn optimize_now(&mut self, fleet: &str) -> Result<serde_json::Value, String> {
+        let map = self
+            .fleets
+            .get_mut(fleet)
+            .ok_or_else(|| format!("no fleet {fleet}"))?;
+        if !map.optimize_now().map_err(|e| e.to_string())? {
+            return Err("part of the network is not anchored yet".into());
+        }
+        if self.store_failed {
+            return Err("the store failed".into());
+        }
+        self.solved(fleet, Instant::now())
+            .map_err(|e| e.to_string())?;
+        let report = self.fleets[fleet].last_optimization();
+        Ok(serde_json::to_value(report).expect("report serializes"))
+    }
+
+    fn reject(&self, reason: &'static str, key: &str, detail: &dyn std::fmt::Display) {
+        self.shared.metrics.reject("node", reason);
+        tracing::warn!(key, reason, "node rejected: {detail}");
+    }
+}
+
+/// What arrived: waits up to `wake` for the first message (a solve may be due even when
+/// nothing arrives), then takes what is queued, up to [`MAX_BATCH`]. `None` once every
+/// sender is gone.
+fn take_batch(work: &mpsc::Receiver<Work>, wake: Duration) -> Option<Vec<Work>> {
+    let first = match work.recv_timeout(wake) {
+        Ok(w) => w,
+        Err(mpsc::RecvTimeoutError::Timeout) => return Some(Vec::new()),
+        Err(mpsc::RecvTimeoutError::Disconnected) => return None,
+    };
+    let mut batch = vec![first];
+    while batch.len() < MAX_BATCH {
+        match work.try_recv() {
+            Ok(w) => batch.push(w),
+            Err(_) => break,
+        }
+    }
+    Some(batch)
+}

@@ -1,0 +1,136 @@
+//! Received messages as domain types: what the mapping takes, parsed once at the edge of the
+//! mapper so that nothing past it sees a protobuf message.
+
+use super::gps::gps_fix_from_wire;
+use super::node::{decode_odometry, validate_node};
+use super::odometry::odometry_from_wire;
+use super::pose::pose2_from_wire;
+use super::scan::{counts_from_wire, leveled_scan_from_wire};
+use crate::{WireError, v1};
+use leveling::{ClassCounts, LeveledScan, TimedPose};
+use slam::Pose2;
+use slam::gnss::GpsFix;
+
+/// One node of a robot, checked: a leveled scan with its odometry and the GPS fixes carried
+/// to it (see `node.proto`). The segmented cloud, stored apart, is not part of it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeInput {
+    pub fleet: String,
+    pub robot: String,
+    /// The node's number in its robot's sequence.
+    pub node_seq: u64,
+    /// The scan's start (ns since the Unix epoch).
+    pub stamp_ns: u64,
+    pub scan: LeveledScan,
+    /// The scan's points per class, when the robot sent them.
+    pub counts: Option<ClassCounts>,
+    /// Dead reckoning at the scan's start (odometry frame, 3D: its attitude levels the GPS
+    /// lever arm).
+    pub odometry: TimedPose,
+    /// The scan's frame in the robot's planar frame.
+    pub scan_origin: Pose2,
+    /// Every fix since the previous node, oldest first (`earlier_gps`, then `gps`).
+    pub gps: Vec<GpsFix>,
+}
+
+impl NodeInput {
+    /// The leveled scan as bearings (rad) and ranges (m, 0 = no return), as it came.
+    pub fn polar(&self) -> (Vec<f32>, Vec<f32>) {
+        self.scan
+            .beams
+            .iter()
+            .map(|b| (b.bearing_rad, b.range_m.unwrap_or(0.0)))
+            .unzip()
+    }
+}
+
+/// A node as the mapping takes it; every check of [`validate_node`] applies.
+pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
+    validate_node(node)?;
+    let header = node.header.as_ref().ok_or(WireError::Missing {
+        field: "Node.header",
+    })?;
+    let scan = node
+        .scan
+        .as_ref()
+        .ok_or(WireError::Missing { field: "Node.scan" })?;
+    let odometry = node.odometry.as_ref().ok_or(WireError::Missing {
+        field: "Node.odometry",
+    })?;
+    Ok(NodeInput {
+        fleet: header.fleet_id.clone(),
+        robot: header.robot_id.clone(),
+        node_seq: node.node_seq,
+        stamp_ns: header.stamp_ns,
+        scan: leveled_scan_from_wire(scan)?,
+        counts: scan.counts.as_ref().map(counts_from_wire).transpose()?,
+        odometry: odometry_from_wire(odometry)?,
+        scan_origin: node
+            .scan_origin_in_robot
+            .as_ref()
+            .map_or(Ok(Pose2::IDENTITY), pose2_from_wire)?,
+        gps: node
+            .earlier_gps
+            .iter()
+            .chain(&node.gps)
+            .map(gps_fix_from_wire)
+            .collect::<Result<_, _>>()?,
+    })
+}
+
+/// A robot's live odometry, checked.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OdometryInput {
+    pub fleet: String,
+    pub robot: String,
+    /// The pose (odometry frame) and its time.
+    pub pose: TimedPose,
+}
+
+/// Decodes and checks live odometry into an [`OdometryInput`].
+pub fn odometry_input(bytes: &[u8]) -> Result<OdometryInput, WireError> {
+    let msg = decode_odometry(bytes)?;
+    let pose = odometry_from_wire(&msg)?;
+    let header = msg.header.ok_or(WireError::Missing {
+        field: "Odometry.header",
+    })?;
+    Ok(OdometryInput {
+        fleet: header.fleet_id,
+        robot: header.robot_id,
+        pose,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::convert::fixtures::*;
+
+    #[test]
+    fn a_node_becomes_its_domain_input_once() {
+        let wire = node();
+        let input = node_input(&wire).unwrap();
+        assert_eq!(
+            (input.fleet.as_str(), input.robot.as_str()),
+            ("campus", "rover-1")
+        );
+        assert_eq!(input.node_seq, wire.node_seq);
+        assert_eq!(input.stamp_ns, STAMP_NS);
+        let scan = wire.scan.as_ref().unwrap();
+        let (bearings, ranges) = input.polar();
+        assert_eq!((&bearings, &ranges), (&scan.bearing_rad, &scan.range_m));
+        assert_eq!(input.counts, Some(counts()));
+        assert_eq!(input.gps.len(), wire.earlier_gps.len() + 1);
+        assert_eq!(
+            input.gps.last().unwrap().position.latitude_deg,
+            wire.gps.as_ref().unwrap().latitude_deg
+        );
+        // Whatever validate_node rejects, node_input rejects.
+        let mut bad = node();
+        bad.scan.as_mut().unwrap().range_m[3] = f32::NAN;
+        assert_eq!(
+            node_input(&bad).unwrap_err().to_string(),
+            validate_node(&bad).unwrap_err().to_string()
+        );
+    }
+}

@@ -1,0 +1,349 @@
+//! GPS fixes, nodes and acks, and decoding checked messages.
+
+use super::cloud::{check_cloud_against_counts, validate_cloud};
+use super::gps::validate_gps_fix;
+use super::odometry::odometry_from_wire;
+use super::pose::pose2d_from_wire;
+use super::scan::leveled_scan_from_wire;
+use super::{check_header, decode, same_sender};
+use crate::{WireError, v1};
+
+/// Checks a node: header; a scan and odometry, valid, from the same fleet and robot; the GPS
+/// fixes and the odometry delta, if present, valid; `earlier_gps` only beside `gps`, oldest
+/// first, each stamped before `gps`; the cloud, if present, valid ([`validate_cloud`]) and
+/// consistent with the scan's counts.
+pub fn validate_node(node: &v1::Node) -> Result<(), WireError> {
+    let header = check_header(node.header.as_ref(), "Node.header")?;
+    let scan = node
+        .scan
+        .as_ref()
+        .ok_or(WireError::Missing { field: "Node.scan" })?;
+    leveled_scan_from_wire(scan)?;
+    let odometry = node.odometry.as_ref().ok_or(WireError::Missing {
+        field: "Node.odometry",
+    })?;
+    odometry_from_wire(odometry)?;
+    // Both checked above, so present.
+    if let (Some(s), Some(o)) = (&scan.header, &odometry.header) {
+        same_sender(header, s, "Node.scan.header")?;
+        same_sender(header, o, "Node.odometry.header")?;
+    }
+    if let Some(gps) = &node.gps {
+        validate_gps_fix(gps)?;
+        if let Some(g) = &gps.header {
+            same_sender(header, g, "Node.gps.header")?;
+        }
+    }
+    validate_earlier_gps(header, node)?;
+    if let Some(cloud) = &node.cloud {
+        let kept = validate_cloud(cloud)?;
+        if let Some(counts) = &scan.counts {
+            check_cloud_against_counts(&kept, cloud, counts)?;
+        }
+    }
+    for pose in [
+        &node.odometry_delta_from_previous,
+        &node.scan_origin_in_robot,
+    ]
+    .into_iter()
+    .flatten()
+    {
+        pose2d_from_wire(pose)?;
+    }
+    Ok(())
+}
+
+/// Checks `Node.earlier_gps`: only beside `Node.gps`, each fix valid and from the node's
+/// sender, stamps strictly increasing and before `Node.gps`'s.
+fn validate_earlier_gps(header: &v1::Header, node: &v1::Node) -> Result<(), WireError> {
+    const FIELD: &str = "Node.earlier_gps";
+    let Some(latest) = &node.gps else {
+        return match node.earlier_gps.len() {
+            0 => Ok(()),
+            n => Err(WireError::Invalid {
+                field: FIELD,
+                detail: format!("{n} fixes without Node.gps"),
+            }),
+        };
+    };
+    let stamp = |fix: &v1::GpsFix| fix.header.as_ref().map_or(0, |h| h.stamp_ns);
+    let mut previous: Option<u64> = None;
+    for (k, fix) in node.earlier_gps.iter().enumerate() {
+        validate_gps_fix(fix)?;
+        if let Some(g) = &fix.header {
+            same_sender(header, g, "Node.earlier_gps.header")?;
+        }
+        let t = stamp(fix);
+        if previous.is_some_and(|p| t <= p) || t >= stamp(latest) {
+            return Err(WireError::InvalidValue {
+                field: FIELD,
+                index: Some(k),
+                value: t as f64,
+                problem: "a stamp not after the fix before it and before Node.gps's",
+            });
+        }
+        previous = Some(t);
+    }
+    Ok(())
+}
+
+/// Checks an ack: header present, of this version, with valid ids.
+pub fn validate_ack(ack: &v1::Ack) -> Result<(), WireError> {
+    check_header(ack.header.as_ref(), "Ack.header").map(drop)
+}
+
+/// Decodes and checks a node ([`validate_node`]): garbage bytes, a missing header, a wire
+/// version other than 1 and a bad scan, pose or fix are errors.
+pub fn decode_node(bytes: &[u8]) -> Result<v1::Node, WireError> {
+    let node: v1::Node = decode("Node", bytes)?;
+    validate_node(&node)?;
+    Ok(node)
+}
+
+/// Decodes and checks live odometry ([`odometry_from_wire`]).
+pub fn decode_odometry(bytes: &[u8]) -> Result<v1::Odometry, WireError> {
+    let odometry: v1::Odometry = decode("Odometry", bytes)?;
+    odometry_from_wire(&odometry)?;
+    Ok(odometry)
+}
+
+/// Decodes and checks an ack ([`validate_ack`]).
+pub fn decode_ack(bytes: &[u8]) -> Result<v1::Ack, WireError> {
+    let ack: v1::Ack = decode("Ack", bytes)?;
+    validate_ack(&ack)?;
+    Ok(ack)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::convert::fixtures::*;
+    use crate::*;
+
+    #[test]
+    fn garbage_bytes_are_rejected() {
+        for bytes in [&b"garbage"[..], &[0xff; 16], &[0x0a, 0x05, 0x01]] {
+            let err = decode_node(bytes).unwrap_err();
+            assert!(
+                matches!(
+                    err,
+                    WireError::Decode {
+                        message: "Node",
+                        ..
+                    }
+                ),
+                "{err}"
+            );
+            assert!(decode_odometry(bytes).is_err());
+            assert!(decode_ack(bytes).is_err());
+        }
+        // Empty bytes are a valid encoding of an empty node, which has no header.
+        assert_eq!(
+            decode_node(&[]).unwrap_err(),
+            WireError::Missing {
+                field: "Node.header"
+            }
+        );
+    }
+
+    #[test]
+    fn other_wire_versions_are_rejected() {
+        let err = rejection(|n| n.header.as_mut().unwrap().version = 2);
+        assert_eq!(
+            err,
+            WireError::Version {
+                field: "Node.header",
+                found: 2
+            }
+        );
+        assert!(err.to_string().contains("wire version 2"), "{err}");
+        let err = rejection(|n| wire_scan(n).header.as_mut().unwrap().version = 2);
+        assert!(matches!(
+            err,
+            WireError::Version {
+                field: "LeveledScan.header",
+                found: 2
+            }
+        ));
+        let err = rejection(|n| n.gps.as_mut().unwrap().header.as_mut().unwrap().version = 0);
+        assert!(matches!(
+            err,
+            WireError::Version {
+                field: "GpsFix.header",
+                found: 0
+            }
+        ));
+        let mut ack = v1::Ack {
+            header: Some(header(3)),
+            acked_node_seq: 6,
+        };
+        assert_eq!(decode_ack(&ack.encode_to_vec()).unwrap().acked_node_seq, 6);
+        ack.header.as_mut().unwrap().version = 2;
+        assert!(decode_ack(&ack.encode_to_vec()).is_err());
+    }
+
+    #[test]
+    fn missing_parts_are_rejected() {
+        assert_eq!(
+            rejection(|n| n.header = None),
+            WireError::Missing {
+                field: "Node.header"
+            }
+        );
+        assert_eq!(
+            rejection(|n| n.scan = None),
+            WireError::Missing { field: "Node.scan" }
+        );
+        assert_eq!(
+            rejection(|n| wire_scan(n).header = None),
+            WireError::Missing {
+                field: "LeveledScan.header"
+            }
+        );
+        assert_eq!(
+            rejection(|n| n.odometry.as_mut().unwrap().pose = None),
+            WireError::Missing {
+                field: "Odometry.pose"
+            }
+        );
+        // An unset orientation (all zeros) is not the identity.
+        let err = rejection(|n| {
+            let p = n.odometry.as_mut().unwrap().pose.as_mut().unwrap();
+            (p.qw, p.qx, p.qy, p.qz) = (0.0, 0.0, 0.0, 0.0);
+        });
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "Pose3D.qw",
+                ..
+            }
+        ));
+        // GPS is optional.
+        let mut n = node();
+        n.gps = None;
+        n.earlier_gps.clear();
+        n.odometry_delta_from_previous = None;
+        decode_node(&n.encode_to_vec()).unwrap();
+    }
+
+    #[test]
+    fn bad_headers_fixes_and_poses_are_rejected() {
+        let err = rejection(|n| n.header.as_mut().unwrap().robot_id = "rover/*".into());
+        assert!(matches!(err, WireError::InvalidId { kind: "robot", .. }));
+        let err = rejection(|n| wire_scan(n).header.as_mut().unwrap().robot_id = "rover-2".into());
+        assert!(matches!(
+            err,
+            WireError::Invalid {
+                field: "Node.scan.header",
+                ..
+            }
+        ));
+        let err = rejection(|n| n.gps.as_mut().unwrap().latitude_deg = 91.0);
+        assert_eq!(err.to_string(), "GpsFix.latitude_deg = 91 is out of range");
+        let err = rejection(|n| n.gps.as_mut().unwrap().position_covariance_m2.truncate(4));
+        assert!(matches!(
+            err,
+            WireError::Invalid {
+                field: "GpsFix.position_covariance_m2",
+                ..
+            }
+        ));
+        let err = rejection(|n| n.gps.as_mut().unwrap().position_covariance_m2[4] = -0.1);
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                index: Some(4),
+                problem: "a negative variance",
+                ..
+            }
+        ));
+        let err = rejection(|n| n.gps.as_mut().unwrap().status = 42);
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "GpsFix.status",
+                ..
+            }
+        ));
+        let err = rejection(|n| n.odometry.as_mut().unwrap().pose.as_mut().unwrap().x_m = f64::NAN);
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "Pose3D.x_m",
+                ..
+            }
+        ));
+        let err = rejection(|n| n.odometry.as_mut().unwrap().pose_covariance = vec![0.0; 35]);
+        assert!(matches!(
+            err,
+            WireError::Invalid {
+                field: "Odometry.pose_covariance",
+                ..
+            }
+        ));
+        let err = rejection(|n| {
+            n.odometry_delta_from_previous.as_mut().unwrap().yaw_rad = f64::INFINITY;
+        });
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "Pose2D.yaw_rad",
+                ..
+            }
+        ));
+    }
+
+    #[test]
+    fn bad_earlier_fixes_are_rejected() {
+        let err = rejection(|n| n.earlier_gps[0].longitude_deg = f64::NAN);
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "GpsFix.longitude_deg",
+                problem: "not finite",
+                ..
+            }
+        ));
+        let err = rejection(|n| {
+            n.earlier_gps[0].header.as_mut().unwrap().robot_id = "rover-2".into();
+        });
+        assert!(matches!(
+            err,
+            WireError::Invalid {
+                field: "Node.earlier_gps.header",
+                ..
+            }
+        ));
+        // Not before Node.gps, or out of order.
+        let err = rejection(|n| {
+            let latest = n.gps.as_ref().unwrap().header.as_ref().unwrap().stamp_ns;
+            n.earlier_gps[0].header.as_mut().unwrap().stamp_ns = latest;
+        });
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "Node.earlier_gps",
+                index: Some(0),
+                ..
+            }
+        ));
+        let err = rejection(|n| {
+            let mut older = n.earlier_gps[0].clone();
+            older.header.as_mut().unwrap().stamp_ns -= 1_000_000_000;
+            n.earlier_gps.push(older);
+        });
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "Node.earlier_gps",
+                index: Some(1),
+                ..
+            }
+        ));
+        let err = rejection(|n| n.gps = None);
+        assert!(
+            err.to_string().contains("1 fixes without Node.gps"),
+            "{err}"
+        );
+    }
+}
