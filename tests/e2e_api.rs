@@ -57,6 +57,32 @@ async fn every_route_answers_in_its_format() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Each route of the document answers: nothing falls through to the router's own 404 (an
+/// empty body) or 405. The event stream, which never ends, is left out.
+fn every_documented_route_is_served(http: &str, doc: &common::openapi::OpenApiDoc) {
+    let ops = doc.operations();
+    assert!(ops.len() >= 23, "{} operations documented", ops.len());
+    for (template, method, types) in ops {
+        if types.iter().any(|t| t == "text/event-stream") {
+            continue;
+        }
+        let path = template
+            .replace("{fleet}", "park")
+            .replace("{robot}", "robot0")
+            .replace("{node}", "0")
+            .replace("{file}", "style.css");
+        let (status, body) = match method.as_str() {
+            "get" => http_get(http, &path).unwrap_or_else(|| panic!("GET {path}: no answer")),
+            "post" => (http_post(http, &path, None), String::from("(not read)")),
+            other => panic!("{other} {template}: a method the test does not know"),
+        };
+        assert!(
+            status != 405 && !(status == 404 && body.is_empty()),
+            "{method} {template} is documented but not served ({status})"
+        );
+    }
+}
+
 fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
     let base = "/api/v1/fleets/park";
     let get = |path: &str| {
@@ -64,9 +90,14 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
         assert_eq!(status, 200, "{path}: {body}");
         body
     };
+    // Each JSON answer is checked against the schema its route documents.
+    let doc = common::openapi::OpenApiDoc::fetch(http);
     let json = |path: &str| -> serde_json::Value {
-        serde_json::from_str(&get(path)).unwrap_or_else(|e| panic!("{path}: {e}"))
+        let value = serde_json::from_str(&get(path)).unwrap_or_else(|e| panic!("{path}: {e}"));
+        doc.check_json(path, &value);
+        value
     };
+    every_documented_route_is_served(http, &doc);
 
     let summary = json(&format!("{base}/summary"));
     assert_eq!(summary["nodes"], 3);

@@ -4,6 +4,8 @@
 
 #![allow(dead_code)]
 
+pub mod openapi;
+
 use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
 use serde_json::Value;
 use std::io::{Read, Write};

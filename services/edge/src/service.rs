@@ -52,6 +52,149 @@ enum Produced {
     End,
 }
 
+/// The robot's side of the bus: its publishers and subscriptions.
+struct Link {
+    session: zenoh::Session,
+    nodes: zenoh::pubsub::Publisher<'static>,
+    odometry: zenoh::pubsub::Publisher<'static>,
+    acks: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    map_poses:
+        zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+}
+
+impl Link {
+    /// Nodes reliable (blocking under congestion), odometry best effort (dropped).
+    async fn open(config: &EdgeConfig) -> Result<Link> {
+        let session = config.zenoh.open().await?;
+        let node_key = wire::node_key(&config.fleet, &config.robot)?;
+        let odom_key = wire::odom_key(&config.fleet, &config.robot)?;
+        let ack_key = wire::ack_key(&config.fleet, &config.robot)?;
+        let nodes = session
+            .declare_publisher(node_key)
+            .congestion_control(CongestionControl::Block)
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
+        let odometry = session
+            .declare_publisher(odom_key)
+            .congestion_control(CongestionControl::Drop)
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
+        let acks = session
+            .declare_subscriber(ack_key)
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
+        let map_poses = session
+            .declare_subscriber(wire::map_key(&config.fleet, "poses")?)
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
+        Ok(Link {
+            session,
+            nodes,
+            odometry,
+            acks,
+            map_poses,
+        })
+    }
+}
+
+/// What the sending loop keeps between events.
+struct Sending {
+    outbox: Arc<Outbox>,
+    report: EdgeReport,
+    /// Publications of this run, for `Header.seq`.
+    header_seq: u64,
+    /// The next node_seq not sent yet.
+    next_to_send: u64,
+    /// The newest send or ack progress: no progress for `resend_after` re-sends.
+    last_progress: Instant,
+    resend_after: Duration,
+}
+
+impl Sending {
+    /// A new node is in the outbox: send it (and any before it not sent yet).
+    async fn on_node(&mut self, link: &Link) -> Result<()> {
+        self.report.nodes += 1;
+        // The ack timer runs from the newest send, not from the last ack.
+        self.last_progress = Instant::now();
+        self.next_to_send = send_pending(
+            &self.outbox,
+            &link.nodes,
+            self.next_to_send,
+            &mut self.header_seq,
+            &mut self.report,
+        )
+        .await?;
+        Ok(())
+    }
+
+    /// Live odometry, best effort.
+    async fn on_odometry(&mut self, link: &Link, mut odometry: Box<v1::Odometry>) {
+        self.header_seq += 1;
+        if let Some(h) = odometry.header.as_mut() {
+            h.seq = self.header_seq;
+            h.sent_ns = now_ns();
+        }
+        if link.odometry.put(odometry.encode_to_vec()).await.is_ok() {
+            self.report.odometry_sent += 1;
+        }
+    }
+
+    /// The mapper took every node up to the ack's: they leave the outbox.
+    fn on_ack(&mut self, robot: &str, payload: &[u8]) -> Result<()> {
+        match wire::decode_ack(payload) {
+            Ok(ack) => {
+                let seq = ack.acked_node_seq;
+                if self.report.acked_node_seq.is_none_or(|a| seq > a) {
+                    self.report.acked_node_seq = Some(seq);
+                    self.last_progress = Instant::now();
+                }
+                self.outbox.ack(seq)?;
+                self.next_to_send = self.next_to_send.max(seq + 1);
+            }
+            Err(e) => tracing::warn!(robot, "bad ack: {e}"),
+        }
+        Ok(())
+    }
+
+    /// The mapper's corrected pose of this robot's last node.
+    fn on_map_poses(&mut self, robot: &str, payload: &[u8]) {
+        match wire::decode_map_poses(payload) {
+            Ok((_, poses)) => {
+                if let Some(p) = poses.into_iter().find(|p| p.robot == robot) {
+                    self.report.map_pose_updates += 1;
+                    self.report.map_pose = Some(p.pose);
+                }
+            }
+            Err(e) => tracing::warn!(robot, "bad map poses: {e}"),
+        }
+    }
+
+    /// Re-sends every unacked node, in order, after `resend_after` without progress;
+    /// whether the run is over (the source ended and everything is acked).
+    async fn on_tick(&mut self, link: &Link, source_done: bool) -> Result<bool> {
+        let pending = self.outbox.len()?;
+        if source_done && pending == 0 {
+            return Ok(true);
+        }
+        if pending > 0 && self.last_progress.elapsed() >= self.resend_after {
+            let from = self.outbox.acked_below()?;
+            let before = self.report.node_sends;
+            let next = send_pending(
+                &self.outbox,
+                &link.nodes,
+                from,
+                &mut self.header_seq,
+                &mut self.report,
+            )
+            .await?;
+            self.next_to_send = next.max(self.next_to_send);
+            self.report.node_resends += self.report.node_sends - before;
+            self.last_progress = Instant::now();
+        }
+        Ok(false)
+    }
+}
+
 /// Runs the edge service until the source ends and every node is acked, or `shutdown`
 /// completes. With `linger_for_acks` false it stops as soon as the source ends.
 pub async fn run(
@@ -65,121 +208,61 @@ pub async fn run(
         Arc::new(Outbox::open(&config.outbox_path).with_context(|| {
             format!("{}: cannot open the outbox", config.outbox_path.display())
         })?);
-    let session = config.zenoh.open().await?;
-    let node_key = wire::node_key(&config.fleet, &config.robot)?;
-    let odom_key = wire::odom_key(&config.fleet, &config.robot)?;
-    let ack_key = wire::ack_key(&config.fleet, &config.robot)?;
-    let node_pub = session
-        .declare_publisher(node_key)
-        .congestion_control(CongestionControl::Block)
-        .await
-        .map_err(anyhow::Error::from_boxed)?;
-    let odom_pub = session
-        .declare_publisher(odom_key)
-        .congestion_control(CongestionControl::Drop)
-        .await
-        .map_err(anyhow::Error::from_boxed)?;
-    let acks = session
-        .declare_subscriber(ack_key)
-        .await
-        .map_err(anyhow::Error::from_boxed)?;
-    let map_poses = session
-        .declare_subscriber(wire::map_key(&config.fleet, "poses")?)
-        .await
-        .map_err(anyhow::Error::from_boxed)?;
-
+    let link = Link::open(&config).await?;
     let (tx, mut rx) = mpsc::channel::<Produced>(256);
     let producer = {
         let outbox = outbox.clone();
         let config = config.clone();
         tokio::task::spawn_blocking(move || produce(config, source, outbox, tx))
     };
-
-    let mut report = EdgeReport {
-        robot: config.robot.clone(),
-        ..Default::default()
+    let mut sending = Sending {
+        report: EdgeReport {
+            robot: config.robot.clone(),
+            ..Default::default()
+        },
+        header_seq: 0,
+        next_to_send: outbox.acked_below()?,
+        outbox,
+        last_progress: Instant::now(),
+        resend_after: Duration::from_millis(config.resend_after_ms),
     };
-    let mut header_seq = 0u64;
-    let mut next_to_send = outbox.acked_below()?;
-    let mut last_progress = Instant::now();
-    let resend_after = Duration::from_millis(config.resend_after_ms);
+    let robot = config.robot.as_str();
     let mut source_done = false;
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     tokio::pin!(shutdown);
-
     loop {
         tokio::select! {
             _ = &mut shutdown => break,
             produced = rx.recv(), if !source_done => match produced {
-                Some(Produced::Node) => {
-                    report.nodes += 1;
-                    // The ack timer runs from the newest send, not from the last ack.
-                    last_progress = Instant::now();
-                    next_to_send = send_pending(&outbox, &node_pub, next_to_send, &mut header_seq, &mut report).await?;
-                }
-                Some(Produced::Odometry(mut odometry)) => {
-                    header_seq += 1;
-                    if let Some(h) = odometry.header.as_mut() {
-                        h.seq = header_seq;
-                        h.sent_ns = now_ns();
-                    }
-                    if odom_pub.put(odometry.encode_to_vec()).await.is_ok() {
-                        report.odometry_sent += 1;
-                    }
-                }
-                Some(Produced::ScanError) => report.scan_errors += 1,
+                Some(Produced::Node) => sending.on_node(&link).await?,
+                Some(Produced::Odometry(odometry)) => sending.on_odometry(&link, odometry).await,
+                Some(Produced::ScanError) => sending.report.scan_errors += 1,
                 Some(Produced::End) | None => {
                     source_done = true;
                     if !config.linger_for_acks { break; }
                 }
             },
-            sample = acks.recv_async() => {
+            sample = link.acks.recv_async() => {
                 let Ok(sample) = sample else { break };
-                match wire::decode_ack(&sample.payload().to_bytes()) {
-                    Ok(ack) => {
-                        let seq = ack.acked_node_seq;
-                        if report.acked_node_seq.is_none_or(|a| seq > a) {
-                            report.acked_node_seq = Some(seq);
-                            last_progress = Instant::now();
-                        }
-                        outbox.ack(seq)?;
-                        next_to_send = next_to_send.max(seq + 1);
-                    }
-                    Err(e) => tracing::warn!(robot = %config.robot, "bad ack: {e}"),
-                }
+                sending.on_ack(robot, &sample.payload().to_bytes())?;
             }
-            sample = map_poses.recv_async() => {
+            sample = link.map_poses.recv_async() => {
                 let Ok(sample) = sample else { break };
-                // The mapper's corrected pose of this robot's last node.
-                match wire::decode_map_poses(&sample.payload().to_bytes()) {
-                    Ok((_, poses)) => {
-                        if let Some(p) = poses.into_iter().find(|p| p.robot == config.robot) {
-                            report.map_pose_updates += 1;
-                            report.map_pose = Some(p.pose);
-                        }
-                    }
-                    Err(e) => tracing::warn!(robot = %config.robot, "bad map poses: {e}"),
-                }
+                sending.on_map_poses(robot, &sample.payload().to_bytes());
             }
             _ = tick.tick() => {
-                let pending = outbox.len()?;
-                if source_done && pending == 0 {
-                    break;
-                }
-                if pending > 0 && last_progress.elapsed() >= resend_after {
-                    let from = outbox.acked_below()?;
-                    let before = report.node_sends;
-                    next_to_send = send_pending(&outbox, &node_pub, from, &mut header_seq, &mut report).await?.max(next_to_send);
-                    report.node_resends += report.node_sends - before;
-                    last_progress = Instant::now();
-                }
+                if sending.on_tick(&link, source_done).await? { break; }
             }
         }
     }
     drop(rx);
     producer.abort();
-    report.outbox_pending = outbox.len()?;
-    session.close().await.map_err(anyhow::Error::from_boxed)?;
+    let mut report = sending.report;
+    report.outbox_pending = sending.outbox.len()?;
+    link.session
+        .close()
+        .await
+        .map_err(anyhow::Error::from_boxed)?;
     Ok(report)
 }
 

@@ -1,0 +1,87 @@
+//! The mapper's OpenAPI document as the tests hold the server to it: each JSON answer
+//! validates against the schema documented for its route, and every documented route is
+//! served.
+
+use serde_json::{Value, json};
+
+/// The document, fetched from a running mapper.
+pub struct OpenApiDoc {
+    doc: Value,
+}
+
+impl OpenApiDoc {
+    pub fn fetch(http: &str) -> OpenApiDoc {
+        let doc = super::get_json(http, "/api/v1/openapi.json").expect("the OpenAPI document");
+        assert!(
+            doc["openapi"].as_str().is_some_and(|v| v.starts_with("3.")),
+            "{doc}"
+        );
+        OpenApiDoc { doc }
+    }
+
+    /// Every documented (path template, method, response content types of 200).
+    pub fn operations(&self) -> Vec<(String, String, Vec<String>)> {
+        let mut out = Vec::new();
+        for (path, item) in self.doc["paths"].as_object().expect("paths") {
+            for (method, op) in item.as_object().expect("operations") {
+                let types = op["responses"]["200"]["content"]
+                    .as_object()
+                    .map(|c| c.keys().cloned().collect())
+                    .unwrap_or_default();
+                out.push((path.clone(), method.clone(), types));
+            }
+        }
+        out
+    }
+
+    /// The documented path template that `path` (query ignored) is an instance of.
+    pub fn template_of(&self, path: &str) -> Option<String> {
+        let path = path.split('?').next().unwrap_or(path);
+        let parts: Vec<&str> = path.split('/').collect();
+        self.doc["paths"]
+            .as_object()?
+            .keys()
+            .find(|template| {
+                let t: Vec<&str> = template.split('/').collect();
+                t.len() == parts.len()
+                    && t.iter().zip(&parts).all(|(t, p)| {
+                        if t.starts_with('{') && t.ends_with('}') {
+                            !p.is_empty()
+                        } else {
+                            // A parameter inside a segment: `{robot}.tum`-style suffixes.
+                            t == p
+                        }
+                    })
+            })
+            .cloned()
+    }
+
+    /// Checks a 200 JSON answer of `GET path` against its documented schema; panics naming
+    /// every violation.
+    pub fn check_json(&self, path: &str, body: &Value) {
+        let template = self
+            .template_of(path)
+            .unwrap_or_else(|| panic!("GET {path}: no such route in the document"));
+        let schema = &self.doc["paths"][&template]["get"]["responses"]["200"]["content"]
+            ["application/json"]["schema"];
+        assert!(
+            schema.is_object(),
+            "GET {template}: no JSON schema documented"
+        );
+        // The schema with the document's components beside it, so its $refs resolve.
+        let mut root = schema.clone();
+        root["components"] = self.doc["components"].clone();
+        root["$schema"] = json!("https://json-schema.org/draft/2020-12/schema");
+        let validator = jsonschema::validator_for(&root)
+            .unwrap_or_else(|e| panic!("GET {template}: the schema does not compile: {e}"));
+        let errors: Vec<String> = validator
+            .iter_errors(body)
+            .map(|e| format!("{} at {}", e, e.instance_path()))
+            .collect();
+        assert!(
+            errors.is_empty(),
+            "GET {path} does not match its schema ({template}):\n{}",
+            errors.join("\n")
+        );
+    }
+}
