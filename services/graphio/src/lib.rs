@@ -24,6 +24,7 @@ pub enum FileError {
     /// truncated.
     #[error("{}: {error}", path.display())]
     Io {
+        /// The file.
         path: PathBuf,
         /// The cause, already in the message (not a chained source, so it prints once).
         error: std::io::Error,
@@ -31,13 +32,21 @@ pub enum FileError {
     /// A line is malformed.
     #[error("{}:{line}: {message}", path.display())]
     Line {
+        /// The file.
         path: PathBuf,
+        /// The 1-based line.
         line: usize,
+        /// What is wrong with it.
         message: String,
     },
     /// The file as a whole is unusable (empty, no element of the expected kind, …).
     #[error("{}: {message}", path.display())]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
 }
 
 /// Why a map product could not be encoded. Never a panic, whatever the input's fields hold.
@@ -46,16 +55,27 @@ pub enum EncodeError {
     /// The grid has no cell, or its `cells` do not match `width × height`.
     #[error("grid of {width} × {height} cells holds {cells} cell values")]
     BadGrid {
+        /// Cells across (x).
         width: usize,
+        /// Cells up (y).
         height: usize,
+        /// Cell values it holds.
         cells: usize,
     },
     /// The grid is wider or higher than an image can be (2³¹ − 1 pixels for PNG).
     #[error("grid of {width} × {height} cells is too large for an image")]
-    GridTooLarge { width: usize, height: usize },
+    GridTooLarge {
+        /// Cells across (x).
+        width: usize,
+        /// Cells up (y).
+        height: usize,
+    },
     /// Pose `index` (in input order) has a NaN or infinite component.
     #[error("pose {index} is not finite")]
-    NonFinitePose { index: usize },
+    NonFinitePose {
+        /// Index of the pose.
+        index: usize,
+    },
     /// The PNG encoder failed.
     #[error("PNG encoding: {0}")]
     Png(String),

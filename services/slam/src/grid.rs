@@ -25,8 +25,11 @@ use serde::{Deserialize, Serialize};
 /// What a cell is known to be.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum CellState {
+    /// Never seen, or seen as neither free nor occupied.
     Unknown,
+    /// Seen as free.
     Free,
+    /// Seen as occupied.
     Occupied,
 }
 
@@ -39,13 +42,16 @@ pub struct OccupancyGrid {
     /// World position of cell (0, 0)'s lower-left corner (m). A multiple of the resolution,
     /// so grids of the same map at different times line up cell for cell.
     pub origin_m: [f64; 2],
+    /// Cells along x (east).
     pub width: usize,
+    /// Cells along y (north).
     pub height: usize,
     /// Occupancy per cent of each cell, row-major from row 0 (lowest y): −1 never seen,
     /// else 0–100 (`nav_msgs/OccupancyGrid.data`).
     pub cells: Vec<i8>,
     /// Per-cent thresholds of [`Self::state`]: occupied at or above, free at or below.
     pub occupied_percent: i8,
+    /// See `occupied_percent`.
     pub free_percent: i8,
 }
 

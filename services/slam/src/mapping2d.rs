@@ -37,22 +37,34 @@ pub enum Placed {
     /// It started node `node`.
     Node(usize),
     /// It hangs off node `node` at `offset` (its frame in the node's frame).
-    Attached { node: usize, offset: Pose2 },
+    Attached {
+        /// The node.
+        node: usize,
+        /// The scan's frame in the node's frame (m, rad).
+        offset: Pose2,
+    },
 }
 
 /// What the mapper did so far.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct MapperStats {
+    /// Scans added.
     pub scans: usize,
+    /// Nodes created (one scan each).
     pub nodes: usize,
+    /// Scan matches between successive nodes the gate accepted.
     pub sequential_matches: usize,
+    /// Scan matches between successive nodes rejected (odometry used instead).
     pub sequential_rejected: usize,
+    /// Loop-closure candidates matched.
     pub loop_candidates: usize,
     /// Loop closures, within a robot's chain and between robots.
     pub loop_closures: usize,
     /// Of `loop_closures`, those between two robots.
     pub inter_robot_closures: usize,
+    /// GPS edges added (fixes taken).
     pub gps_edges: usize,
+    /// Optimizations run.
     pub optimizations: usize,
     /// Optimizations put off because a part of the network was not anchored yet.
     pub deferred_optimizations: usize,
@@ -100,6 +112,7 @@ pub struct Mapper2d {
 }
 
 impl Mapper2d {
+    /// A mapper with no scan yet.
     pub fn new(params: Mapper2dParams) -> Mapper2d {
         Mapper2d {
             params,
@@ -107,10 +120,12 @@ impl Mapper2d {
         }
     }
 
+    /// The pose network so far: node poses at their current estimates, and the edges.
     pub fn graph(&self) -> &PoseGraph {
         &self.graph
     }
 
+    /// What the mapper did so far.
     pub fn stats(&self) -> MapperStats {
         self.stats
     }

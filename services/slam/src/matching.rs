@@ -24,11 +24,19 @@ use std::fmt;
 #[derive(Clone, Debug, PartialEq)]
 pub enum MatchError {
     /// `from_polar` got different numbers of bearings and ranges.
-    LengthMismatch { bearings: usize, ranges: usize },
+    LengthMismatch {
+        /// Bearings given.
+        bearings: usize,
+        /// Ranges given.
+        ranges: usize,
+    },
     /// A scan has fewer valid returns than [`IdcParams::min_correspondences`].
     TooFewPoints {
+        /// Which scan: "reference" or "current".
         scan: &'static str,
+        /// Its valid returns.
         found: usize,
+        /// Returns needed.
         needed: usize,
     },
     /// The initial pose has a NaN or infinite component.
@@ -36,9 +44,13 @@ pub enum MatchError {
     /// An iteration found too few correspondences of one rule: the scans do not overlap at
     /// this initial pose.
     TooFewCorrespondences {
+        /// The iteration (from 1).
         iteration: u32,
+        /// The rule: "closest-point" or "matching-range".
         rule: &'static str,
+        /// Pairs found.
         found: usize,
+        /// Pairs needed.
         needed: usize,
     },
     /// A parameter is out of its range.

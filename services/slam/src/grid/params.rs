@@ -20,6 +20,7 @@ pub struct GridParams {
     pub log_odds_miss: f32,
     /// Clamp of the log-odds (keeps a cell able to change its mind after many scans).
     pub log_odds_min: f32,
+    /// Upper clamp of the log-odds (see `log_odds_min`).
     pub log_odds_max: f32,
     /// Occupied at or above this probability…
     pub occupied_threshold: f64,
@@ -63,11 +64,17 @@ pub enum GridError {
     /// No scan was given.
     NoScans,
     /// The pose of scan `index` (in input order) has a NaN or infinite component.
-    NonFinitePose { index: usize },
+    NonFinitePose {
+        /// Index of the scan.
+        index: usize,
+    },
     /// The scans span more cells than [`GridParams::max_cells`].
     TooLarge {
+        /// Cells the grid would have along x.
         width: u64,
+        /// Cells the grid would have along y.
         height: u64,
+        /// The limit, [`GridParams::max_cells`].
         max_cells: usize,
     },
 }

@@ -16,12 +16,16 @@ pub struct Mapper2dParams {
     pub node_rotation_rad: f64,
     /// Odometry noise per step: σ_xy = a + b·distance (m), σ_θ = c + d·|rotation| (rad).
     pub odometry_sigma_xy_m: f64,
+    /// See `odometry_sigma_xy_m` (m per m travelled).
     pub odometry_sigma_xy_per_m: f64,
+    /// See `odometry_sigma_xy_m` (rad).
     pub odometry_sigma_theta_rad: f64,
+    /// See `odometry_sigma_xy_m` (rad per rad turned).
     pub odometry_sigma_theta_per_rad: f64,
     /// Floor on the standard deviations taken from a scan match (m, rad): IDC's covariance
     /// is optimistic on clean data.
     pub match_min_sigma_xy_m: f64,
+    /// See `match_min_sigma_xy_m` (rad).
     pub match_min_sigma_theta_rad: f64,
     /// A match between nodes of one chain is rejected when it disagrees with odometry: the
     /// squared Mahalanobis distance between the two (odometry and match covariances
@@ -30,12 +34,14 @@ pub struct Mapper2dParams {
     /// Keep the odometry edge beside an accepted match between successive nodes (odometry
     /// and scan matching fused), rather than the match alone.
     pub fuse_odometry: bool,
-    /// Do not optimize while adding scans; the caller runs [`Mapper2d::optimize_pending`]
-    /// (a server batching the nodes that arrived together into one solve).
+    /// Do not optimize while adding scans; the caller runs
+    /// [`Mapper2d::optimize_pending`](super::Mapper2d::optimize_pending) (a server batching
+    /// the nodes that arrived together into one solve).
     pub defer_optimization: bool,
     /// Loop-closure candidates: earlier nodes within this distance (m) of the new node, plus
     /// `loop_search_growth` times the path travelled between them (drift grows with it)…
     pub loop_search_radius_m: f64,
+    /// See `loop_search_radius_m` (m per m of path).
     pub loop_search_growth: f64,
     /// …and at least this many nodes back.
     pub loop_min_node_gap: usize,
@@ -47,8 +53,11 @@ pub struct Mapper2dParams {
     pub inter_robot_search_radius_m: f64,
     /// Robust kernel of GPS edges (multipath jumps).
     pub gps_robust: Robust,
+    /// Scan matching (IDC) of successive nodes and loop-closure candidates.
     pub idc: IdcParams,
+    /// The quality gate a match must pass to become an edge.
     pub gate: QualityGate,
+    /// The nonlinear optimization of the network.
     pub optimize: OptimizeParams,
 }
 
