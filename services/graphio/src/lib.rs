@@ -2,9 +2,9 @@
 //! logs (CARMEN), and the Kümmerle et al. relations used to score maps. The only crate that
 //! reads these files; the algorithms in `slam` stay free of I/O.
 //!
-//! The map products (DESIGN §3 "Map") are encoded here too, to bytes or text and never to a
-//! file, so the command line and the HTTP API serve the same bytes: the occupancy grid as
-//! PNG and as PGM + YAML for ROS map_server ([`gridmap`]), nodes and trajectories as
+//! The map products (docs/slam.md, "Map products") are encoded here too, to bytes or text and
+//! never to a file, so the command line and the HTTP API serve the same bytes: the occupancy
+//! grid as PNG and as PGM + YAML for ROS map_server ([`gridmap`]), nodes and trajectories as
 //! GeoJSON ([`geojson`]), trajectories as TUM text ([`trajectory`]), the graph as g2o
 //! ([`posegraph::to_g2o`]).
 

@@ -1,10 +1,9 @@
-//! The occupancy grid of a scan-based map (DESIGN §3 "Map"): the leveled scans at their
-//! optimized node poses, ray cast into a grid of log-odds. Every beam clears the cells it
-//! crosses (a supercover traversal, see `traverse`) and marks the cell of its return
-//! occupied. The result is served as
-//! occupancy per cent in the layout of ROS `nav_msgs/OccupancyGrid` (−1 unknown, 0–100;
-//! row-major, row 0 the southernmost), so the PNG/PGM encoders and any ROS client read it
-//! the same way.
+//! The occupancy grid of a scan-based map (docs/slam.md, "Map products"): the leveled scans at
+//! their optimized node poses, ray cast into a grid of log-odds. Every beam clears the cells it
+//! crosses (a supercover traversal, see `traverse`) and marks the cell of its return occupied.
+//! The result is served as occupancy per cent in the layout of ROS `nav_msgs/OccupancyGrid` (−1
+//! unknown, 0–100; row-major, row 0 the southernmost), so the PNG/PGM encoders and any ROS
+//! client read it the same way.
 //!
 //! Within one scan a cell is updated at most once, and a return wins over a beam crossing
 //! it: rays grazing a wall would otherwise erase the wall their neighbours just hit.

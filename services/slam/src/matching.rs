@@ -1,6 +1,7 @@
-//! Scan matching of 2D range scans (DESIGN §3 "Scan matching"): iterative dual correspondence
-//! (Lu & Milios 1997) between two leveled scans gives the relative pose, its covariance and a
-//! quality; a match below the [`QualityGate`] is rejected, never added as a constraint.
+//! Scan matching of 2D range scans (docs/slam.md, "Scan matching"): iterative dual
+//! correspondence (Lu & Milios 1997) between two leveled scans gives the relative pose, its
+//! covariance and a quality; a match below the [`QualityGate`] is rejected, never added as a
+//! constraint.
 //!
 //! Reading order: [`Scan2`] (a scan as a bearing-ordered point set), the reference
 //! contour (`contour`: the two correspondence rules), [`idc`] (the iteration), `validate`
