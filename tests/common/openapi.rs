@@ -62,8 +62,8 @@ impl OpenApiDoc {
         let template = self
             .template_of(path)
             .unwrap_or_else(|| panic!("GET {path}: no such route in the document"));
-        let schema = &self.doc["paths"][&template]["get"]["responses"]["200"]["content"]
-            ["application/json"]["schema"];
+        let schema = &self.doc["paths"][&template]["get"]["responses"]["200"]["content"]["application/json"]
+            ["schema"];
         assert!(
             schema.is_object(),
             "GET {template}: no JSON schema documented"

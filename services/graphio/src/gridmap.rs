@@ -21,6 +21,7 @@ pub const UNKNOWN: u8 = 205;
 /// `occupied_thresh` and `free_thresh` of the YAML, map_saver's constants: they classify
 /// the three grey levels above back into the same three states.
 pub const OCCUPIED_THRESH: f64 = 0.65;
+/// `free_thresh` of the YAML (see [`OCCUPIED_THRESH`]).
 pub const FREE_THRESH: f64 = 0.196;
 
 /// The grid's pixels, one grey byte a cell, top row (largest y) first.

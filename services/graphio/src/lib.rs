@@ -2,9 +2,9 @@
 //! logs (CARMEN), and the Kümmerle et al. relations used to score maps. The only crate that
 //! reads these files; the algorithms in `slam` stay free of I/O.
 //!
-//! The map products (DESIGN §3 "Map") are encoded here too, to bytes or text and never to a
-//! file, so the command line and the HTTP API serve the same bytes: the occupancy grid as
-//! PNG and as PGM + YAML for ROS map_server ([`gridmap`]), nodes and trajectories as
+//! The map products (docs/slam.md, "Map products") are encoded here too, to bytes or text and
+//! never to a file, so the command line and the HTTP API serve the same bytes: the occupancy
+//! grid as PNG and as PGM + YAML for ROS map_server ([`gridmap`]), nodes and trajectories as
 //! GeoJSON ([`geojson`]), trajectories as TUM text ([`trajectory`]), the graph as g2o
 //! ([`posegraph::to_g2o`]).
 
@@ -24,6 +24,7 @@ pub enum FileError {
     /// truncated.
     #[error("{}: {error}", path.display())]
     Io {
+        /// The file.
         path: PathBuf,
         /// The cause, already in the message (not a chained source, so it prints once).
         error: std::io::Error,
@@ -31,13 +32,21 @@ pub enum FileError {
     /// A line is malformed.
     #[error("{}:{line}: {message}", path.display())]
     Line {
+        /// The file.
         path: PathBuf,
+        /// The 1-based line.
         line: usize,
+        /// What is wrong with it.
         message: String,
     },
     /// The file as a whole is unusable (empty, no element of the expected kind, …).
     #[error("{}: {message}", path.display())]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
 }
 
 /// Why a map product could not be encoded. Never a panic, whatever the input's fields hold.
@@ -46,16 +55,27 @@ pub enum EncodeError {
     /// The grid has no cell, or its `cells` do not match `width × height`.
     #[error("grid of {width} × {height} cells holds {cells} cell values")]
     BadGrid {
+        /// Cells across (x).
         width: usize,
+        /// Cells up (y).
         height: usize,
+        /// Cell values it holds.
         cells: usize,
     },
     /// The grid is wider or higher than an image can be (2³¹ − 1 pixels for PNG).
     #[error("grid of {width} × {height} cells is too large for an image")]
-    GridTooLarge { width: usize, height: usize },
+    GridTooLarge {
+        /// Cells across (x).
+        width: usize,
+        /// Cells up (y).
+        height: usize,
+    },
     /// Pose `index` (in input order) has a NaN or infinite component.
     #[error("pose {index} is not finite")]
-    NonFinitePose { index: usize },
+    NonFinitePose {
+        /// Index of the pose.
+        index: usize,
+    },
     /// The PNG encoder failed.
     #[error("PNG encoding: {0}")]
     Png(String),

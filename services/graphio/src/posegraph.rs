@@ -14,7 +14,9 @@ use std::path::Path;
 /// The text formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GraphFormat {
+    /// g2o: `VERTEX_SE2`, `EDGE_SE2` (`.g2o`).
     G2o,
+    /// TORO: `VERTEX2`, `EDGE2` (`.graph`, `.toro`).
     Toro,
 }
 
@@ -32,6 +34,7 @@ impl GraphFormat {
 /// A pose graph read from a file.
 #[derive(Clone, Debug)]
 pub struct GraphFile {
+    /// The nodes and edges, nodes numbered by increasing vertex id.
     pub graph: PoseGraph,
     /// The file's vertex id of each node.
     pub ids: Vec<i64>,

@@ -14,7 +14,9 @@ use serde::{Deserialize, Serialize};
 /// the odometry frame, whose z axis is along gravity.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TimedPose {
+    /// Time of the pose (ns, the clock of the scan's column stamps).
     pub stamp_ns: u64,
+    /// The robot frame in the odometry frame (m, rad).
     pub pose: Isometry3<f64>,
 }
 
@@ -24,12 +26,19 @@ pub enum DeskewError {
     /// The track has no samples.
     EmptyTrack,
     /// Samples are not in strictly increasing time order (index of the first bad one).
-    UnorderedTrack { index: usize },
+    UnorderedTrack {
+        /// Index of the sample.
+        index: usize,
+    },
     /// A column was measured outside the time span the track covers.
     OutsideTrack {
+        /// Index of the column.
         column: usize,
+        /// Its time stamp (ns).
         stamp_ns: u64,
+        /// Time of the track's first sample (ns).
         first_ns: u64,
+        /// Time of the track's last sample (ns).
         last_ns: u64,
     },
 }
@@ -89,6 +98,7 @@ impl PoseTrack {
         }
     }
 
+    /// The samples, in strictly increasing time order.
     pub fn samples(&self) -> &[TimedPose] {
         &self.samples
     }

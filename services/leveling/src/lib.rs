@@ -2,8 +2,8 @@
 //! Laser Range Data for SLAM in Outdoor Environments" (the spec for every step here).
 //!
 //! The pipeline reads like the paper, one named step each:
-//! [`deskew`] (scanning while driving, 2.1) → [`Segmenter::segment`] (3.1, eqs. 3.2–3.3)
-//! → [`project`] (3.2, eq. 3.4). [`Leveler`] composes them. Pure: no I/O, no async.
+//! [`deskew()`] (scanning while driving, 2.1) → [`Segmenter::segment`] (3.1, eqs. 3.2–3.3)
+//! → [`project()`] (3.2, eq. 3.4). [`Leveler`] composes them. Pure: no I/O, no async.
 
 pub mod deskew;
 pub mod project;
@@ -29,7 +29,9 @@ pub struct Leveled {
     pub classes: Vec<PointClass>,
     /// Per column, the index of the point projected into the leveled scan.
     pub first_landmarks: Vec<Option<u32>>,
+    /// Points per class in `classes`.
     pub counts: ClassCounts,
+    /// The leveled range scan: one beam per column.
     pub scan: LeveledScan,
 }
 
@@ -40,12 +42,14 @@ pub struct Leveler {
 }
 
 impl Leveler {
+    /// A pipeline segmenting with `params`.
     pub fn new(params: SegmentParams) -> Leveler {
         Leveler {
             segmenter: Segmenter::new(params),
         }
     }
 
+    /// The segmentation thresholds it uses.
     pub fn params(&self) -> &SegmentParams {
         self.segmenter.params()
     }

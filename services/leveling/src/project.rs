@@ -20,6 +20,7 @@ pub struct Beam {
 pub struct LeveledScan {
     /// Time of the scan's first column (ns); the scan's frame is the robot's at that time.
     pub stamp_ns: u64,
+    /// One beam per column of the scan, in column order.
     pub beams: Vec<Beam>,
 }
 

@@ -10,8 +10,11 @@ use serde::{Deserialize, Serialize};
 /// that the bottom-up order is kept; it is stored as [`CylPoint::INVALID`] (`r_m == 0`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CylPoint {
+    /// Horizontal distance from the column's vertical sensor axis (m); 0 for an invalid return.
     pub r_m: f32,
+    /// Azimuth in the scan frame (rad, counter-clockwise from x forward).
     pub phi_rad: f32,
+    /// Height along the scan frame's z axis (m).
     pub z_m: f32,
 }
 
@@ -72,10 +75,12 @@ pub struct Column {
 /// An organized 3D scan: `columns` index contiguous, bottom-up runs of `points`.
 ///
 /// The frame is the sensor frame as loaded (x forward, y left, z up), or the leveled frame
-/// after [`crate::deskew`]: origin at the sensor at scan start, z along gravity.
+/// after [`crate::deskew()`]: origin at the sensor at scan start, z along gravity.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Scan3d {
+    /// Every column's points, column after column, each column bottom-up.
     pub points: Vec<CylPoint>,
+    /// The columns (vertical base scans), in measurement order.
     pub columns: Vec<Column>,
 }
 

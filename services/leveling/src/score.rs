@@ -10,7 +10,9 @@ pub struct Precision {
     pub landmark_scored: usize,
     /// Of those, points whose truth is ground (false landmarks).
     pub landmark_on_ground: usize,
+    /// Projected beams with a scored truth.
     pub beam_scored: usize,
+    /// Of those, beams whose truth is ground (false beams).
     pub beam_on_ground: usize,
 }
 

@@ -156,13 +156,18 @@ pub fn segment_column_reference(
 /// Points per class in one scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ClassCounts {
+    /// Points without a usable return.
     pub invalid: usize,
+    /// Points on the ground or traversable.
     pub ground: usize,
+    /// Points on a landmark, standing on a lower point (eq. 3.3).
     pub landmark: usize,
+    /// Points with a farther point below them in their column (eq. 3.2).
     pub overhang: usize,
 }
 
 impl ClassCounts {
+    /// Counts the classes of one scan's points.
     pub fn of(classes: &[PointClass]) -> ClassCounts {
         let mut c = ClassCounts::default();
         for class in classes {
@@ -215,6 +220,7 @@ struct PrefixBounds {
 }
 
 impl Segmenter {
+    /// A segmenter with its parameters and empty buffers.
     pub fn new(params: SegmentParams) -> Segmenter {
         Segmenter {
             params,
@@ -224,6 +230,7 @@ impl Segmenter {
         }
     }
 
+    /// The parameters it segments with.
     pub fn params(&self) -> &SegmentParams {
         &self.params
     }

@@ -81,14 +81,17 @@ impl<'w> FleetRobot<'w> {
         })
     }
 
+    /// The robot's yawing 3D scanner.
     pub fn scanner(&self) -> &YawingScanner {
         &self.scanner
     }
 
+    /// The robot's GPS receiver.
     pub fn gps(&self) -> &Gps {
         &self.gps
     }
 
+    /// The fixed horizontal 2D scanner it carries for the baseline.
     pub fn fixed_scanner(&self) -> &FixedScanner2d {
         &self.fixed2d
     }

@@ -260,18 +260,22 @@ impl Route {
         })
     }
 
+    /// The waypoints the route goes through (m, world x/y).
     pub fn waypoints(&self) -> &[Point2<f64>] {
         &self.waypoints
     }
 
+    /// Whether the route loops back to its first waypoint.
     pub fn is_closed(&self) -> bool {
         self.closed
     }
 
+    /// Driving speed (m/s).
     pub fn speed_mps(&self) -> f64 {
         self.speed_mps
     }
 
+    /// The robot's body: its wheelbase, track and height above the ground.
     pub fn body(&self) -> &RobotBody {
         &self.body
     }

@@ -43,11 +43,15 @@ pub struct SimScanFile {
 /// Why a [`SimScanFile`] is not usable.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SimFileError {
+    /// `format` is not [`SimScanFile::FORMAT`] (the value found).
     Format(String),
+    /// `version` is not [`SimScanFile::VERSION`] (the value found).
     Version(u32),
     /// `truth` does not have one entry per point.
     TruthLength {
+        /// Points in `raw`.
         points: usize,
+        /// Entries in `truth`.
         truth: usize,
     },
     /// The odometry is not a valid track or does not cover the columns.
@@ -78,9 +82,12 @@ impl std::fmt::Display for SimFileError {
 impl std::error::Error for SimFileError {}
 
 impl SimScanFile {
+    /// The `format` of every file.
     pub const FORMAT: &'static str = "levelmap-sim-scan";
+    /// The `version` this code reads and writes.
     pub const VERSION: u32 = 1;
 
+    /// A file of a simulated scan, with the scanner mount and the dead reckoning covering it.
     pub fn new(
         scan: SimScan,
         sensor_in_robot: Isometry3<f64>,

@@ -14,15 +14,18 @@ const MIN_HIT_M: f64 = 1e-6;
 pub struct VerticalCylinder {
     /// Axis position (m).
     pub center_xy_m: [f64; 2],
+    /// Radius (m).
     pub radius_m: f64,
     /// Bottom and top (m, world z).
     pub z_min_m: f64,
+    /// See `z_min_m`.
     pub z_max_m: f64,
 }
 
 /// An axis-aligned ellipsoid (tree crowns, bushes, lamp heads).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ellipsoid {
+    /// Centre (m, world frame).
     pub center_m: Point3<f64>,
     /// Semi-axes along world x, y, z (m).
     pub radii_m: Vector3<f64>,
@@ -31,6 +34,7 @@ pub struct Ellipsoid {
 /// A rotated box (walls, cars, the bridge deck, rails).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cuboid {
+    /// Centre (m, world frame).
     pub center_m: Point3<f64>,
     /// Box frame in the world frame.
     pub rotation: UnitQuaternion<f64>,
@@ -41,8 +45,11 @@ pub struct Cuboid {
 /// One solid primitive.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Shape {
+    /// An upright cylinder (trunks, poles, pillars).
     Cylinder(VerticalCylinder),
+    /// An axis-aligned ellipsoid (crowns, bushes, lamp heads).
     Ellipsoid(Ellipsoid),
+    /// A rotated box (walls, cars, the bridge deck, rails).
     Cuboid(Cuboid),
 }
 

@@ -12,10 +12,13 @@ use nalgebra::{Point3, Vector3};
 /// `center_m` turned by −`yaw_rad` (so σᵤ runs along the direction `yaw_rad`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bump {
+    /// Centre (m, world x/y).
     pub center_m: [f64; 2],
+    /// Height at the centre (m; negative for a hollow).
     pub amplitude_m: f64,
     /// Standard deviations along and across `yaw_rad` (m).
     pub sigma_m: [f64; 2],
+    /// Direction of the first axis (rad, counter-clockwise from x).
     pub yaw_rad: f64,
 }
 

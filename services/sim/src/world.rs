@@ -91,6 +91,7 @@ impl SurfaceKind {
 pub struct Hit {
     /// Distance from the ray's origin (m).
     pub range_m: f64,
+    /// What was hit (ground truth).
     pub kind: SurfaceKind,
     /// The physical object hit ([`World::TERRAIN_OBJECT`] for the ground); a tree's trunk
     /// and crown share one id.
@@ -100,7 +101,9 @@ pub struct Hit {
 /// One solid of the world with its ground truth.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Part {
+    /// The solid.
     pub shape: Shape,
+    /// What it is (ground truth).
     pub kind: SurfaceKind,
     /// The physical object the part belongs to.
     pub object: u32,
@@ -110,7 +113,9 @@ pub struct Part {
 /// its top surface meets the ground on its centre line.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bridge {
+    /// Start of the deck's centre line, on the ground (m).
     pub start_m: Point3<f64>,
+    /// End of the deck's centre line, on the ground (m).
     pub end_m: Point3<f64>,
     /// Width of the drivable deck (m), between the side beams.
     pub width_m: f64,
@@ -155,8 +160,11 @@ impl Bridge {
 /// A straight wall given by its centre line on the ground (m, world x/y).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WallLine {
+    /// One end of the centre line (m).
     pub a_m: Point2<f64>,
+    /// The other end (m).
     pub b_m: Point2<f64>,
+    /// Thickness (m).
     pub thickness_m: f64,
 }
 
@@ -356,6 +364,7 @@ impl World {
         }
     }
 
+    /// The ground.
     pub fn terrain(&self) -> &Terrain {
         &self.terrain
     }
@@ -370,10 +379,12 @@ impl World {
         self.object_count
     }
 
+    /// The bridge.
     pub fn bridge(&self) -> &Bridge {
         &self.bridge
     }
 
+    /// Named places: the pavilion, the dell, test lanes, footpath loops, the extent.
     pub fn places(&self) -> &Places {
         &self.places
     }

@@ -1,6 +1,7 @@
 //! WGS84 geodesy for GPS constraints: conversions between geodetic positions and a local
-//! east-north-up frame (x east, y north, z up, metres) around a map datum. Conversions go exactly through Earth-centred Earth-fixed coordinates on the WGS84
-//! ellipsoid (millimetre-exact over the park).
+//! east-north-up frame (x east, y north, z up, metres) around a map datum. Conversions go
+//! exactly through Earth-centred Earth-fixed coordinates on the WGS84 ellipsoid
+//! (millimetre-exact over the park).
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -13,7 +14,9 @@ const WGS84_F: f64 = 1.0 / 298.257_223_563;
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Geodetic {
+    /// Latitude (degrees, north positive).
     pub latitude_deg: f64,
+    /// Longitude (degrees, east positive).
     pub longitude_deg: f64,
     /// Height above the ellipsoid (m).
     pub height_m: f64,
@@ -22,6 +25,7 @@ pub struct Geodetic {
 /// The origin of the local ENU frame.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GeoDatum {
+    /// The datum: where the ENU frame's origin is, on the ellipsoid.
     pub origin: Geodetic,
 }
 

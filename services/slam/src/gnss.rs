@@ -52,6 +52,7 @@ pub struct GpsFix {
     /// Covariance of the position (m²), east-north-up at the fix; `None`: unknown (the
     /// status's default applies).
     pub covariance_m2: Option<Matrix3<f64>>,
+    /// The receiver's kind of solution.
     pub status: FixStatus,
     /// The antenna in the robot frame at the node's scan start (m): see the module docs.
     pub antenna_offset_m: Vector3<f64>,

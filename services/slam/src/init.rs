@@ -27,9 +27,11 @@ pub enum Init {
 /// Why an initialization is impossible.
 #[derive(Clone, Debug, PartialEq)]
 pub enum InitError {
+    /// The network itself is invalid.
     Graph(GraphError),
     /// `Init::Odometry` needs an edge i → i+1 for every i.
     MissingOdometry {
+        /// The node with no odometry edge to the next one.
         from: usize,
     },
 }

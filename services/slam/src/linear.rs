@@ -165,6 +165,7 @@ impl SparsePattern {
         }
     }
 
+    /// The matrix's dimension (rows = columns).
     pub fn dim(&self) -> usize {
         self.n
     }

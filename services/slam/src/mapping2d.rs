@@ -17,112 +17,18 @@
 //! right one that arrives after much drift still pulls the map. (DCS was measured on ACES:
 //! it discarded the right closures too, and the relation error tripled.)
 
-use crate::matching::{IdcParams, Match, QualityGate, Scan2, accept, idc};
-use crate::network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge, is_information};
-use crate::optimize::{OptimizeParams, OptimizeReport, Optimizer};
+mod edges;
+mod params;
+mod solve;
+
+pub use params::Mapper2dParams;
+
+use crate::matching::{Scan2, accept, idc};
+use crate::network::{EdgeKind, GraphError, PoseGraph, RelativeEdge};
+use crate::optimize::{OptimizeReport, Optimizer};
 use crate::robust::Robust;
 use crate::se2::{Pose2, wrap_angle};
-use nalgebra::Matrix3;
-use serde::{Deserialize, Serialize};
-
-/// Tunables of the 2D mapper, each with its unit.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct Mapper2dParams {
-    /// A new node after this much travel (m)…
-    pub node_distance_m: f64,
-    /// …or this much rotation (rad).
-    pub node_rotation_rad: f64,
-    /// Odometry noise per step: σ_xy = a + b·distance (m), σ_θ = c + d·|rotation| (rad).
-    pub odometry_sigma_xy_m: f64,
-    pub odometry_sigma_xy_per_m: f64,
-    pub odometry_sigma_theta_rad: f64,
-    pub odometry_sigma_theta_per_rad: f64,
-    /// Floor on the standard deviations taken from a scan match (m, rad): IDC's covariance
-    /// is optimistic on clean data.
-    pub match_min_sigma_xy_m: f64,
-    pub match_min_sigma_theta_rad: f64,
-    /// A match between nodes of one chain is rejected when it disagrees with odometry: the
-    /// squared Mahalanobis distance between the two (odometry and match covariances
-    /// summed) above this. Infinite: no check.
-    pub match_odometry_max_chi2: f64,
-    /// Keep the odometry edge beside an accepted match between successive nodes (odometry
-    /// and scan matching fused), rather than the match alone.
-    pub fuse_odometry: bool,
-    /// Do not optimize while adding scans; the caller runs [`Mapper2d::optimize_pending`]
-    /// (a server batching the nodes that arrived together into one solve).
-    pub defer_optimization: bool,
-    /// Loop-closure candidates: earlier nodes within this distance (m) of the new node, plus
-    /// `loop_search_growth` times the path travelled between them (drift grows with it)…
-    pub loop_search_radius_m: f64,
-    pub loop_search_growth: f64,
-    /// …and at least this many nodes back.
-    pub loop_min_node_gap: usize,
-    /// At most this many candidates are matched per new node (the nearest first).
-    pub loop_max_candidates: usize,
-    /// Robust kernel of loop closures (within and between robots).
-    pub loop_robust: Robust,
-    /// Candidates on another robot's chain: within this distance (m) of the new node.
-    pub inter_robot_search_radius_m: f64,
-    /// Robust kernel of GPS edges (multipath jumps).
-    pub gps_robust: Robust,
-    pub idc: IdcParams,
-    pub gate: QualityGate,
-    pub optimize: OptimizeParams,
-}
-
-impl Default for Mapper2dParams {
-    fn default() -> Self {
-        Mapper2dParams {
-            node_distance_m: 0.5,
-            node_rotation_rad: 20f64.to_radians(),
-            odometry_sigma_xy_m: 0.02,
-            odometry_sigma_xy_per_m: 0.1,
-            odometry_sigma_theta_rad: 1f64.to_radians(),
-            odometry_sigma_theta_per_rad: 0.1,
-            match_min_sigma_xy_m: 0.01,
-            match_min_sigma_theta_rad: 0.2f64.to_radians(),
-            match_odometry_max_chi2: f64::INFINITY,
-            fuse_odometry: false,
-            defer_optimization: false,
-            loop_search_radius_m: 3.0,
-            loop_search_growth: 0.2,
-            loop_min_node_gap: 20,
-            loop_max_candidates: 4,
-            loop_robust: Robust::Cauchy { c: 10.0 },
-            inter_robot_search_radius_m: 3.0,
-            gps_robust: Robust::Cauchy { c: 2.0 },
-            idc: IdcParams::default(),
-            gate: QualityGate::default(),
-            optimize: OptimizeParams::default(),
-        }
-    }
-}
-
-impl Mapper2dParams {
-    /// For robots with precise dead reckoning (a fibre-optic-class gyro, bias ~10°/h, and
-    /// wheels with 0.5 % scale error, as the simulator's `DeadReckoning::default()`), which
-    /// errs by 0.001–0.04 m and about 0.01° over 5 m, and sparse leveled scans of open
-    /// ground (a few dozen returns): odometry is then no worse than a sparse match, so a
-    /// match that contradicts it is rejected and an accepted one is fused with it. Measured
-    /// in `services/sim/tests/fleet_mapping.rs` and used by `levelmap demo`.
-    pub fn precise_dead_reckoning() -> Mapper2dParams {
-        let defaults = Mapper2dParams::default();
-        Mapper2dParams {
-            odometry_sigma_xy_m: 0.01,
-            odometry_sigma_xy_per_m: 0.01,
-            odometry_sigma_theta_rad: 0.002,
-            odometry_sigma_theta_per_rad: 0.01,
-            match_odometry_max_chi2: 16.0,
-            fuse_odometry: true,
-            idc: crate::matching::IdcParams {
-                min_correspondences: 10,
-                ..defaults.idc.clone()
-            },
-            ..defaults
-        }
-    }
-}
+use serde::Serialize;
 
 /// Where a scan went.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -130,23 +36,35 @@ pub enum Placed {
     /// It started node `node`.
     Node(usize),
     /// It hangs off node `node` at `offset` (its frame in the node's frame).
-    Attached { node: usize, offset: Pose2 },
+    Attached {
+        /// The node.
+        node: usize,
+        /// The scan's frame in the node's frame (m, rad).
+        offset: Pose2,
+    },
 }
 
 /// What the mapper did so far.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct MapperStats {
+    /// Scans added.
     pub scans: usize,
+    /// Nodes created (one scan each).
     pub nodes: usize,
+    /// Scan matches between successive nodes the gate accepted.
     pub sequential_matches: usize,
+    /// Scan matches between successive nodes rejected (odometry used instead).
     pub sequential_rejected: usize,
+    /// Loop-closure candidates matched.
     pub loop_candidates: usize,
     /// Loop closures, within a robot's chain and between robots.
     pub loop_closures: usize,
     /// Of `loop_closures`, those between two robots.
     pub inter_robot_closures: usize,
+    /// GPS edges added (fixes taken).
     pub gps_edges: usize,
+    /// Optimizations run.
     pub optimizations: usize,
     /// Optimizations put off because a part of the network was not anchored yet.
     pub deferred_optimizations: usize,
@@ -183,6 +101,7 @@ pub struct Mapper2d {
 }
 
 impl Mapper2d {
+    /// A mapper with no scan yet.
     pub fn new(params: Mapper2dParams) -> Mapper2d {
         Mapper2d {
             params,
@@ -190,10 +109,12 @@ impl Mapper2d {
         }
     }
 
+    /// The pose network so far: node poses at their current estimates, and the edges.
     pub fn graph(&self) -> &PoseGraph {
         &self.graph
     }
 
+    /// What the mapper did so far.
     pub fn stats(&self) -> MapperStats {
         self.stats
     }
@@ -334,214 +255,6 @@ impl Mapper2d {
         self.node_scans.push(scan);
         self.stats.nodes += 1;
         node
-    }
-
-    /// Whether match `m` of two nodes of one chain agrees with their odometry `step` (see
-    /// `match_odometry_max_chi2`).
-    fn agrees_with_odometry(&self, m: &Match, step: &Pose2) -> bool {
-        let limit = self.params.match_odometry_max_chi2;
-        if limit == f64::INFINITY {
-            return true;
-        }
-        let Some(odometry) = self.odometry_information(step).try_inverse() else {
-            return false;
-        };
-        let Some(matched) = self.match_information(&m.covariance).try_inverse() else {
-            return false;
-        };
-        let e = nalgebra::Vector3::new(
-            m.pose.x - step.x,
-            m.pose.y - step.y,
-            wrap_angle(m.pose.theta - step.theta),
-        );
-        (odometry + matched)
-            .try_inverse()
-            .is_some_and(|i| (e.transpose() * i * e)[(0, 0)] <= limit)
-    }
-
-    /// Adds a GPS edge per fix of `node`; returns whether it added any.
-    fn add_gps(&mut self, node: usize, gps: &[GpsObservation]) -> bool {
-        let mut added = false;
-        for fix in gps {
-            added |= self.add_gps_edge(node, fix);
-        }
-        added
-    }
-
-    /// Adds the GPS edge of one fix of `node`; returns whether it was taken.
-    fn add_gps_edge(&mut self, node: usize, fix: &GpsObservation) -> bool {
-        // A fix the network would reject (NaN, a covariance not positive definite) is
-        // dropped here rather than failing every later optimization.
-        let Some(information) = fix.covariance_m2.try_inverse() else {
-            return false;
-        };
-        if !(is_information(&information)
-            && fix
-                .position_m
-                .iter()
-                .chain(fix.lever_arm_m.iter())
-                .all(|v| v.is_finite()))
-        {
-            return false;
-        }
-        let edge = GpsEdge {
-            node,
-            position_m: fix.position_m,
-            information,
-            lever_arm_m: fix.lever_arm_m,
-            robust: self.params.gps_robust,
-        };
-        self.graph.gps.push(edge);
-        self.stats.gps_edges += 1;
-        true
-    }
-
-    /// Matches `node` against earlier nodes near it, its own robot's and the others';
-    /// returns how many closures were added.
-    fn close_loops(&mut self, node: usize) -> usize {
-        let p = self.params.clone();
-        let here = self.graph.poses[node];
-        let (robot, place) = self.node_robot[node];
-        let mut candidates: Vec<(f64, usize)> = (0..node)
-            .filter_map(|j| {
-                let d = (self.graph.poses[j].x - here.x).hypot(self.graph.poses[j].y - here.y);
-                let (other, other_place) = self.node_robot[j];
-                let near = if other == robot {
-                    place >= other_place + p.loop_min_node_gap
-                        && d <= p.loop_search_radius_m
-                            + p.loop_search_growth * (self.node_path_m[node] - self.node_path_m[j])
-                } else {
-                    d <= p.inter_robot_search_radius_m
-                };
-                near.then_some((d, j))
-            })
-            .collect();
-        candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
-        // Spread the candidates along the chains: the nearest one, then others at least
-        // loop_min_node_gap nodes from those taken on the same chain.
-        let mut taken: Vec<usize> = Vec::new();
-        for (_, j) in candidates {
-            if taken.len() >= p.loop_max_candidates {
-                break;
-            }
-            let (chain, at) = self.node_robot[j];
-            if taken.iter().all(|&t| {
-                let (c, a) = self.node_robot[t];
-                c != chain || a.abs_diff(at) >= p.loop_min_node_gap
-            }) {
-                taken.push(j);
-            }
-        }
-        let mut added = 0;
-        for j in taken {
-            self.stats.loop_candidates += 1;
-            let guess = self.graph.poses[j].between(&here);
-            let Ok(m) = idc(&self.node_scans[j], &self.node_scans[node], guess, &p.idc) else {
-                continue;
-            };
-            if !accept(&m, &p.gate) {
-                continue;
-            }
-            let inter_robot = self.node_robot[j].0 != robot;
-            self.graph.edges.push(RelativeEdge {
-                from: j,
-                to: node,
-                measurement: m.pose,
-                information: self.match_information(&m.covariance),
-                kind: if inter_robot {
-                    EdgeKind::InterRobot
-                } else {
-                    EdgeKind::LoopClosure
-                },
-                robust: p.loop_robust,
-            });
-            self.stats.loop_closures += 1;
-            self.stats.inter_robot_closures += usize::from(inter_robot);
-            added += 1;
-        }
-        added
-    }
-
-    /// Optimizes now, or marks it pending with `defer_optimization`.
-    fn optimize_when_anchored(&mut self) -> Result<(), GraphError> {
-        if self.params.defer_optimization {
-            self.optimization_pending = true;
-            return Ok(());
-        }
-        self.optimize_anchored().map(drop)
-    }
-
-    /// Runs the optimization that scans added since the last one called for (with
-    /// `defer_optimization`); returns whether one ran.
-    pub fn optimize_pending(&mut self) -> Result<bool, GraphError> {
-        if !std::mem::take(&mut self.optimization_pending) {
-            return Ok(false);
-        }
-        self.optimize_anchored()
-    }
-
-    /// Optimizes now, pending or not, unless a part of the network is not anchored yet;
-    /// returns whether it ran.
-    pub fn optimize_now(&mut self) -> Result<bool, GraphError> {
-        self.optimization_pending = false;
-        self.optimize_anchored()
-    }
-
-    /// Optimizes unless a part of the network is not anchored yet; returns whether it ran.
-    fn optimize_anchored(&mut self) -> Result<bool, GraphError> {
-        match self.optimize() {
-            Ok(_) => Ok(true),
-            Err(GraphError::Disconnected { .. } | GraphError::Singular) => {
-                self.stats.deferred_optimizations += 1;
-                Ok(false)
-            }
-            Err(e) => Err(e),
-        }
-    }
-
-    fn optimize(&mut self) -> Result<OptimizeReport, GraphError> {
-        let report = self
-            .optimizer
-            .optimize(&mut self.graph, &self.params.optimize)?;
-        self.stats.optimizations += 1;
-        self.last_optimization = Some(report);
-        Ok(report)
-    }
-
-    fn odometry_information(&self, step: &Pose2) -> Matrix3<f64> {
-        let p = &self.params;
-        let sxy = p.odometry_sigma_xy_m + p.odometry_sigma_xy_per_m * step.x.hypot(step.y);
-        let st = p.odometry_sigma_theta_rad
-            + p.odometry_sigma_theta_per_rad * wrap_angle(step.theta).abs();
-        Matrix3::from_diagonal(&nalgebra::Vector3::new(
-            1.0 / (sxy * sxy),
-            1.0 / (sxy * sxy),
-            1.0 / (st * st),
-        ))
-    }
-
-    /// Information of a scan match: its covariance with a floor on each standard deviation.
-    fn match_information(&self, covariance: &[[f64; 3]; 3]) -> Matrix3<f64> {
-        let p = &self.params;
-        let mut c = Matrix3::from_fn(|r, k| covariance[r][k]);
-        c = (c + c.transpose()) * 0.5;
-        let floor = [
-            p.match_min_sigma_xy_m.powi(2),
-            p.match_min_sigma_xy_m.powi(2),
-            p.match_min_sigma_theta_rad.powi(2),
-        ];
-        for (d, f) in floor.iter().enumerate() {
-            c[(d, d)] += f;
-        }
-        c.try_inverse()
-            .filter(|i| i.iter().all(|v| v.is_finite()))
-            .unwrap_or_else(|| {
-                Matrix3::from_diagonal(&nalgebra::Vector3::new(
-                    1.0 / floor[0],
-                    1.0 / floor[1],
-                    1.0 / floor[2],
-                ))
-            })
     }
 }
 

@@ -1,6 +1,7 @@
-//! Scan matching of 2D range scans (DESIGN §3 "Scan matching"): iterative dual correspondence
-//! (Lu & Milios 1997) between two leveled scans gives the relative pose, its covariance and a
-//! quality; a match below the [`QualityGate`] is rejected, never added as a constraint.
+//! Scan matching of 2D range scans (docs/slam.md, "Scan matching"): iterative dual
+//! correspondence (Lu & Milios 1997) between two leveled scans gives the relative pose, its
+//! covariance and a quality; a match below the [`QualityGate`] is rejected, never added as a
+//! constraint.
 //!
 //! Reading order: [`Scan2`] (a scan as a bearing-ordered point set), the reference
 //! contour (`contour`: the two correspondence rules), [`idc`] (the iteration), `validate`
@@ -24,11 +25,19 @@ use std::fmt;
 #[derive(Clone, Debug, PartialEq)]
 pub enum MatchError {
     /// `from_polar` got different numbers of bearings and ranges.
-    LengthMismatch { bearings: usize, ranges: usize },
+    LengthMismatch {
+        /// Bearings given.
+        bearings: usize,
+        /// Ranges given.
+        ranges: usize,
+    },
     /// A scan has fewer valid returns than [`IdcParams::min_correspondences`].
     TooFewPoints {
+        /// Which scan: "reference" or "current".
         scan: &'static str,
+        /// Its valid returns.
         found: usize,
+        /// Returns needed.
         needed: usize,
     },
     /// The initial pose has a NaN or infinite component.
@@ -36,9 +45,13 @@ pub enum MatchError {
     /// An iteration found too few correspondences of one rule: the scans do not overlap at
     /// this initial pose.
     TooFewCorrespondences {
+        /// The iteration (from 1).
         iteration: u32,
+        /// The rule: "closest-point" or "matching-range".
         rule: &'static str,
+        /// Pairs found.
         found: usize,
+        /// Pairs needed.
         needed: usize,
     },
     /// A parameter is out of its range.

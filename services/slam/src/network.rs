@@ -7,13 +7,17 @@ use crate::se2::{Pose2, wrap_angle};
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
-/// Where a relative edge comes from (also picks its robust kernel in a [`RobustPolicy`]).
+/// Where a relative edge comes from (maps and reports count edges by kind).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum EdgeKind {
+    /// Dead reckoning between successive nodes of one robot.
     Odometry,
+    /// A scan match between successive nodes of one robot.
     ScanMatch,
+    /// A scan match closing a loop within one robot's chain.
     LoopClosure,
+    /// A scan match between nodes of two robots.
     InterRobot,
 }
 
@@ -30,19 +34,25 @@ impl EdgeKind {
 /// A relative pose measurement: pose `to` seen from pose `from`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RelativeEdge {
+    /// The node the measurement is seen from.
     pub from: usize,
+    /// The node measured.
     pub to: usize,
+    /// Pose `to` in the frame of pose `from` (m, rad).
     pub measurement: Pose2,
     /// Information (inverse covariance) of (x, y, θ), in the measurement's frame (g2o's
     /// convention).
     pub information: Matrix3<f64>,
+    /// Where it comes from.
     pub kind: EdgeKind,
+    /// Its robust kernel.
     pub robust: Robust,
 }
 
 /// An absolute position of a GPS antenna in the local east-north frame of the map datum.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GpsEdge {
+    /// The node whose antenna was fixed.
     pub node: usize,
     /// Antenna position, east and north of the datum (m).
     pub position_m: Vector2<f64>,
@@ -50,14 +60,18 @@ pub struct GpsEdge {
     pub information: Matrix2<f64>,
     /// Antenna position in the robot frame (m): the lever arm.
     pub lever_arm_m: Vector2<f64>,
+    /// Its robust kernel (multipath jumps).
     pub robust: Robust,
 }
 
 /// The network: node poses (map frame; east-north when GPS is used) and its edges.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PoseGraph {
+    /// Node poses, by node index (m, rad).
     pub poses: Vec<Pose2>,
+    /// Relative measurements between nodes.
     pub edges: Vec<RelativeEdge>,
+    /// Absolute GPS positions of nodes' antennas.
     pub gps: Vec<GpsEdge>,
 }
 
@@ -66,20 +80,40 @@ pub struct PoseGraph {
 pub enum GraphError {
     /// An edge names a node that does not exist.
     MissingNode {
+        /// The edge: its index among the relative edges, GPS edges numbered after them.
         edge: usize,
+        /// The node it names.
         node: usize,
+        /// Nodes in the graph.
         nodes: usize,
     },
     /// An edge's measurement or information has a NaN or infinity.
-    NotFinite { edge: usize },
+    NotFinite {
+        /// The edge, numbered as in `MissingNode`.
+        edge: usize,
+    },
     /// An information matrix is not symmetric positive definite.
-    NotPositiveDefinite { edge: usize },
+    NotPositiveDefinite {
+        /// The edge, numbered as in `MissingNode`.
+        edge: usize,
+    },
     /// An edge from a node to itself.
-    SelfLoop { edge: usize },
+    SelfLoop {
+        /// The edge, numbered as in `MissingNode`.
+        edge: usize,
+    },
     /// Nodes that no chain of relative edges links to node 0 (and no GPS anchors).
-    Disconnected { unreachable: usize, example: usize },
+    Disconnected {
+        /// How many nodes.
+        unreachable: usize,
+        /// One of them.
+        example: usize,
+    },
     /// A node pose is not finite.
-    BadPose { node: usize },
+    BadPose {
+        /// The node.
+        node: usize,
+    },
     /// The linear system could not be solved (numerically singular).
     Singular,
 }
@@ -279,6 +313,7 @@ impl RelativeEdge {
         (e, ji, jj)
     }
 
+    /// The squared Mahalanobis error eᵀΩe at `poses` (unitless).
     pub fn chi2(&self, poses: &[Pose2]) -> f64 {
         let e = self.error(poses);
         e.dot(&(self.information * e))
@@ -327,6 +362,7 @@ impl GpsEdge {
         (self.error(poses), j)
     }
 
+    /// The squared Mahalanobis error eᵀΩe at `poses` (unitless).
     pub fn chi2(&self, poses: &[Pose2]) -> f64 {
         let e = self.error(poses);
         e.dot(&(self.information * e))

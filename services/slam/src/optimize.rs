@@ -27,6 +27,7 @@ pub enum Method {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct OptimizeParams {
+    /// Gauss-Newton or Levenberg-Marquardt.
     pub method: Method,
     /// Most iterations (linear solves that changed the poses).
     pub max_iterations: u32,
@@ -70,6 +71,7 @@ pub enum StopReason {
     SmallStep,
     /// Levenberg-Marquardt could not find a step that lowers the cost.
     NoDescent,
+    /// `max_iterations` reached.
     MaxIterations,
 }
 
@@ -79,10 +81,13 @@ pub enum StopReason {
 pub struct OptimizeReport {
     /// Σ eᵀΩe before and after, without robust kernels (g2o's convention).
     pub initial_chi2: f64,
+    /// See `initial_chi2`.
     pub final_chi2: f64,
     /// The robust cost Σ ρ(eᵀΩe) that was minimized.
     pub final_cost: f64,
+    /// Iterations run (linear solves that changed the poses).
     pub iterations: u32,
+    /// Why it stopped.
     pub stop: StopReason,
     /// Whether the symbolic factorization of an earlier call was reused.
     pub reused_symbolic: bool,
@@ -204,6 +209,7 @@ struct Linearization {
 }
 
 impl Optimizer {
+    /// An optimizer with empty buffers (they grow on the first solve and are kept).
     pub fn new() -> Optimizer {
         Optimizer::default()
     }

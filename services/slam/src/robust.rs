@@ -12,11 +12,20 @@ pub enum Robust {
     #[default]
     None,
     /// Quadratic up to `delta`, linear beyond.
-    Huber { delta: f64 },
+    Huber {
+        /// Where quadratic turns linear (Mahalanobis distance).
+        delta: f64,
+    },
     /// ρ(s) = c² log(1 + s/c²): outliers fade out.
-    Cauchy { c: f64 },
+    Cauchy {
+        /// Scale c (Mahalanobis distance).
+        c: f64,
+    },
     /// Dynamic covariance scaling (Agarwal et al. 2013) with parameter φ.
-    Dcs { phi: f64 },
+    Dcs {
+        /// φ (squared Mahalanobis distance).
+        phi: f64,
+    },
 }
 
 impl Robust {

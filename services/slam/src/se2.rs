@@ -8,8 +8,11 @@ use std::f64::consts::PI;
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Pose2 {
+    /// East, or x of the parent frame (m).
     pub x: f64,
+    /// North, or y of the parent frame (m).
     pub y: f64,
+    /// Heading (rad, counter-clockwise from the x axis).
     pub theta: f64,
 }
 
@@ -31,12 +34,14 @@ pub fn wrap_angle(a: f64) -> f64 {
 }
 
 impl Pose2 {
+    /// The identity: the origin, heading 0.
     pub const IDENTITY: Pose2 = Pose2 {
         x: 0.0,
         y: 0.0,
         theta: 0.0,
     };
 
+    /// The pose at (x, y) (m) with heading theta (rad).
     pub fn new(x: f64, y: f64, theta: f64) -> Pose2 {
         Pose2 { x, y, theta }
     }

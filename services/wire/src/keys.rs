@@ -1,4 +1,4 @@
-//! Zenoh key expressions of DESIGN.md §4, built only from validated ids.
+//! Zenoh key expressions (ARCHITECTURE.md, "The wire contract"), built only from validated ids.
 //!
 //! Ids are restricted to `[A-Za-z0-9_-]` so that no id can add a chunk (`/`) or a wildcard
 //! (`*`, `**`, `$*`) to a key expression: a robot named `*` must not subscribe to, or

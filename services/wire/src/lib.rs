@@ -1,4 +1,4 @@
-//! The levelmap wire contract (DESIGN.md §4): protobuf messages generated from
+//! The levelmap wire contract (ARCHITECTURE.md): protobuf messages generated from
 //! `proto/levelmap/v1/*.proto` (compiled by protox, no system `protoc`), the Zenoh key
 //! expressions, and checked conversions between the messages and the `leveling` types.
 //!

@@ -6,6 +6,7 @@ use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 /// A planar scanner bolted to the robot: its plane tilts with the robot on a slope.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FixedScanner2d {
+    /// Number of beams, evenly spread over `fov_deg`.
     pub beams: usize,
     /// Opening angle, centred forward (degrees).
     pub fov_deg: f64,

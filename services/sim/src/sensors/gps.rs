@@ -18,6 +18,7 @@ pub struct Gps {
     pub sigma_horizontal_m: f64,
     /// Standard deviation of the height (m).
     pub sigma_vertical_m: f64,
+    /// Probability per fix time that there is no fix.
     pub dropout_probability: f64,
     /// Probability per fix that a multipath episode starts.
     pub multipath_probability: f64,
@@ -27,6 +28,7 @@ pub struct Gps {
     pub multipath_fixes: [u32; 2],
     /// The antenna in the robot frame (m).
     pub antenna_in_robot_m: Vector3<f64>,
+    /// The datum of the local ENU frame.
     pub datum: GeoDatum,
 }
 
@@ -51,11 +53,13 @@ impl Default for Gps {
 /// One GPS fix with its ground truth.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GpsFix {
+    /// Time of the fix (ns, the simulation clock).
     pub stamp_ns: u64,
     /// Measured antenna position in the local ENU frame (m).
     pub enu_m: Point3<f64>,
     /// The receiver's claimed standard deviations, horizontal and vertical (m).
     pub sigma_horizontal_m: f64,
+    /// See `sigma_horizontal_m`.
     pub sigma_vertical_m: f64,
     /// Ground truth: where the antenna really was (m, ENU).
     pub true_enu_m: Point3<f64>,

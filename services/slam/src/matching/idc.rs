@@ -12,164 +12,17 @@
 //! closest-point rule pins translation but turns slowly; the range rule turns quickly but
 //! is blind to translation. Together they converge in about ten iterations on real scans.
 
+mod pairs;
+mod params;
+
+pub use params::IdcParams;
+
 use super::contour::Contour;
 use super::validate::validate;
 use super::{MatchError, Scan2};
 use crate::{Pose2, wrap_angle};
-use nalgebra::{Matrix3, Vector3};
+use pairs::{Pairs, correspond};
 use serde::{Deserialize, Serialize};
-
-/// Every tunable of IDC and of the validation of its result, with its unit and default.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct IdcParams {
-    /// Outlier distance of the first iteration (m): a pair further apart is dropped. Covers
-    /// the error of the initial guess. Default 1.0.
-    pub initial_max_distance_m: f64,
-    /// Floor of the outlier distance (m), reached after a few iterations. Default 0.2.
-    pub final_max_distance_m: f64,
-    /// Rotation window B_r of the matching-range rule at the first iteration (rad): covers
-    /// the rotation error of the initial guess. Default 0.15 (8.6°).
-    pub initial_rotation_window_rad: f64,
-    /// Floor of the rotation window (rad). Default 0.03 (1.7°).
-    pub final_rotation_window_rad: f64,
-    /// Factor applied to the outlier distance and the window after every iteration
-    /// (0 < shrink ≤ 1). Default 0.7.
-    pub shrink: f64,
-    /// Until the schedules reach their floors, only every `coarse_stride`-th point of the
-    /// current scan is paired, for speed. It narrows the basin of convergence: with 2 or 3,
-    /// the 2D mapper on ACES found 45 % fewer loop closures (their initial guesses are
-    /// far off). Default 1: every point throughout.
-    pub coarse_stride: usize,
-    /// Iterations at most. Default 50.
-    pub max_iterations: u32,
-    /// Converged when, with both schedules at their floors, one update moves the pose by
-    /// less than this (m) ... Default 1e-3.
-    pub converged_translation_m: f64,
-    /// ... and turns it by less than this (rad). Default 1e-4.
-    pub converged_rotation_rad: f64,
-    /// Fewest returns per scan, and fewest pairs per rule and iteration (divided by the
-    /// stride in coarse iterations). Default 20.
-    pub min_correspondences: usize,
-    /// Neighbouring reference returns lie on one surface (and are interpolated between)
-    /// when at most `join_distance_m + join_distance_per_m · range` apart (m). Default 0.3.
-    pub join_distance_m: f64,
-    /// See `join_distance_m` (m per m of range). Default 0.05.
-    pub join_distance_per_m: f64,
-    /// Validation: a point within this distance of the reference polyline at the final pose
-    /// is an inlier (m). Default 0.1.
-    pub inlier_distance_m: f64,
-    /// Validation: a point is visible to the reference when the reference has a return
-    /// within this bearing of it (rad, seen from the reference origin). Default 0.02 (1.1°).
-    pub visibility_window_rad: f64,
-    /// Validation: a visible point nearer to the reference origin than every reference
-    /// return around its bearing by more than this lies in space the reference saw free:
-    /// a conflict (m). Default 0.5.
-    pub conflict_margin_m: f64,
-    /// Validation: conditioning (smallest / largest eigenvalue of the scaled information)
-    /// from which a match counts as fully constrained; below it quality is reduced, to at
-    /// most half for a degenerate scene. Default 0.02.
-    pub conditioning_ok: f64,
-    /// Covariance: the residual standard deviation is taken as at least this (m), so that
-    /// noise-free scans do not claim a perfect pose. Default 0.01.
-    pub range_noise_m: f64,
-    /// Covariance: standard deviation reported along a direction the scans do not
-    /// constrain, as in a corridor (m). Default 1.0.
-    pub unobservable_std_m: f64,
-    /// Covariance: the same for rotation (rad). Default 0.2.
-    pub unobservable_std_rad: f64,
-}
-
-impl Default for IdcParams {
-    fn default() -> IdcParams {
-        IdcParams {
-            initial_max_distance_m: 1.0,
-            final_max_distance_m: 0.2,
-            initial_rotation_window_rad: 0.15,
-            final_rotation_window_rad: 0.03,
-            shrink: 0.7,
-            coarse_stride: 1,
-            max_iterations: 50,
-            converged_translation_m: 1e-3,
-            converged_rotation_rad: 1e-4,
-            min_correspondences: 20,
-            join_distance_m: 0.3,
-            join_distance_per_m: 0.05,
-            inlier_distance_m: 0.1,
-            visibility_window_rad: 0.02,
-            conflict_margin_m: 0.5,
-            conditioning_ok: 0.02,
-            range_noise_m: 0.01,
-            unobservable_std_m: 1.0,
-            unobservable_std_rad: 0.2,
-        }
-    }
-}
-
-impl IdcParams {
-    /// Checks every parameter against its range.
-    pub fn check(&self) -> Result<(), MatchError> {
-        let positive = [
-            ("initial_max_distance_m", self.initial_max_distance_m),
-            ("final_max_distance_m", self.final_max_distance_m),
-            (
-                "initial_rotation_window_rad",
-                self.initial_rotation_window_rad,
-            ),
-            ("final_rotation_window_rad", self.final_rotation_window_rad),
-            ("shrink", self.shrink),
-            ("converged_translation_m", self.converged_translation_m),
-            ("converged_rotation_rad", self.converged_rotation_rad),
-            ("inlier_distance_m", self.inlier_distance_m),
-            ("visibility_window_rad", self.visibility_window_rad),
-            ("conditioning_ok", self.conditioning_ok),
-            ("range_noise_m", self.range_noise_m),
-            ("unobservable_std_m", self.unobservable_std_m),
-            ("unobservable_std_rad", self.unobservable_std_rad),
-        ];
-        let non_negative = [
-            ("join_distance_m", self.join_distance_m),
-            ("join_distance_per_m", self.join_distance_per_m),
-            ("conflict_margin_m", self.conflict_margin_m),
-        ];
-        let bad = |name: &str, value: f64| MatchError::InvalidParams(format!("{name} = {value}"));
-        for (name, value) in positive {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(bad(name, value));
-            }
-        }
-        for (name, value) in non_negative {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(bad(name, value));
-            }
-        }
-        if self.shrink > 1.0 {
-            return Err(bad("shrink", self.shrink));
-        }
-        if self.initial_max_distance_m < self.final_max_distance_m {
-            return Err(bad("initial_max_distance_m", self.initial_max_distance_m));
-        }
-        if self.initial_rotation_window_rad < self.final_rotation_window_rad {
-            return Err(bad(
-                "initial_rotation_window_rad",
-                self.initial_rotation_window_rad,
-            ));
-        }
-        if self.coarse_stride == 0 {
-            return Err(MatchError::InvalidParams("coarse_stride = 0".into()));
-        }
-        if self.max_iterations == 0 {
-            return Err(MatchError::InvalidParams("max_iterations = 0".into()));
-        }
-        if self.min_correspondences < 3 {
-            return Err(MatchError::InvalidParams(format!(
-                "min_correspondences = {} (3 at least: a pose has 3 unknowns)",
-                self.min_correspondences
-            )));
-        }
-        Ok(())
-    }
-}
 
 /// The result of matching the current scan against the reference scan.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -235,10 +88,7 @@ pub fn idc(
     let mut iterations = 0;
     let mut max_distance_m = params.initial_max_distance_m;
     let mut window_rad = params.initial_rotation_window_rad;
-    let mut pairs = Pairs {
-        closest: Vec::with_capacity(current.len()),
-        ..Pairs::default()
-    };
+    let mut pairs = Pairs::with_capacity(current.len());
     while iterations < params.max_iterations && !converged {
         iterations += 1;
         let at_floor = max_distance_m <= params.final_max_distance_m
@@ -293,127 +143,6 @@ pub fn idc(
         converged,
         ..validate(&contour, current, &pose, params)
     })
-}
-
-/// A closest-point pair (reference frame, m).
-struct ClosestPair {
-    /// The point of the current scan.
-    point: [f64; 2],
-    /// Its closest point on the reference polyline.
-    target: [f64; 2],
-    /// The reference surface normal there; `None` at an isolated return.
-    normal: Option<[f64; 2]>,
-}
-
-/// One iteration's pairs (points in the reference frame).
-#[derive(Default)]
-struct Pairs {
-    closest: Vec<ClosestPair>,
-    /// Number of matching-range pairs, with Σ w·sin δ and Σ w·cos δ over them (δ: bearing
-    /// offset from the point to its match, w: the pair's rotation information).
-    matching: usize,
-    cross: f64,
-    dot: f64,
-}
-
-impl Pairs {
-    /// The update, as a motion applied in the reference frame, `q ↦ R(ω)·q + T`: the rotation
-    /// ω of the matching-range pairs and the translation T of the closest-point pairs, each
-    /// from the least-squares solution of its own pairs (Lu & Milios, section 4: "(ω₂, T₁)").
-    fn update(&self) -> Pose2 {
-        let t = self.closest_point_solution();
-        Pose2::new(t.x, t.y, self.matching_range_rotation())
-    }
-
-    /// The matching-range pairs have equal ranges, so they differ by a rotation about the
-    /// reference origin; this is its weighted least-squares angle (rad).
-    fn matching_range_rotation(&self) -> f64 {
-        self.cross.atan2(self.dot)
-    }
-
-    /// The least-squares motion (T, ω) of the closest-point pairs, linearized in ω.
-    ///
-    /// A closest point inside the reference polyline is the foot of the perpendicular, so a
-    /// pair's residual is counted along the surface normal (point-to-line): its component
-    /// along the surface only says where the foot fell. At an isolated return the residual
-    /// counts in full (point-to-point).
-    fn closest_point_solution(&self) -> Pose2 {
-        let mut h = Matrix3::<f64>::zeros();
-        let mut g = Vector3::<f64>::zeros();
-        let mut add = |n: [f64; 2], lever: f64, e: f64| {
-            let j = Vector3::new(n[0], n[1], lever);
-            h += j * j.transpose();
-            g += j * e;
-        };
-        for ClosestPair {
-            point: q,
-            target,
-            normal,
-        } in &self.closest
-        {
-            // d(R(ω)q)/dω at ω = 0 is perp(q) = (−q_y, q_x).
-            let (perp, d) = ([-q[1], q[0]], [target[0] - q[0], target[1] - q[1]]);
-            match normal {
-                Some(n) => add(
-                    *n,
-                    n[0] * perp[0] + n[1] * perp[1],
-                    n[0] * d[0] + n[1] * d[1],
-                ),
-                None => {
-                    add([1.0, 0.0], perp[0], d[0]);
-                    add([0.0, 1.0], perp[1], d[1]);
-                }
-            }
-        }
-        // Damping: along a direction no pair constrains (a corridor's axis) the estimate stays
-        // where it is instead of following noise; elsewhere it costs a step 0.1 % short.
-        h += Matrix3::identity() * (1e-3 * h.trace() / 3.0);
-        let x = h.cholesky().map(|c| c.solve(&g)).unwrap_or_default();
-        Pose2::new(x[0], x[1], x[2])
-    }
-}
-
-/// Both correspondence rules for every `stride`-th point of `current` at `pose`, into `pairs`.
-fn correspond(
-    contour: &Contour,
-    current: &Scan2,
-    pose: &Pose2,
-    max_distance_m: f64,
-    window_rad: f64,
-    stride: usize,
-    pairs: &mut Pairs,
-) {
-    pairs.closest.clear();
-    (pairs.matching, pairs.cross, pairs.dot) = (0, 0.0, 0.0);
-    let max2 = max_distance_m * max_distance_m;
-    let to_reference = motion(pose);
-    for &p in current.points().iter().step_by(stride) {
-        let Some(query) = contour.query(to_reference(p)) else {
-            continue;
-        };
-        let q = query.point;
-        // No polyline point within the outlier distance: no pair by either rule (a
-        // matching-range point is never nearer than the closest point).
-        let Some(c) = contour.closest(&query, max_distance_m) else {
-            continue;
-        };
-        if !c.open_end {
-            pairs.closest.push(ClosestPair {
-                point: q,
-                target: c.point,
-                normal: c.normal,
-            });
-        }
-        if let Some(m) = contour.matching_range(&query, window_rad, max_distance_m)
-            && (m.point[0] - q[0]).powi(2) + (m.point[1] - q[1]).powi(2) <= max2
-        {
-            // (sin δ, cos δ) of the pair's bearing offset δ, weighted.
-            let scale = m.weight / (query.range_m * m.range_m);
-            pairs.matching += 1;
-            pairs.cross += scale * (q[0] * m.point[1] - q[1] * m.point[0]);
-            pairs.dot += scale * (q[0] * m.point[0] + q[1] * m.point[1]);
-        }
-    }
 }
 
 /// `pose` as a function on points, with its sine and cosine computed once.

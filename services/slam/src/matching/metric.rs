@@ -30,12 +30,19 @@ pub fn relation_error(from: &Pose2, to: &Pose2, delta: &Pose2) -> RelationError 
 /// of the relation errors.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RelationMetric {
+    /// Relations scored.
     pub count: usize,
+    /// Mean translation error (m).
     pub translation_mean_m: f64,
+    /// Standard deviation of the translation error (m).
     pub translation_std_m: f64,
+    /// Largest translation error (m).
     pub translation_max_m: f64,
+    /// Mean rotation error (rad).
     pub rotation_mean_rad: f64,
+    /// Standard deviation of the rotation error (rad).
     pub rotation_std_rad: f64,
+    /// Largest rotation error (rad).
     pub rotation_max_rad: f64,
 }
 
@@ -45,9 +52,17 @@ pub enum MetricError {
     /// No relation was given.
     Empty,
     /// The pose lookup has no pose for a relation's key.
-    MissingPose { relation: usize, key: String },
+    MissingPose {
+        /// Index of the relation.
+        relation: usize,
+        /// The key with no pose.
+        key: String,
+    },
     /// A relation or a looked-up pose is not finite.
-    NonFinite { relation: usize },
+    NonFinite {
+        /// Index of the relation.
+        relation: usize,
+    },
 }
 
 impl fmt::Display for MetricError {

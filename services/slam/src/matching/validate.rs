@@ -1,5 +1,5 @@
-//! What a match is worth (DESIGN §3: "every match yields a relative pose, a covariance and a
-//! quality; a match below the quality gate is rejected").
+//! What a match is worth: every match yields a relative pose, a covariance and a quality; a
+//! match below the quality gate is rejected (docs/slam.md, "Scan matching").
 //!
 //! **Covariance.** At the final pose, a closest-point pair on a reference surface (normal n)
 //! is a point-to-line residual `e = nᵀ(q − c)` with Jacobian `nᵀ [I | perp(q − t)]` with

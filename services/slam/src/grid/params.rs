@@ -1,0 +1,126 @@
+//! The grid's tunables and their ranges, and why a grid could not be built.
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// Tunables of the grid, each with its unit. The defaults suit leveled outdoor scans.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct GridParams {
+    /// Cell edge (m).
+    pub resolution_m: f64,
+    /// Beams are used up to this range (m); a longer return clears free space up to it and
+    /// marks nothing occupied (far returns are sparse and their bearing error is large).
+    pub max_range_m: f64,
+    /// Log-odds added to a cell that holds a return: 0.85 is p ≈ 0.70, so one return
+    /// already reads as occupied.
+    pub log_odds_hit: f32,
+    /// Log-odds added to a cell a beam crosses: −0.7 is p ≈ 0.33, so one pass reads as
+    /// free, and a cell with two returns survives one grazing pass.
+    pub log_odds_miss: f32,
+    /// Clamp of the log-odds (keeps a cell able to change its mind after many scans).
+    pub log_odds_min: f32,
+    /// Upper clamp of the log-odds (see `log_odds_min`).
+    pub log_odds_max: f32,
+    /// Occupied at or above this probability…
+    pub occupied_threshold: f64,
+    /// …free at or below this one; in between (and never seen) unknown.
+    pub free_threshold: f64,
+    /// Refuse grids with more cells than this (8 bytes a cell while building): a stray
+    /// pose kilometres away gives a clear error instead of a huge allocation. The default
+    /// 2²⁴ cells is 410 m × 410 m at 0.1 m.
+    pub max_cells: usize,
+    /// Instead of refusing a grid over `max_cells`, make the cells as much coarser as it
+    /// takes (an overview of a map too big for `resolution_m`).
+    pub coarsen_to_fit: bool,
+    /// Only this part of the map, `[min x, min y, max x, max y]` (m): the beams of every scan
+    /// that reach it still count.
+    pub window_m: Option<[f64; 4]>,
+}
+
+impl Default for GridParams {
+    fn default() -> Self {
+        GridParams {
+            resolution_m: 0.1,
+            max_range_m: 40.0,
+            log_odds_hit: 0.85,
+            log_odds_miss: -0.7,
+            log_odds_min: -2.0,
+            log_odds_max: 3.5,
+            occupied_threshold: 0.65,
+            free_threshold: 0.35,
+            max_cells: 1 << 24,
+            coarsen_to_fit: false,
+            window_m: None,
+        }
+    }
+}
+
+/// Why a grid could not be built.
+#[derive(Clone, Debug, PartialEq)]
+pub enum GridError {
+    /// A parameter is out of its range.
+    InvalidParams(String),
+    /// No scan was given.
+    NoScans,
+    /// The pose of scan `index` (in input order) has a NaN or infinite component.
+    NonFinitePose {
+        /// Index of the scan.
+        index: usize,
+    },
+    /// The scans span more cells than [`GridParams::max_cells`].
+    TooLarge {
+        /// Cells the grid would have along x.
+        width: u64,
+        /// Cells the grid would have along y.
+        height: u64,
+        /// The limit, [`GridParams::max_cells`].
+        max_cells: usize,
+    },
+}
+
+impl fmt::Display for GridError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            GridError::InvalidParams(why) => write!(f, "invalid grid parameters: {why}"),
+            GridError::NoScans => write!(f, "no scans to build a grid from"),
+            GridError::NonFinitePose { index } => write!(f, "scan {index} has a non-finite pose"),
+            GridError::TooLarge {
+                width,
+                height,
+                max_cells,
+            } => write!(
+                f,
+                "grid of {width} × {height} cells exceeds the limit of {max_cells} cells \
+                 (coarser resolution, or a pose far off the map?)"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for GridError {}
+
+/// Checks every parameter against its range.
+pub(super) fn check(params: &GridParams) -> Result<(), GridError> {
+    let bad = |why: &str| Err(GridError::InvalidParams(why.to_string()));
+    let p = params;
+    if !(p.resolution_m.is_finite() && p.resolution_m > 0.0) {
+        return bad("resolution_m must be positive");
+    }
+    if !(p.max_range_m.is_finite() && p.max_range_m > 0.0) {
+        return bad("max_range_m must be positive");
+    }
+    if !(p.log_odds_hit > 0.0 && p.log_odds_miss < 0.0) {
+        return bad("log_odds_hit must be positive and log_odds_miss negative");
+    }
+    if !(p.log_odds_min < 0.0 && p.log_odds_max > 0.0) {
+        return bad("log_odds_min must be negative and log_odds_max positive");
+    }
+    if !(0.0 < p.free_threshold
+        && p.free_threshold < p.occupied_threshold
+        && p.occupied_threshold < 1.0)
+    {
+        return bad("thresholds must satisfy 0 < free_threshold < occupied_threshold < 1");
+    }
+    Ok(())
+}

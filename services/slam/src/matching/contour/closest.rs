@@ -1,0 +1,142 @@
+//! The closest-point rule: the nearest point of the polyline to a query, with the surface
+//! normal there.
+
+use super::geometry::{dist2, unit, unit_normal, wrap_index};
+use super::{Closest, Contour, Query};
+
+impl Contour<'_> {
+    /// The closest point of the polyline to the query, if one is within `max_distance_m`.
+    pub fn closest(&self, query: &Query, max_distance_m: f64) -> Option<Closest> {
+        let n = self.len();
+        let q = query.point;
+        let mut best = Best {
+            d2: max_distance_m * max_distance_m,
+            hit: None,
+        };
+        // Right (counter-clockwise): at each return, first the segment that leads to it.
+        let mut visited = 0;
+        for k in 0..n {
+            let j = wrap_index(query.start + k, n);
+            let i = if j == 0 { n - 1 } else { j - 1 };
+            if self.joined[i] {
+                self.try_segment(q, i, &mut best);
+            }
+            if self.beyond(query, j, best.d2) {
+                break;
+            }
+            self.try_return(q, j, &mut best);
+            visited += 1;
+        }
+        // Left (clockwise), over the returns the right walk did not reach.
+        for k in 0..n.saturating_sub(visited) {
+            let j = wrap_index(query.start + n - 1 - k, n);
+            if k > 0 && self.joined[j] {
+                self.try_segment(q, j, &mut best);
+            }
+            if self.beyond(query, j, best.d2) {
+                break;
+            }
+            self.try_return(q, j, &mut best);
+        }
+        let distance_m = best.d2.sqrt();
+        Some(match best.hit? {
+            Hit::Segment { point, segment, s } => Closest {
+                point,
+                distance_m,
+                normal: self.blended_normal(segment, s),
+                open_end: false,
+            },
+            Hit::Return(j) => Closest {
+                point: self.points[j],
+                distance_m,
+                normal: self.normals[j],
+                open_end: self.joined[(j + n - 1) % n] != self.joined[j],
+            },
+        })
+    }
+
+    /// The distance from the query to the polyline, if within `max_distance_m`.
+    pub fn distance_within(&self, query: &Query, max_distance_m: f64) -> Option<f64> {
+        self.closest(query, max_distance_m).map(|c| c.distance_m)
+    }
+
+    /// Whether every polyline point at the bearing of return j or further from the query's
+    /// bearing is more than √d2 from the query. The bound is `r·sin δ` (δ: bearing offset,
+    /// r: the query's range), or r past a right angle; compared squared, without division.
+    fn beyond(&self, query: &Query, j: usize, d2: f64) -> bool {
+        let (q, p) = (query.point, self.points[j]);
+        if q[0] * p[0] + q[1] * p[1] <= 0.0 {
+            return query.range_m * query.range_m > d2;
+        }
+        let cross = q[0] * p[1] - q[1] * p[0];
+        cross * cross > d2 * self.ranges[j] * self.ranges[j]
+    }
+
+    fn try_return(&self, q: [f64; 2], j: usize, best: &mut Best) {
+        let d2 = dist2(q, self.points[j]);
+        if d2 < best.d2 {
+            *best = Best {
+                d2,
+                hit: Some(Hit::Return(j)),
+            };
+        }
+    }
+
+    /// The projection of `q` on segment i → i + 1, when it falls strictly inside (the ends
+    /// are returns, tried on their own).
+    fn try_segment(&self, q: [f64; 2], i: usize, best: &mut Best) {
+        let j = if i + 1 == self.len() { 0 } else { i + 1 };
+        let (a, b) = (self.points[i], self.points[j]);
+        let ab = [b[0] - a[0], b[1] - a[1]];
+        let aq = [q[0] - a[0], q[1] - a[1]];
+        let len2 = ab[0] * ab[0] + ab[1] * ab[1];
+        let along = aq[0] * ab[0] + aq[1] * ab[1];
+        // Outside the segment (or a segment of length 0): its ends are tried on their own.
+        if along <= 0.0 || along >= len2 {
+            return;
+        }
+        // Squared distance to the line, cross² / len2, compared before dividing.
+        let cross = aq[0] * ab[1] - aq[1] * ab[0];
+        if cross * cross >= best.d2 * len2 {
+            return;
+        }
+        let s = along / len2;
+        let point = [a[0] + s * ab[0], a[1] + s * ab[1]];
+        let hit = Some(Hit::Segment {
+            point,
+            segment: i,
+            s,
+        });
+        *best = Best {
+            d2: cross * cross / len2,
+            hit,
+        };
+    }
+
+    /// The surface normal at fraction s of segment i → i + 1: both ends are joined, so both
+    /// have normals; blended along the segment.
+    pub(super) fn blended_normal(&self, i: usize, s: f64) -> Option<[f64; 2]> {
+        let j = if i + 1 == self.len() { 0 } else { i + 1 };
+        let (na, nb) = (
+            self.normals[i].unwrap_or_default(),
+            self.normals[j].unwrap_or_default(),
+        );
+        unit([(1.0 - s) * na[0] + s * nb[0], (1.0 - s) * na[1] + s * nb[1]])
+            .or_else(|| unit_normal(self.points[i], self.points[j]))
+    }
+}
+
+struct Best {
+    d2: f64,
+    hit: Option<Hit>,
+}
+
+enum Hit {
+    Return(usize),
+    /// At fraction s of segment i → i + 1.
+    Segment {
+        point: [f64; 2],
+        segment: usize,
+        s: f64,
+    },
+}
