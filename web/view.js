@@ -1,4 +1,5 @@
-// The map camera: world metres (x east, y north) to canvas pixels, pan, zoom, scale bar.
+// The map camera: world metres (x east, y north) to canvas pixels, pan, zoom, scale bar, and
+// the world box a view shows (for culling).
 
 export class View {
   constructor() {
@@ -56,3 +57,15 @@ export function scaleBarMetres(scale, targetPx = 120) {
 export function formatMetres(m) {
   return m >= 1000 ? `${m / 1000} km` : m >= 1 ? `${m} m` : `${Math.round(m * 100)} cm`;
 }
+
+// The world box a view shows, with a margin of `px` pixels: what lies outside is not drawn.
+export function visibleBox(v, px = 20) {
+  const [x0, y1] = v.toWorld(-px, -px);
+  const [x1, y0] = v.toWorld(v.width + px, v.height + px);
+  return [x0, y0, x1, y1];
+}
+
+export const inBox = (b, x, y) => x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3];
+// Whether the segment's bounding box meets the box (cheap and conservative).
+export const segInBox = (b, ax, ay, bx, by) =>
+  Math.max(ax, bx) >= b[0] && Math.min(ax, bx) <= b[2] && Math.max(ay, by) >= b[1] && Math.min(ay, by) <= b[3];

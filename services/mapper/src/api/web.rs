@@ -39,6 +39,41 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
         include_str!("../../../../web/view.js"),
     ),
     (
+        "state.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/state.js"),
+    ),
+    (
+        "data.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/data.js"),
+    ),
+    (
+        "grid.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/grid.js"),
+    ),
+    (
+        "layer.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/layer.js"),
+    ),
+    (
+        "frame.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/frame.js"),
+    ),
+    (
+        "sidebar.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/sidebar.js"),
+    ),
+    (
+        "input.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/input.js"),
+    ),
+    (
         "style.css",
         "text/css; charset=utf-8",
         include_str!("../../../../web/style.css"),

@@ -2,7 +2,6 @@
 
 use crate::error::finite;
 use crate::{WireError, v1};
-use leveling::heading_rad;
 use leveling::nalgebra::{Isometry2, Isometry3, Quaternion, Translation3, UnitQuaternion};
 use slam::Pose2;
 
@@ -49,29 +48,7 @@ pub fn pose3d_from_wire(pose: &v1::Pose3D) -> Result<Isometry3<f64>, WireError> 
     ))
 }
 
-/// The planar pose of a 3D pose: x, y and the heading of its x axis
-/// ([`leveling::heading_rad`]), as the 2D mapping uses it.
-pub fn pose2d_to_wire(pose: &Isometry3<f64>) -> v1::Pose2D {
-    v1::Pose2D {
-        x_m: pose.translation.vector.x,
-        y_m: pose.translation.vector.y,
-        yaw_rad: heading_rad(&pose.rotation),
-    }
-}
-
-/// A planar pose from the wire, every component finite.
-pub fn pose2d_from_wire(pose: &v1::Pose2D) -> Result<Isometry2<f64>, WireError> {
-    Ok(Isometry2::new(
-        [
-            finite("Pose2D.x_m", None, pose.x_m)?,
-            finite("Pose2D.y_m", None, pose.y_m)?,
-        ]
-        .into(),
-        finite("Pose2D.yaw_rad", None, pose.yaw_rad)?,
-    ))
-}
-
-/// A planar pose on the wire.
+/// A planar pose on the wire: the one way a `Pose2D` is written.
 pub fn pose2_to_wire(pose: &Pose2) -> v1::Pose2D {
     v1::Pose2D {
         x_m: pose.x,
@@ -80,14 +57,25 @@ pub fn pose2_to_wire(pose: &Pose2) -> v1::Pose2D {
     }
 }
 
-/// A planar pose from the wire, every component finite.
+/// A planar pose from the wire, every component finite: the one way a `Pose2D` is read.
 pub fn pose2_from_wire(pose: &v1::Pose2D) -> Result<Pose2, WireError> {
-    let p = pose2d_from_wire(pose)?;
     Ok(Pose2::new(
-        p.translation.x,
-        p.translation.y,
-        p.rotation.angle(),
+        finite("Pose2D.x_m", None, pose.x_m)?,
+        finite("Pose2D.y_m", None, pose.y_m)?,
+        finite("Pose2D.yaw_rad", None, pose.yaw_rad)?,
     ))
+}
+
+/// The planar pose of a 3D pose: x, y and the heading of its x axis
+/// ([`Pose2::from_isometry3`], as the 2D mapping uses it).
+pub fn pose2d_to_wire(pose: &Isometry3<f64>) -> v1::Pose2D {
+    pose2_to_wire(&Pose2::from_isometry3(pose))
+}
+
+/// A planar pose from the wire as an isometry ([`pose2_from_wire`]).
+pub fn pose2d_from_wire(pose: &v1::Pose2D) -> Result<Isometry2<f64>, WireError> {
+    let p = pose2_from_wire(pose)?;
+    Ok(Isometry2::new([p.x, p.y].into(), p.theta))
 }
 
 pub(crate) fn check_vec3(v: Option<&v1::Vec3>, field: &'static str) -> Result<(), WireError> {
@@ -129,6 +117,7 @@ pub(crate) fn check_covariance(
 mod tests {
     use super::*;
     use crate::convert::fixtures::*;
+    use leveling::heading_rad;
     use crate::*;
     use leveling::*;
 

@@ -1,0 +1,67 @@
+// The occupancy grid in two pictures: an overview of the whole map, its cells as coarse as it
+// takes to stay under GRID_MAX_CELLS, and, zoomed in past the overview's cells, a detail of
+// the part on screen (and half a screen around) at the cells the zoom can show.
+
+import { visibleBox } from "./view.js";
+import { API, state, view, ctx, throttled } from "./state.js";
+
+const GRID_MAX_CELLS = 2048 * 2048;
+const GRID_FINEST_M = 0.1; // the mapper's default cell
+
+async function fetchGrid(query) {
+  const r = await fetch(`${API}/fleets/${state.fleet}/map.png?max_cells=${GRID_MAX_CELLS}${query}`, { cache: "no-store" });
+  if (!r.ok) throw new Error(`map.png${query}: ${r.status} ${(await r.text()).trim()}`);
+  // Where the picture lies comes with it, so it always matches the picture.
+  const placement = JSON.parse(r.headers.get("levelmap-grid"));
+  return { ...placement, image: await createImageBitmap(await r.blob()) };
+}
+
+async function loadGrid() {
+  state.grid = await fetchGrid("");
+  state.gridDetail = null;
+  await loadGridDetail();
+}
+
+// The detail the view wants: null when the overview's cells are already under 2 px.
+function wantedDetail() {
+  const g = state.grid;
+  if (!g || g.resolution_m * view.scale <= 2) return null;
+  // The finest cell worth a pixel, in powers of two of the finest: small zooms reuse it.
+  const cell = GRID_FINEST_M * 2 ** Math.max(0, Math.ceil(Math.log2(1 / (view.scale * GRID_FINEST_M))));
+  if (cell >= g.resolution_m) return null;
+  return { cell, box: visibleBox(view, Math.max(view.width, view.height) / 2) };
+}
+
+async function loadGridDetail() {
+  const want = wantedDetail();
+  const d = state.gridDetail;
+  if (!want) {
+    state.gridDetail = null;
+    return;
+  }
+  const [x0, y0, x1, y1] = visibleBox(view, 0);
+  if (d && d.cell === want.cell && d.nodes === state.grid.nodes &&
+      x0 >= d.box[0] && y0 >= d.box[1] && x1 <= d.box[2] && y1 <= d.box[3]) {
+    return;
+  }
+  const box = want.box.map((v) => v.toFixed(1));
+  const detail = await fetchGrid(`&resolution_m=${want.cell}&bbox=${box.join(",")}`);
+  state.gridDetail = { ...detail, cell: want.cell, box: want.box };
+  state.gridDetailLoads += 1;
+}
+
+export const refreshGrid = throttled(loadGrid, 3000);
+export const refreshGridDetail = throttled(loadGridDetail, 300);
+
+/// Both pictures on the map canvas, each where its header placed it (the frame's first layer).
+export function drawGrid() {
+  if (!state.showGrid) return;
+  ctx.globalAlpha = 0.9;
+  for (const g of [state.grid, state.gridDetail]) {
+    if (!g) continue;
+    const [x0, y0] = view.toScreen(g.origin_m[0], g.origin_m[1] + g.height * g.resolution_m);
+    ctx.imageSmoothingEnabled = view.scale * g.resolution_m < 1;
+    ctx.drawImage(g.image, x0, y0, g.width * g.resolution_m * view.scale, g.height * g.resolution_m * view.scale);
+  }
+  ctx.globalAlpha = 1;
+}
