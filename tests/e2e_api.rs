@@ -98,6 +98,9 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
         value
     };
     every_documented_route_is_served(http, &doc);
+    // The schemas are strict enough to catch a wrong answer.
+    let wrong = serde_json::json!({"fleet": 3, "nodes": "many"});
+    assert!(doc.violations(&format!("{base}/summary"), &wrong).len() >= 2);
 
     let summary = json(&format!("{base}/summary"));
     assert_eq!(summary["nodes"], 3);

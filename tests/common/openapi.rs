@@ -59,14 +59,31 @@ impl OpenApiDoc {
     /// Checks a 200 JSON answer of `GET path` against its documented schema; panics naming
     /// every violation.
     pub fn check_json(&self, path: &str, body: &Value) {
+        let errors = self.violations(path, body);
+        assert!(
+            errors.is_empty(),
+            "GET {path} does not match its schema:\n{}",
+            errors.join("\n")
+        );
+    }
+
+    /// How a JSON answer of `GET path` departs from its documented schema (none: it fits).
+    pub fn violations(&self, path: &str, body: &Value) -> Vec<String> {
         let template = self
             .template_of(path)
             .unwrap_or_else(|| panic!("GET {path}: no such route in the document"));
-        let schema = &self.doc["paths"][&template]["get"]["responses"]["200"]["content"]["application/json"]
-            ["schema"];
+        let content = &self.doc["paths"][&template]["get"]["responses"]["200"]["content"];
+        // application/json, or a JSON type of its own (application/geo+json).
+        let schema = content
+            .as_object()
+            .and_then(|c| {
+                c.iter()
+                    .find(|(t, _)| *t == "application/json" || t.ends_with("+json"))
+            })
+            .map_or(&Value::Null, |(_, media)| &media["schema"]);
         assert!(
             schema.is_object(),
-            "GET {template}: no JSON schema documented"
+            "GET {template}: no JSON schema documented ({content})"
         );
         // The schema with the document's components beside it, so its $refs resolve.
         let mut root = schema.clone();
@@ -74,14 +91,9 @@ impl OpenApiDoc {
         root["$schema"] = json!("https://json-schema.org/draft/2020-12/schema");
         let validator = jsonschema::validator_for(&root)
             .unwrap_or_else(|e| panic!("GET {template}: the schema does not compile: {e}"));
-        let errors: Vec<String> = validator
+        validator
             .iter_errors(body)
-            .map(|e| format!("{} at {}", e, e.instance_path()))
-            .collect();
-        assert!(
-            errors.is_empty(),
-            "GET {path} does not match its schema ({template}):\n{}",
-            errors.join("\n")
-        );
+            .map(|e| format!("{template}: {} at {}", e, e.instance_path()))
+            .collect()
     }
 }

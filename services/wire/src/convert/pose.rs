@@ -117,8 +117,8 @@ pub(crate) fn check_covariance(
 mod tests {
     use super::*;
     use crate::convert::fixtures::*;
-    use leveling::heading_rad;
     use crate::*;
+    use leveling::heading_rad;
     use leveling::*;
 
     #[test]
