@@ -13,6 +13,7 @@ pub struct Bus {
 }
 
 impl Bus {
+    /// The bus over the mapper's session.
     pub fn new(session: zenoh::Session) -> Bus {
         Bus { session }
     }

@@ -7,6 +7,7 @@ use slam::geodesy::Geodetic;
 use std::path::{Path, PathBuf};
 use wire::session::SessionConfig;
 
+/// The mapping server's configuration (`deploy/mapper.toml`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MapperConfig {

@@ -20,14 +20,20 @@ pub enum Sequence {
     /// Taken already (a re-send): re-ack.
     Duplicate,
     /// Nodes are missing before it: not taken until they come.
-    Gap { expected: u64 },
+    Gap {
+        /// The node the robot must send next.
+        expected: u64,
+    },
 }
 
 /// A node of the map with what it came with.
 #[derive(Clone, Debug)]
 pub struct NodeRecord {
+    /// Index of its robot in [`FleetMap::robots`].
     pub robot: usize,
+    /// Its number in its robot's sequence.
     pub node_seq: u64,
+    /// The scan's start (ns since the Unix epoch).
     pub stamp_ns: u64,
     /// The scan frame's pose in the robot's odometry frame.
     pub odometry: Pose2,
@@ -38,9 +44,11 @@ pub struct NodeRecord {
     /// Its GPS fixes as the mapper took them (`Node.earlier_gps` then `Node.gps`: oldest
     /// first), each an edge of the network.
     pub gps: Vec<GpsObservation>,
+    /// The scan's points per class, when the robot sent them.
     pub counts: Option<ClassCounts>,
     /// The leveled scan: bearings (rad) and ranges (m, 0 = no return).
     pub bearings_rad: Vec<f32>,
+    /// Range per bearing (m, 0 = no return).
     pub ranges_m: Vec<f32>,
 }
 
@@ -62,6 +70,7 @@ impl NodeRecord {
 /// A robot of the fleet.
 #[derive(Clone, Debug, Serialize)]
 pub struct RobotRecord {
+    /// The robot's id.
     pub id: String,
     /// Highest node_seq taken.
     pub last_node_seq: u64,
@@ -72,17 +81,24 @@ pub struct RobotRecord {
 /// Where a node went in the map.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ingested {
+    /// The node's index in the map.
     pub node: usize,
 }
 
+/// Why a node was not added.
 #[derive(Debug, thiserror::Error)]
 pub enum IngestError {
+    /// Not the robot's next node.
     #[error("node {node_seq} of {robot}: {problem}")]
     Sequence {
+        /// The robot.
         robot: String,
+        /// The node's number.
         node_seq: u64,
+        /// What is wrong with its number.
         problem: String,
     },
+    /// The network refused it.
     #[error("the pose network: {0}")]
     Graph(#[from] slam::GraphError),
 }
@@ -126,42 +142,52 @@ impl FleetMap {
         }
     }
 
+    /// The fleet's id.
     pub fn id(&self) -> &str {
         &self.id
     }
 
+    /// The GPS datum, once configured or set by the first fix.
     pub fn datum(&self) -> Option<&GeoDatum> {
         self.datum.as_ref()
     }
 
+    /// The robots, in the order they first sent a node.
     pub fn robots(&self) -> &[RobotRecord] {
         &self.robots
     }
 
+    /// A robot's index in [`Self::robots`].
     pub fn robot_index(&self, id: &str) -> Option<usize> {
         self.by_id.get(id).copied()
     }
 
+    /// Every node with what it came with, in map order.
     pub fn nodes(&self) -> &[Arc<NodeRecord>] {
         &self.nodes
     }
 
+    /// The nodes' poses (scan frames in the map frame), as last solved or placed.
     pub fn poses(&self) -> &[Pose2] {
         &self.mapper.graph().poses
     }
 
+    /// The pose network.
     pub fn graph(&self) -> &slam::PoseGraph {
         self.mapper.graph()
     }
 
+    /// What the mapping did so far.
     pub fn stats(&self) -> MapperStats {
         self.mapper.stats()
     }
 
+    /// The last solve's report.
     pub fn last_optimization(&self) -> Option<&OptimizeReport> {
         self.mapper.last_optimization()
     }
 
+    /// A node's scan as matching uses it (cut at `max_range_m`).
     pub fn node_scan(&self, node: usize) -> &Scan2 {
         self.mapper.node_scan(node)
     }

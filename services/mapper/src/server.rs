@@ -21,7 +21,9 @@ use wire::session::now_ns;
 
 /// A running mapper: its HTTP address and the handle to stop it.
 pub struct Running {
+    /// Where the HTTP API listens.
     pub http_addr: std::net::SocketAddr,
+    /// What the HTTP side reads: views, live odometry, counters.
     pub shared: Arc<Shared>,
     session: zenoh::Session,
     http: tokio::task::JoinHandle<()>,

@@ -13,12 +13,16 @@ use tokio::sync::broadcast;
 /// A robot as the map knows it.
 #[derive(Clone, Debug, Serialize)]
 pub struct RobotView {
+    /// The robot's id.
     pub id: String,
+    /// Its nodes in the map.
     pub nodes: usize,
+    /// Highest node_seq taken.
     pub last_node_seq: u64,
     /// The robot frame's map pose at its last node, and its odometry pose there: live odometry
     /// since then, composed onto the first, gives the live map pose.
     pub map_pose_at_last_node: Pose2,
+    /// The robot's planar odometry pose at its last node.
     pub odometry_at_last_node: Pose2,
 }
 
@@ -33,21 +37,32 @@ impl RobotView {
 /// One fleet's map at one moment.
 #[derive(Debug)]
 pub struct FleetView {
+    /// The fleet's id.
     pub id: String,
+    /// The GPS datum (origin of the east-north map frame), once known.
     pub datum: Option<GeoDatum>,
+    /// The robots, as in [`FleetMap::robots`].
     pub robots: Vec<RobotView>,
+    /// Every node with what it came with, in map order.
     pub nodes: Vec<Arc<NodeRecord>>,
+    /// The nodes' poses in the map frame.
     pub poses: Vec<Pose2>,
+    /// The network's relative edges.
     pub edges: Vec<RelativeEdge>,
+    /// The network's GPS edges.
     pub gps: Vec<GpsEdge>,
+    /// What the mapping did so far.
     pub stats: MapperStats,
+    /// The last solve's report.
     pub last_optimization: Option<OptimizeReport>,
-    /// Time the last accepted node took to map (ms), and when the view was made.
+    /// Time the last batch of nodes took to map (ms).
     pub last_ingest_ms: f64,
+    /// When the view was made (ns since the Unix epoch).
     pub updated_ns: u64,
 }
 
 impl FleetView {
+    /// A copy of `map` now, for readers.
     pub fn of(map: &FleetMap, last_ingest_ms: f64, updated_ns: u64) -> FleetView {
         let poses = map.poses().to_vec();
         let robots = map
@@ -80,6 +95,7 @@ impl FleetView {
         }
     }
 
+    /// A robot of the fleet by id.
     pub fn robot(&self, id: &str) -> Option<&RobotView> {
         self.robots.iter().find(|r| r.id == id)
     }
@@ -88,8 +104,11 @@ impl FleetView {
 /// A robot's latest odometry.
 #[derive(Clone, Copy, Debug)]
 pub struct LiveOdometry {
+    /// Its planar odometry pose.
     pub odometry: Pose2,
+    /// When it was measured (ns since the Unix epoch).
     pub stamp_ns: u64,
+    /// When it arrived.
     pub received_ns: u64,
     /// When this robot's last `pose` event went out.
     pub evented_ns: u64,
@@ -98,16 +117,22 @@ pub struct LiveOdometry {
 /// Counters for `/metrics`.
 #[derive(Debug, Default)]
 pub struct Metrics {
+    /// Nodes mapped and stored.
     pub nodes_accepted: AtomicU64,
+    /// Re-sent nodes taken already (re-acked).
     pub nodes_duplicate: AtomicU64,
+    /// Live odometry messages taken.
     pub odometry_received: AtomicU64,
+    /// Acks published.
     pub acks_sent: AtomicU64,
+    /// Network solves run.
     pub optimizations: AtomicU64,
     /// Rejections by (topic, reason).
     pub rejected: Mutex<BTreeMap<(&'static str, &'static str), u64>>,
 }
 
 impl Metrics {
+    /// Counts a rejected message of `topic` (`node`, `odom`) for `reason`.
     pub fn reject(&self, topic: &'static str, reason: &'static str) {
         *self
             .rejected
@@ -117,6 +142,7 @@ impl Metrics {
             .or_default() += 1;
     }
 
+    /// Rejections of `topic` for `reason` so far.
     pub fn rejected(&self, topic: &str, reason: &str) -> u64 {
         self.rejected
             .lock()
@@ -126,6 +152,7 @@ impl Metrics {
             .unwrap_or(0)
     }
 
+    /// Adds one to a counter.
     pub fn bump(counter: &AtomicU64) {
         counter.fetch_add(1, Ordering::Relaxed);
     }
@@ -134,18 +161,24 @@ impl Metrics {
 /// Everything the HTTP side shares with the mapping worker and the Zenoh callbacks.
 #[derive(Debug)]
 pub struct Shared {
+    /// Each fleet's latest view.
     pub fleets: RwLock<HashMap<String, Arc<FleetView>>>,
+    /// Each robot's (fleet, robot) latest odometry.
     pub live: Mutex<HashMap<(String, String), LiveOdometry>>,
+    /// The counters of `/metrics`.
     pub metrics: Metrics,
     /// Events as JSON text (see `docs/api.md`).
     pub events: broadcast::Sender<String>,
+    /// The bearer token of the write routes (empty: they are off).
     pub token: String,
+    /// When the mapper started (ns since the Unix epoch).
     pub started_ns: u64,
     /// False once the store failed: `/healthz` reports it, so a supervisor restarts us.
     pub healthy: std::sync::atomic::AtomicBool,
 }
 
 impl Shared {
+    /// Nothing mapped yet.
     pub fn new(token: String, started_ns: u64) -> Shared {
         Shared {
             fleets: RwLock::default(),
@@ -158,10 +191,12 @@ impl Shared {
         }
     }
 
+    /// A fleet's latest view.
     pub fn fleet(&self, id: &str) -> Option<Arc<FleetView>> {
         self.fleets.read().expect("views lock").get(id).cloned()
     }
 
+    /// Replaces the fleet's view: readers see the new one from now on.
     pub fn publish_view(&self, view: FleetView) {
         self.fleets
             .write()

@@ -19,6 +19,7 @@ const SOLVES: TableDefinition<(&str, u64), ()> = TableDefinition::new("solves");
 /// (fleet, node index) → the node's encoded `v1::SegmentedCloud` (`Node.cloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
 
+/// A failure of the store (redb): the disk, the file, a transaction.
 #[derive(Debug, thiserror::Error)]
 #[error("store: {0}")]
 pub struct StoreError(#[from] redb::Error);
@@ -40,6 +41,7 @@ from_redb!(
     redb::CommitError
 );
 
+/// The mapper's durable store: one redb file.
 pub struct Store {
     db: Database,
 }
@@ -47,6 +49,7 @@ pub struct Store {
 /// One fleet as stored.
 #[derive(Debug, Default)]
 pub struct StoredFleet {
+    /// The fleet's id.
     pub id: String,
     /// Encoded nodes in arrival order.
     pub nodes: Vec<Vec<u8>>,
@@ -59,13 +62,15 @@ pub struct StoredFleet {
 /// What one batch of work adds to a fleet.
 #[derive(Debug, Default)]
 pub struct FleetBatch<'a> {
+    /// The fleet.
     pub fleet: &'a str,
     /// (arrival index, encoded node without its cloud).
     pub nodes: Vec<(u64, &'a [u8])>,
     /// (node index, encoded cloud) of the nodes that came with one.
     pub clouds: Vec<(u64, &'a [u8])>,
-    /// Index of the first new edge, and the new edges as JSON.
+    /// Index of the first new edge.
     pub first_edge: u64,
+    /// The new edges, as JSON ([`encode_edges`]).
     pub edges: Vec<Vec<u8>>,
     /// The network was optimized after the node of this arrival index.
     pub solved_after: Option<u64>,
@@ -89,6 +94,7 @@ pub fn split_cloud(node: &mut v1::Node, payload: Vec<u8>) -> (Vec<u8>, Option<Ve
 }
 
 impl Store {
+    /// Opens the store at `path`, made when missing.
     pub fn open(path: &Path) -> Result<Store, StoreError> {
         let db = Database::create(path)?;
         let txn = db.begin_write()?;

@@ -29,9 +29,19 @@ pub type OptimizeReply = tokio::sync::oneshot::Sender<Result<serde_json::Value, 
 /// Work for the mapping worker.
 pub enum Work {
     /// A node as it came from the bus.
-    Node { key: String, payload: Vec<u8> },
+    Node {
+        /// Its Zenoh key.
+        key: String,
+        /// Its bytes.
+        payload: Vec<u8>,
+    },
     /// Re-optimize a fleet now.
-    Optimize { fleet: String, reply: OptimizeReply },
+    Optimize {
+        /// The fleet.
+        fleet: String,
+        /// Where the report goes.
+        reply: OptimizeReply,
+    },
 }
 
 impl Work {

@@ -8,28 +8,54 @@ use std::fmt;
 pub enum WireError {
     /// The bytes are not a protobuf encoding of `message`.
     Decode {
+        /// The message expected.
         message: &'static str,
+        /// What prost said.
         source: prost::DecodeError,
     },
     /// The header's wire version is not [`crate::WIRE_VERSION`] (0: the header left it unset).
-    Version { field: &'static str, found: u32 },
-    /// A required field (a header, a scan, a pose) is absent.
-    Missing { field: &'static str },
-    /// A fleet or robot id is empty or has a character outside `[A-Za-z0-9_-]`.
-    InvalidId { kind: &'static str, id: String },
-    /// A Zenoh key expression is not one of levelmap's.
-    InvalidKey { key: String },
-    /// One number is out of its domain (NaN, infinite, negative range, latitude beyond 90°).
-    /// `index` is the element index in a repeated field, `None` for a singular one.
-    InvalidValue {
+    Version {
+        /// The header (`Node.header`).
         field: &'static str,
+        /// The version it carries.
+        found: u32,
+    },
+    /// A required field (a header, a scan, a pose) is absent.
+    Missing {
+        /// The field, as `Message.field`.
+        field: &'static str,
+    },
+    /// A fleet or robot id is empty or has a character outside `[A-Za-z0-9_-]`.
+    InvalidId {
+        /// What kind of id (`fleet`, `robot`).
+        kind: &'static str,
+        /// The id as given.
+        id: String,
+    },
+    /// A Zenoh key expression is not one of levelmap's.
+    InvalidKey {
+        /// The key as given.
+        key: String,
+    },
+    /// One number is out of its domain (NaN, infinite, negative range, latitude beyond 90°).
+    InvalidValue {
+        /// The field, as `Message.field`.
+        field: &'static str,
+        /// The element's index in a repeated field, `None` for a singular one.
         index: Option<usize>,
+        /// The value.
         value: f64,
+        /// What is wrong with it.
         problem: &'static str,
     },
     /// A structural inconsistency: lengths that differ, counts that do not add up, ids that
     /// disagree between nested headers, an empty scan.
-    Invalid { field: &'static str, detail: String },
+    Invalid {
+        /// The field, as `Message.field`.
+        field: &'static str,
+        /// What is inconsistent.
+        detail: String,
+    },
 }
 
 impl WireError {

@@ -110,8 +110,11 @@ pub fn map_key(fleet: &str, item: &str) -> Result<String, WireError> {
 /// The parts of a concrete per-robot key.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RobotKey<'a> {
+    /// The fleet's id.
     pub fleet: &'a str,
+    /// The robot's id.
     pub robot: &'a str,
+    /// What the key carries.
     pub topic: Topic,
 }
 

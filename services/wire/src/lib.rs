@@ -15,7 +15,9 @@ mod convert;
 mod error;
 mod keys;
 
-/// Types generated from `proto/levelmap/v1` (package `levelmap.v1`).
+/// Types generated from `proto/levelmap/v1` (package `levelmap.v1`). Their docs are the
+/// `.proto` comments; a field the contract leaves uncommented is named for what it holds.
+#[allow(missing_docs)]
 pub mod v1 {
     include!(concat!(env!("OUT_DIR"), "/levelmap.v1.rs"));
 }

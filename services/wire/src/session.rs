@@ -66,6 +66,7 @@ impl SessionConfig {
         }
     }
 
+    /// This configuration as Zenoh's own.
     pub fn to_zenoh(&self) -> anyhow::Result<zenoh::Config> {
         let mut config = zenoh::Config::default();
         let values = [

@@ -15,12 +15,15 @@ use slam::gnss::GpsFix;
 /// to it (see `node.proto`). The segmented cloud, stored apart, is not part of it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodeInput {
+    /// The sender's fleet.
     pub fleet: String,
+    /// The sender's robot.
     pub robot: String,
     /// The node's number in its robot's sequence.
     pub node_seq: u64,
     /// The scan's start (ns since the Unix epoch).
     pub stamp_ns: u64,
+    /// The leveled scan.
     pub scan: LeveledScan,
     /// The scan's points per class, when the robot sent them.
     pub counts: Option<ClassCounts>,
@@ -81,7 +84,9 @@ pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
 /// A robot's live odometry, checked.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OdometryInput {
+    /// The sender's fleet.
     pub fleet: String,
+    /// The sender's robot.
     pub robot: String,
     /// The pose (odometry frame) and its time.
     pub pose: TimedPose,

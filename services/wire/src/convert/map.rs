@@ -8,6 +8,7 @@ use slam::Pose2;
 /// The optimized pose of one node of a fleet's map.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MapPose {
+    /// The robot's id.
     pub robot: String,
     /// The node's number in its robot's sequence.
     pub node_seq: u64,
