@@ -39,13 +39,19 @@ impl Default for NodeParams {
 /// One GPS fix as the source reads it, with dead reckoning at the fix's time.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GpsReading {
+    /// When the receiver measured it (ns since the Unix epoch).
     pub stamp_ns: u64,
+    /// WGS84 latitude (deg, north positive).
     pub latitude_deg: f64,
+    /// WGS84 longitude (deg, east positive).
     pub longitude_deg: f64,
+    /// Height above the WGS84 ellipsoid (m).
     pub altitude_m: f64,
     /// The receiver's standard deviations, horizontal and vertical (m).
     pub sigma_horizontal_m: f64,
+    /// The vertical one (m).
     pub sigma_vertical_m: f64,
+    /// The receiver's kind of solution.
     pub status: FixStatus,
     /// The antenna in the robot frame (m).
     pub antenna_in_robot_m: Vector3<f64>,
@@ -70,12 +76,15 @@ pub struct SensorScan {
 /// A scan of a fixed (not leveled) 2D scanner.
 #[derive(Clone, Debug)]
 pub struct PlanarScan {
+    /// The scan's time (ns since the Unix epoch).
     pub stamp_ns: u64,
+    /// Bearing of each beam (rad, counter-clockwise from x).
     pub bearings_rad: Vec<f32>,
     /// Range per bearing (m); 0 = no return.
     pub ranges_m: Vec<f32>,
     /// Dead reckoning at the scan (odometry frame).
     pub robot_at_start: Isometry3<f64>,
+    /// The scanner's mount on the robot.
     pub sensor_in_robot: Isometry3<f64>,
     /// As [`SensorScan::gps`].
     pub gps: Vec<GpsReading>,
@@ -84,10 +93,16 @@ pub struct PlanarScan {
 /// Why a scan gave no node.
 #[derive(Debug, thiserror::Error)]
 pub enum NodeError {
+    /// The scan has no columns.
     #[error("scan has no columns")]
     Empty,
+    /// Dead reckoning does not reach the scan's start.
     #[error("dead reckoning does not cover the scan's start ({stamp_ns} ns)")]
-    NoOdometry { stamp_ns: u64 },
+    NoOdometry {
+        /// The scan's start (ns since the Unix epoch).
+        stamp_ns: u64,
+    },
+    /// Motion compensation failed.
     #[error("motion compensation: {0:?}")]
     Deskew(DeskewError),
 }
@@ -111,6 +126,7 @@ pub struct NodeBuilder {
 }
 
 impl NodeBuilder {
+    /// A builder for `robot` of `fleet`, its first node numbered `first_node_seq`.
     pub fn new(
         fleet: &str,
         robot: &str,

@@ -9,6 +9,7 @@ const NODES: TableDefinition<u64, &[u8]> = TableDefinition::new("nodes");
 /// `next_node_seq` (the next number to give) and `acked` (highest node_seq acked + 1).
 const META: TableDefinition<&str, u64> = TableDefinition::new("meta");
 
+/// A failure of the outbox's file (redb).
 #[derive(Debug, thiserror::Error)]
 #[error("outbox: {0}")]
 pub struct OutboxError(#[from] redb::Error);
@@ -30,6 +31,7 @@ from_redb!(
     redb::CommitError
 );
 
+/// The robot's nodes not acked yet, on disk (redb), and the node numbering.
 pub struct Outbox {
     db: Database,
 }
@@ -116,6 +118,7 @@ impl Outbox {
         Ok(txn.open_table(NODES)?.len()?)
     }
 
+    /// Whether every node is acked.
     pub fn is_empty(&self) -> Result<bool, OutboxError> {
         Ok(self.len()? == 0)
     }

@@ -26,12 +26,15 @@ const RESEND_WINDOW: usize = 64;
 /// What an edge service did.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct EdgeReport {
+    /// The robot's id.
     pub robot: String,
     /// Nodes made (committed to the outbox) by this run.
     pub nodes: u64,
     /// Node publications, first sends and re-sends.
     pub node_sends: u64,
+    /// Of `node_sends`, the re-sends.
     pub node_resends: u64,
+    /// Live odometry messages sent.
     pub odometry_sent: u64,
     /// Highest node_seq the mapper acked, if any.
     pub acked_node_seq: Option<u64>,
@@ -42,6 +45,7 @@ pub struct EdgeReport {
     /// Corrected poses the mapper sent back after its solves, and the latest: this robot's
     /// last node on the map.
     pub map_pose_updates: u64,
+    /// The latest corrected pose of this robot's last node.
     pub map_pose: Option<slam::Pose2>,
 }
 
