@@ -815,7 +815,7 @@ fn web_reply_from_disk(dir: &std::path::Path, file: &str) -> Reply {
         .map_err(|e| not_found(format!("{WEB_DIR_ENV}: {file}: {e}")))?;
     Ok((
         [
-            (header::CONTENT_TYPE, *content_type),
+            (header::CONTENT_TYPE, content_type),
             (header::CACHE_CONTROL, "no-cache"),
         ],
         body,
