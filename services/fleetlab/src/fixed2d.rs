@@ -10,9 +10,9 @@ use mapper::{FleetMap, MapperConfig};
 use sim::FleetRobot;
 use slam::Pose2;
 
-/// The same run (the simulator is deterministic per seed) from the fixed 2D scanners, mapped
-/// with the mapper's own code and parameters: the ATE and the loop closures.
-/// `robots` of the park's loops, driving `duration_s` with noise seed `seed`.
+/// The run of `robots` of the park's loops, `duration_s` long with noise seed `seed` (the
+/// simulator is deterministic per seed, so this is the demo's run), from the fixed 2D
+/// scanners, mapped with the mapper's own code and parameters: the ATE and the loop closures.
 pub fn map_fixed2d(robots: usize, duration_s: f64, seed: u64) -> Result<(f64, usize)> {
     let duration_ns = (duration_s * 1e9) as u64;
     let defaults = MapperConfig::default();
