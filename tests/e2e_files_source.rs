@@ -9,7 +9,7 @@ use std::time::Duration;
 
 #[test]
 fn real_3dtk_scans_flow_from_an_edge_service_into_the_map() {
-    let data = scanio::shared_data("rotating_2d_laser_3d_scans_3dtk");
+    let data = testdata::shared_data("rotating_2d_laser_3d_scans_3dtk");
     let dir = temp_dir("files-source");
     let mapper = MapperProcess::start(&dir);
     let source = format!("[source.files]\nfolder = {:?}\nperiod_s = 1.0\n", data);

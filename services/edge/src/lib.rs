@@ -17,17 +17,23 @@ pub use config::{EdgeConfig, SourceConfig};
 pub use node::{GpsReading, NodeBuilder, NodeError, NodeParams, PlanarScan, SensorScan};
 pub use outbox::{Outbox, OutboxError};
 pub use service::{EdgeReport, run};
-pub use source::{
-    FilesSource, FilesSourceConfig, SimSource, SimSourceConfig, Source, SourceEvent, park,
-    sim_gps_reading,
-};
+pub use source::{FilesSource, FilesSourceConfig, SimSourceConfig, Source, SourceEvent};
+#[cfg(feature = "sim")]
+pub use source::{SimSource, park, sim_gps_reading};
 
 /// The source a config names, with simulation time 0 at `epoch_ns`.
 pub fn open_source(config: &EdgeConfig, epoch_ns: u64) -> anyhow::Result<Box<dyn Source>> {
     match &config.source {
+        #[cfg(feature = "sim")]
         SourceConfig::Sim(sim) => SimSource::new(sim, epoch_ns, config.odometry_rate_hz)
             .map(|s| Box::new(s) as Box<dyn Source>)
             .ok_or_else(|| anyhow::anyhow!("sim source: the park has no loop {}", sim.loop_index)),
+        // A robot's build has no simulator: say so rather than fail on a parse error.
+        #[cfg(not(feature = "sim"))]
+        SourceConfig::Sim(_) => anyhow::bail!(
+            "[source.sim]: this levelmap was built without the simulator (feature `sim` of \
+             edge, in levelmap's `lab` feature); use [source.files] or a build with it"
+        ),
         SourceConfig::Files(files) => Ok(Box::new(FilesSource::new(files, epoch_ns)?)),
     }
 }

@@ -372,6 +372,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "sim")]
     fn nodes_of_the_simulated_robot_carry_their_cloud_when_kept() {
         use crate::{SimSource, SimSourceConfig, Source, SourceEvent};
         use wire::Message;

@@ -1,11 +1,15 @@
 //! Where an edge service's measurements come from: events in time order, each stamped in ns
 //! since the Unix epoch.
 
-use crate::node::{GpsReading, SensorScan};
+use crate::node::SensorScan;
 use leveling::{PoseTrack, TimedPose};
 use serde::{Deserialize, Serialize};
-use sim::{FleetRobot, PARK_DATUM, World};
-use std::sync::OnceLock;
+
+// The simulated robot: only with the `sim` feature (the lab, not a robot's build).
+#[cfg(feature = "sim")]
+mod sim;
+#[cfg(feature = "sim")]
+pub use self::sim::{SimSource, park, sim_gps_reading};
 
 /// One measurement of a source.
 #[derive(Clone, Debug)]
@@ -26,32 +30,14 @@ impl SourceEvent {
     }
 }
 
-/// A simulated fix as a receiver reports it, with the dead reckoning at its time; stamps
-/// shifted by `epoch_ns`.
-pub fn sim_gps_reading(robot: &FleetRobot<'_>, fix: &sim::GpsFix, epoch_ns: u64) -> GpsReading {
-    let geodetic = fix.geodetic(&PARK_DATUM);
-    GpsReading {
-        stamp_ns: fix.stamp_ns + epoch_ns,
-        latitude_deg: geodetic.latitude_deg,
-        longitude_deg: geodetic.longitude_deg,
-        altitude_m: geodetic.height_m,
-        sigma_horizontal_m: fix.sigma_horizontal_m,
-        sigma_vertical_m: fix.sigma_vertical_m,
-        status: slam::gnss::FixStatus::RtkFloat,
-        antenna_in_robot_m: robot.gps().antenna_in_robot_m,
-        odometry_at_fix: robot
-            .odometry_track(fix.stamp_ns, fix.stamp_ns)
-            .at(fix.stamp_ns)
-            .expect("the track covers the fix"),
-    }
-}
-
 /// Yields measurements in time order; `None` at the end.
 pub trait Source: Send {
+    /// The next measurement in time order; `None` once the source is done.
     fn next_event(&mut self) -> Option<SourceEvent>;
 }
 
-/// The simulated robot of the park (see `sim::FleetRobot`).
+/// The simulated robot of the park (see `sim::FleetRobot`). Parsed in every build, so that
+/// a build without the `sim` feature can refuse it by name.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SimSourceConfig {
@@ -73,103 +59,13 @@ impl Default for SimSourceConfig {
     }
 }
 
-/// The park, built once per process and shared by every simulated robot.
-pub fn park() -> &'static World {
-    static PARK: OnceLock<World> = OnceLock::new();
-    PARK.get_or_init(World::park)
-}
-
-/// A simulated robot as a source: odometry at `odometry_rate_hz` and a 3D scan every 4 s,
-/// simulation time 0 mapped to `epoch_ns`.
-pub struct SimSource {
-    robot: FleetRobot<'static>,
-    epoch_ns: u64,
-    odometry_period_ns: u64,
-    /// Events of the current scan period, in time order, popped from the back.
-    queue: Vec<SourceEvent>,
-    next_odometry_ns: u64,
-}
-
-impl SimSource {
-    pub fn new(config: &SimSourceConfig, epoch_ns: u64, odometry_rate_hz: f64) -> Option<Self> {
-        let duration_ns = (config.duration_s.max(0.0) * 1e9) as u64;
-        Some(SimSource {
-            robot: FleetRobot::new(park(), config.loop_index, duration_ns, config.seed)?,
-            epoch_ns,
-            odometry_period_ns: (1e9 / odometry_rate_hz.max(0.1)) as u64,
-            queue: Vec::new(),
-            next_odometry_ns: 0,
-        })
-    }
-
-    fn shift(&self, pose: TimedPose) -> TimedPose {
-        TimedPose {
-            stamp_ns: pose.stamp_ns + self.epoch_ns,
-            pose: pose.pose,
-        }
-    }
-}
-
-impl Source for SimSource {
-    fn next_event(&mut self) -> Option<SourceEvent> {
-        if let Some(event) = self.queue.pop() {
-            return Some(event);
-        }
-        let fleet_scan = self.robot.next_scan()?;
-        let mut raw = fleet_scan.scan.raw;
-        for column in &mut raw.columns {
-            column.stamp_ns += self.epoch_ns;
-        }
-        let end_ns = raw.columns.last().map_or(0, |c| c.stamp_ns) - self.epoch_ns;
-        let track = PoseTrack::new(
-            fleet_scan
-                .track
-                .samples()
-                .iter()
-                .map(|p| self.shift(*p))
-                .collect(),
-        )
-        .expect("the simulator's track is ordered");
-        let gps = fleet_scan
-            .gps_since_previous
-            .iter()
-            .map(|fix| sim_gps_reading(&self.robot, fix, self.epoch_ns))
-            .collect();
-        let scan = SensorScan {
-            raw,
-            track,
-            sensor_in_robot: self.robot.scanner().mount,
-            gps,
-        };
-        // Odometry up to the scan's end, then the scan; stored reversed for popping.
-        let mut events = Vec::new();
-        let from = self.next_odometry_ns;
-        if end_ns >= from {
-            let odometry = self.robot.odometry_track(from, end_ns);
-            let mut t = from;
-            while t <= end_ns {
-                if let Some(pose) = odometry.at(t) {
-                    events.push(SourceEvent::Odometry(
-                        self.shift(TimedPose { stamp_ns: t, pose }),
-                    ));
-                }
-                t += self.odometry_period_ns;
-            }
-            self.next_odometry_ns = t;
-        }
-        events.push(SourceEvent::Scan(Box::new(scan)));
-        events.reverse();
-        self.queue = events;
-        self.queue.pop()
-    }
-}
-
 /// Scan files in a folder, in name order: KITTI `.bin`, 3DTK `.3d` (with its `.pose`, the
-/// odometry), levelmap simulator `.json`. Files carry no time: scans are stamped `period_s`
-/// apart. A file that cannot be read is skipped with a warning, never ends the run.
+/// odometry), levelmap simulator `.json` (with the `sim` feature). Files carry no time:
+/// scans are stamped `period_s` apart. A file that cannot be read is skipped with a warning, never ends the run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct FilesSourceConfig {
+    /// The folder of scan files, read in name order.
     pub folder: std::path::PathBuf,
     /// Time between scans (s).
     pub period_s: f64,
@@ -186,7 +82,7 @@ impl Default for FilesSourceConfig {
 
 /// See [`FilesSourceConfig`].
 pub struct FilesSource {
-    files: std::vec::IntoIter<(std::path::PathBuf, scanio::ScanFormat)>,
+    files: std::vec::IntoIter<(std::path::PathBuf, FileFormat)>,
     epoch_ns: u64,
     period_ns: u64,
     index: u64,
@@ -200,15 +96,16 @@ impl FilesSource {
             .map_err(|e| anyhow::anyhow!("{}: {e}", config.folder.display()))?
             .filter_map(|entry| {
                 let path = entry.ok()?.path();
-                let format = scanio::ScanFormat::from_extension(&path)?;
+                let format = FileFormat::of(&path)?;
                 Some((path, format))
             })
             .collect();
         files.sort_by(|a, b| a.0.cmp(&b.0));
         anyhow::ensure!(
             !files.is_empty(),
-            "{}: no scan files (.bin, .3d, .json)",
-            config.folder.display()
+            "{}: no scan files ({})",
+            config.folder.display(),
+            FileFormat::EXTENSIONS
         );
         Ok(FilesSource {
             files: files.into_iter(),
@@ -226,7 +123,7 @@ impl Source for FilesSource {
             return Some(SourceEvent::Scan(Box::new(scan)));
         }
         for (path, format) in self.files.by_ref() {
-            let loaded = match scanio::load(&path, format) {
+            let loaded = match format.load(&path) {
                 Ok(l) => l,
                 Err(e) => {
                     tracing::warn!("scan skipped: {e}");
@@ -250,5 +147,36 @@ impl Source for FilesSource {
             return Some(SourceEvent::Odometry(TimedPose { stamp_ns, pose }));
         }
         None
+    }
+}
+
+/// A scan file's format: scanio's real formats, and the simulator's JSON with `sim`.
+#[derive(Clone, Copy, Debug)]
+enum FileFormat {
+    Scan(scanio::ScanFormat),
+    #[cfg(feature = "sim")]
+    Sim,
+}
+
+impl FileFormat {
+    #[cfg(feature = "sim")]
+    const EXTENSIONS: &str = ".bin, .3d, .json";
+    #[cfg(not(feature = "sim"))]
+    const EXTENSIONS: &str = ".bin, .3d";
+
+    fn of(path: &std::path::Path) -> Option<FileFormat> {
+        #[cfg(feature = "sim")]
+        if path.extension().is_some_and(|e| e == "json") {
+            return Some(FileFormat::Sim);
+        }
+        scanio::ScanFormat::from_extension(path).map(FileFormat::Scan)
+    }
+
+    fn load(self, path: &std::path::Path) -> Result<scanio::LoadedScan, scanio::LoadError> {
+        match self {
+            FileFormat::Scan(format) => scanio::load(path, format),
+            #[cfg(feature = "sim")]
+            FileFormat::Sim => ::sim::scan_file::load(path).map(|(scan, _truth)| scan),
+        }
     }
 }

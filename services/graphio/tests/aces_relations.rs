@@ -2,9 +2,9 @@
 //! timestamps are FLASER timestamps of the log, and the relation metric of the raw odometry.
 
 use graphio::{carmen, relations};
-use scanio::shared_data;
 use slam::Pose2;
 use slam::matching::metric::relation_metric;
+use testdata::shared_data;
 
 #[test]
 fn aces_relations_refer_to_flaser_scans() {

@@ -2,8 +2,8 @@
 //! manifest (MANIFEST.md §2) states.
 
 use graphio::carmen::{self, CarmenLog, LaserScan};
-use scanio::shared_data;
 use std::f64::consts::{FRAC_PI_2, PI};
+use testdata::shared_data;
 
 fn read(relative: &str) -> CarmenLog {
     let path = shared_data(relative);

@@ -4,10 +4,10 @@
 //! robot's path is free.
 
 use graphio::{carmen, gridmap};
-use scanio::shared_data;
 use slam::Pose2;
 use slam::grid::{CellState, GridParams, OccupancyGrid};
 use slam::matching::Scan2;
+use testdata::shared_data;
 
 /// Share of the returns (within max range) that land on occupied cells of the grid built
 /// from the same scans at `poses`, and how many poses stand on free cells.

@@ -7,7 +7,8 @@
 //! Needs ../shared/data beside the repository (or LEVELMAP_DATA); fails loudly without it.
 
 use leveling::{Leveler, Scan3d, SegmentParams, deskew};
-use scanio::{ScanFormat, shared_data};
+use scanio::ScanFormat;
+use testdata::shared_data;
 
 fn main() {
     divan::main();

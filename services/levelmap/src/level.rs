@@ -9,22 +9,54 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// A scan file's format: scanio's real ones and, in the lab build, the simulator's JSON.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Scan(ScanFormat),
+    #[cfg(feature = "lab")]
+    Sim,
+}
+
+impl Format {
+    /// As the report names it.
+    fn name(self) -> &'static str {
+        match self {
+            Format::Scan(ScanFormat::Kitti) => "kitti",
+            Format::Scan(ScanFormat::ThreeDtk) => "threedtk",
+            #[cfg(feature = "lab")]
+            Format::Sim => "sim",
+        }
+    }
+}
+
+#[cfg(feature = "lab")]
+const FORMATS: (&str, &str) = ("kitti, 3dtk or sim", "kitti|3dtk|sim");
+#[cfg(not(feature = "lab"))]
+const FORMATS: (&str, &str) = ("kitti or 3dtk", "kitti|3dtk");
+
 /// The format named by `--format`, or guessed from the file's extension.
-pub fn scan_format(file: &Path, format: Option<&str>) -> Result<ScanFormat> {
+pub fn scan_format(file: &Path, format: Option<&str>) -> Result<Format> {
     match format {
-        Some("kitti") => Ok(ScanFormat::Kitti),
-        Some("3dtk") => Ok(ScanFormat::ThreeDtk),
-        Some("sim") => Ok(ScanFormat::Sim),
+        Some("kitti") => Ok(Format::Scan(ScanFormat::Kitti)),
+        Some("3dtk") => Ok(Format::Scan(ScanFormat::ThreeDtk)),
+        #[cfg(feature = "lab")]
+        Some("sim") => Ok(Format::Sim),
         Some(other) => bail!(
-            "{}: unknown format {other:?} (expected kitti, 3dtk or sim)",
-            file.display()
+            "{}: unknown format {other:?} (expected {})",
+            file.display(),
+            FORMATS.0
         ),
-        None => ScanFormat::from_extension(file).with_context(|| {
-            format!(
-                "{}: cannot tell the format from the extension; pass --format kitti|3dtk|sim",
-                file.display()
-            )
-        }),
+        #[cfg(feature = "lab")]
+        None if file.extension().is_some_and(|e| e == "json") => Ok(Format::Sim),
+        None => ScanFormat::from_extension(file)
+            .map(Format::Scan)
+            .with_context(|| {
+                format!(
+                    "{}: cannot tell the format from the extension; pass --format {}",
+                    file.display(),
+                    FORMATS.1
+                )
+            }),
     }
 }
 
@@ -34,8 +66,8 @@ pub struct LevelArgs {
     /// The 3D scan file.
     pub file: PathBuf,
     /// File format: kitti (Velodyne .bin, float32 x y z reflectance), 3dtk (.3d text in cm,
-    /// with FILE.pose beside it if present) or sim (levelmap simulator JSON). Guessed from the
-    /// extension (.bin, .3d, .json) when omitted.
+    /// with FILE.pose beside it if present) or sim (levelmap simulator JSON; lab builds only).
+    /// Guessed from the extension (.bin, .3d, .json) when omitted.
     #[arg(long, value_name = "kitti|3dtk|sim")]
     pub format: Option<String>,
     /// SemanticKITTI .label file for the scan: adds landmark_precision and beam_precision.
@@ -112,11 +144,16 @@ pub fn run(args: &LevelArgs) -> Result<()> {
     let params = load_params(args.config.as_deref())?;
     let format = scan_format(&args.file, args.format.as_deref())?;
     let t0 = Instant::now();
-    let (loaded, sim_truth) = match format {
-        ScanFormat::Sim => {
-            scanio::sim_file::load(&args.file).map(|(scan, truth)| (scan, Some(truth)))?
-        }
-        _ => (scanio::load(&args.file, format)?, None),
+    let (loaded, sim_truth): (LoadedScan, Option<Vec<Option<bool>>>) = match format {
+        #[cfg(feature = "lab")]
+        Format::Sim => sim::scan_file::load(&args.file).map(|(scan, truth)| {
+            // Per point: on the ground or not (None: no surface, no return).
+            (
+                scan,
+                Some(truth.iter().map(|k| k.map(|k| k.is_ground())).collect()),
+            )
+        })?,
+        Format::Scan(format) => (scanio::load(&args.file, format)?, None),
     };
     let load_ms = ms(t0);
     let labels = args
@@ -134,11 +171,9 @@ pub fn run(args: &LevelArgs) -> Result<()> {
             |i| labels.is_ground(loaded.file_index[i] as usize),
         ))
     } else {
-        sim_truth.as_ref().map(|truth| {
-            Precision::score(&leveled.classes, &leveled.first_landmarks, |i| {
-                truth[i].map(|kind| kind.is_ground())
-            })
-        })
+        sim_truth
+            .as_ref()
+            .map(|truth| Precision::score(&leveled.classes, &leveled.first_landmarks, |i| truth[i]))
     };
 
     let mut warnings = Vec::new();
@@ -163,7 +198,7 @@ pub fn run(args: &LevelArgs) -> Result<()> {
 
     let report = LevelReport {
         file: args.file.display().to_string(),
-        format: format!("{format:?}").to_lowercase(),
+        format: format.name().into(),
         points: loaded.raw.points.len(),
         columns: loaded.raw.columns.len(),
         invalid: leveled.counts.invalid,

@@ -1,12 +1,20 @@
 //! `levelmap`: the command line of the levelmap outdoor SLAM system.
 
-mod bench_fleet;
-mod demo;
+//! Cargo features choose the commands: `edge` (the robot's service), `mapper` (the mapping
+//! server and the offline solver tools, optimize and slam2d: faer), `lab` (the simulator and
+//! the fleet lab: demo, bench-fleet, simulate, pavilion, level's sim format). `level` is in
+//! every build. A command not compiled in is not in `--help` either.
+
 mod level;
+#[cfg(feature = "mapper")]
 mod optimize;
+#[cfg(feature = "lab")]
 mod pavilion;
+#[cfg(any(feature = "edge", feature = "mapper"))]
 mod services;
+#[cfg(feature = "lab")]
 mod simulate;
+#[cfg(feature = "mapper")]
 mod slam2d;
 mod svg;
 
@@ -24,27 +32,43 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    BenchFleet(bench_fleet::BenchFleetArgs),
-    Demo(demo::DemoArgs),
+    #[cfg(feature = "lab")]
+    BenchFleet(fleetlab::BenchFleetArgs),
+    #[cfg(feature = "lab")]
+    Demo(fleetlab::DemoArgs),
+    #[cfg(feature = "edge")]
     Edge(services::EdgeArgs),
     Level(level::LevelArgs),
+    #[cfg(feature = "mapper")]
     Mapper(services::MapperArgs),
+    #[cfg(feature = "mapper")]
     Optimize(optimize::OptimizeArgs),
+    #[cfg(feature = "lab")]
     Pavilion(pavilion::PavilionArgs),
+    #[cfg(feature = "lab")]
     Simulate(simulate::SimulateArgs),
+    #[cfg(feature = "mapper")]
     Slam2d(slam2d::Slam2dArgs),
 }
 
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
-        Command::BenchFleet(args) => bench_fleet::run(&args),
-        Command::Demo(args) => demo::run(&args),
+        #[cfg(feature = "lab")]
+        Command::BenchFleet(args) => fleetlab::bench_fleet::run(&args),
+        #[cfg(feature = "lab")]
+        Command::Demo(args) => fleetlab::demo::run(&args),
+        #[cfg(feature = "edge")]
         Command::Edge(args) => services::run_edge(&args),
+        #[cfg(feature = "mapper")]
         Command::Mapper(args) => services::run_mapper(&args),
+        #[cfg(feature = "lab")]
         Command::Pavilion(args) => pavilion::run(&args),
         Command::Level(args) => level::run(&args),
+        #[cfg(feature = "mapper")]
         Command::Optimize(args) => optimize::run(&args),
+        #[cfg(feature = "lab")]
         Command::Simulate(args) => simulate::run(&args),
+        #[cfg(feature = "mapper")]
         Command::Slam2d(args) => slam2d::run(&args),
     };
     match result {

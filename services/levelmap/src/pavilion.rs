@@ -59,8 +59,8 @@ pub fn run(args: &PavilionArgs) -> Result<()> {
     let svg_path = args.out_dir.join("pavilion.svg");
 
     let (file, fixed2d) = sim::scenario::pavilion_hill_scan(args.seed);
-    scanio::sim_file::save(&scan_path, &file)?;
-    let (loaded, truth) = scanio::sim_file::into_loaded(file).map_err(anyhow::Error::msg)?;
+    sim::scan_file::save(&scan_path, &file)?;
+    let (loaded, truth) = sim::scan_file::into_loaded(file).map_err(anyhow::Error::msg)?;
     let (leveled, _, elapsed_ms) = level_timed(&loaded, SegmentParams::default(), 10)?;
     let beam_kinds: Vec<SurfaceKind> = leveled
         .first_landmarks

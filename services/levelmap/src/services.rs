@@ -5,6 +5,7 @@ use clap::Args;
 use std::path::PathBuf;
 
 /// Run the mapping server: Zenoh router for the robots, durable store, HTTP API.
+#[cfg(feature = "mapper")]
 #[derive(Args, Debug)]
 pub struct MapperArgs {
     /// TOML configuration (see deploy/mapper.toml); defaults without one.
@@ -13,6 +14,7 @@ pub struct MapperArgs {
 }
 
 /// Run a robot's edge service: its source's scans leveled and published as nodes.
+#[cfg(feature = "edge")]
 #[derive(Args, Debug)]
 pub struct EdgeArgs {
     /// TOML configuration (see deploy/edge.toml); defaults without one.
@@ -24,7 +26,7 @@ pub struct EdgeArgs {
 }
 
 /// Zenoh needs Tokio's multi-thread runtime.
-pub fn runtime() -> Result<tokio::runtime::Runtime> {
+fn runtime() -> Result<tokio::runtime::Runtime> {
     Ok(tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?)
@@ -39,6 +41,7 @@ fn init_logging() {
         .try_init();
 }
 
+#[cfg(feature = "mapper")]
 pub fn run_mapper(args: &MapperArgs) -> Result<()> {
     init_logging();
     let config = match &args.config {
@@ -59,6 +62,7 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
     })
 }
 
+#[cfg(feature = "edge")]
 pub fn run_edge(args: &EdgeArgs) -> Result<()> {
     init_logging();
     let config = match &args.config {

@@ -67,7 +67,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         );
     }
     let file = scene_scan(args.scene, args.seed, args.speed_mps);
-    scanio::sim_file::save(&args.out, &file)?;
+    sim::scan_file::save(&args.out, &file)?;
     let report = SimulateReport {
         file: args.out.display().to_string(),
         scene: args.scene,

@@ -37,7 +37,7 @@ const EDGE: &str = "1 0 0 1 0 0 1 0 1";
 
 #[test]
 fn reports_chi2_in_json_on_a_benchmark() {
-    let path = scanio::shared_data("pose_graph_2d/se-sync/intel.g2o");
+    let path = testdata::shared_data("pose_graph_2d/se-sync/intel.g2o");
     let out = tempfile_out("report");
     let result = levelmap(&[
         "optimize",

@@ -5,7 +5,7 @@ use std::process::Command;
 
 #[test]
 fn slam2d_writes_grid_images_and_trajectory() {
-    let log = scanio::shared_data("radish_2d_corrected_logs/aces-corrected.log.gz");
+    let log = testdata::shared_data("radish_2d_corrected_logs/aces-corrected.log.gz");
     let dir = std::env::temp_dir().join(format!("levelmap-test-{}-products", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let (png, pgm, tum) = (

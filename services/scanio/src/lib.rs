@@ -1,12 +1,11 @@
 //! Readers for 3D scan files, turning each into the organized [`leveling::Scan3d`] the
-//! leveling pipeline takes: KITTI Velodyne `.bin`, 3DTK `.3d` + `.pose` (nodding SICK), and
-//! levelmap's simulator JSON; plus SemanticKITTI `.label` files for scoring. The only crate
-//! in the workspace that reads scan files; the algorithms stay free of I/O.
+//! leveling pipeline takes: KITTI Velodyne `.bin` and 3DTK `.3d` + `.pose` (nodding SICK);
+//! plus SemanticKITTI `.label` files for scoring. The algorithms stay free of I/O. The
+//! simulator's own JSON scans are read by `sim::scan_file` (the lab), with this crate's
+//! [`LoadedScan`] and [`LoadError`], so that a robot's build needs no simulator.
 
 pub mod kitti;
 pub mod labels;
-pub mod sim_file;
-
 pub mod threedtk;
 
 use leveling::nalgebra::Isometry3;
@@ -41,7 +40,8 @@ pub enum LoadError {
 }
 
 impl LoadError {
-    pub(crate) fn invalid(path: &Path, message: impl Into<String>) -> LoadError {
+    /// An `Invalid` error naming `path`.
+    pub fn invalid(path: &Path, message: impl Into<String>) -> LoadError {
         LoadError::Invalid {
             path: path.to_owned(),
             message: message.into(),
@@ -69,17 +69,14 @@ pub enum ScanFormat {
     Kitti,
     /// 3DTK `.3d` text (cm, left-handed, y up) with an optional `.pose` beside it.
     ThreeDtk,
-    /// levelmap simulator JSON (`levelmap simulate`).
-    Sim,
 }
 
 impl ScanFormat {
-    /// The format a file name suggests: `.bin`, `.3d`, `.json`.
+    /// The format a file name suggests: `.bin`, `.3d`.
     pub fn from_extension(path: &Path) -> Option<ScanFormat> {
         match path.extension()?.to_str()? {
             "bin" => Some(ScanFormat::Kitti),
             "3d" => Some(ScanFormat::ThreeDtk),
-            "json" => Some(ScanFormat::Sim),
             _ => None,
         }
     }
@@ -90,28 +87,11 @@ pub fn load(path: &Path, format: ScanFormat) -> Result<LoadedScan, LoadError> {
     match format {
         ScanFormat::Kitti => kitti::load(path, kitti::DEFAULT_COLUMNS),
         ScanFormat::ThreeDtk => threedtk::load(path),
-        ScanFormat::Sim => sim_file::load(path).map(|(scan, _truth)| scan),
     }
 }
 
-/// A path in the public test data: `$LEVELMAP_DATA/relative`, or `../shared/data/relative`
-/// beside the repository. Panics, naming the path, if it does not exist: tests and benchmarks
-/// that need the data must fail loudly without it, never skip.
-pub fn shared_data(relative: &str) -> PathBuf {
-    let root = std::env::var_os("LEVELMAP_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
-    let path = root.join(relative);
-    assert!(
-        path.exists(),
-        "test data missing: {} (set LEVELMAP_DATA or put ../shared beside the repository)",
-        path.display()
-    );
-    path
-}
-
 /// Reads a whole file, refusing a missing or empty one with an error naming it.
-pub(crate) fn read_nonempty(path: &Path) -> Result<Vec<u8>, LoadError> {
+pub fn read_nonempty(path: &Path) -> Result<Vec<u8>, LoadError> {
     let bytes = std::fs::read(path).map_err(|source| LoadError::Io {
         path: path.to_owned(),
         error: source,

@@ -3,8 +3,8 @@
 
 use leveling::{Leveled, Leveler, Precision, SegmentParams};
 use scanio::labels::Labels;
-use scanio::shared_data as data;
 use scanio::{LoadedScan, ScanFormat};
+use testdata::shared_data as data;
 
 fn level(loaded: &LoadedScan) -> Leveled {
     Leveler::new(SegmentParams::default())

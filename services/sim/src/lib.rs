@@ -2,7 +2,8 @@
 //! tests and demos (after Wulf, Brenneke & Wagner, "Using 3D Laser Range Data for SLAM in
 //! Outdoor Environments").
 //!
-//! Pure library: no file I/O, no threads; everything is fixed by a seed ([`Rng`], our own
+//! Pure library but for [`scan_file`] (the simulator's scan files, JSON): no other file I/O,
+//! no threads; everything is fixed by a seed ([`Rng`], our own
 //! generator, so results never change with a dependency's version).
 //!
 //! # The park ([`World::park`])
@@ -66,6 +67,7 @@ pub mod geodesy;
 mod park;
 pub mod rng;
 pub mod robot;
+pub mod scan_file;
 pub mod scenario;
 pub mod sensors;
 pub mod shape;

@@ -37,7 +37,7 @@ fn synthetic_park_360_beams(bencher: divan::Bencher) {
 /// 1.1 m apart), from their corrected relative pose perturbed by (0.2 m, 0.2 m, 3°).
 #[divan::bench]
 fn freiburg_campus_pair(bencher: divan::Bencher) {
-    let path = scanio::shared_data("radish_2d_corrected_logs/freiburg-campus-corrected.log.gz");
+    let path = testdata::shared_data("radish_2d_corrected_logs/freiburg-campus-corrected.log.gz");
     let log = graphio::carmen::read(&path).unwrap_or_else(|e| panic!("{e}"));
     let (a, b) = (&log.scans[7], &log.scans[8]);
     let scan = |s: &graphio::carmen::LaserScan| s.to_scan2();

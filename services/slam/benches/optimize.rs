@@ -21,7 +21,7 @@ const GRAPHS: [&str; 3] = [
 ];
 
 fn graph(file: &str) -> PoseGraph {
-    posegraph::read(&scanio::shared_data(file), GraphFormat::G2o)
+    posegraph::read(&testdata::shared_data(file), GraphFormat::G2o)
         .expect("read")
         .graph
 }

@@ -3,23 +3,40 @@
 //! GPS fixes; the network is solved as full nonlinear least squares on SE(2) (beyond the
 //! paper's linear solution). Pure library: no I/O, no async.
 
+//!
+//! The `solver` feature (default) adds everything that needs faer: the sparse linear algebra,
+//! the optimizer, chordal initialization and 2D mapping. Without it (`default-features =
+//! false`) the crate is the pure geometry a robot needs: poses, geodesy, the network's types,
+//! scan matching and the occupancy grid.
+
+// Needs no faer.
 pub mod geodesy;
 pub mod gnss;
 pub mod grid;
-pub mod init;
-pub mod linear;
-pub mod mapping2d;
 pub mod matching;
 pub mod network;
-pub mod optimize;
 pub mod robust;
 pub mod se2;
 
 pub use grid::{CellState, GridError, GridParams, OccupancyGrid};
-pub use init::{Init, InitError, initialize};
-pub use mapping2d::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Placed};
 pub use nalgebra;
 pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
-pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};
 pub use robust::Robust;
 pub use se2::{Pose2, position_rmse, wrap_angle};
+
+// The solver: faer's sparse Cholesky and everything built on it.
+#[cfg(feature = "solver")]
+pub mod init;
+#[cfg(feature = "solver")]
+pub mod linear;
+#[cfg(feature = "solver")]
+pub mod mapping2d;
+#[cfg(feature = "solver")]
+pub mod optimize;
+
+#[cfg(feature = "solver")]
+pub use init::{Init, InitError, initialize};
+#[cfg(feature = "solver")]
+pub use mapping2d::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Placed};
+#[cfg(feature = "solver")]
+pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

@@ -2,6 +2,7 @@
 //! on loopback, measured from outside through HTTP: how long a published node takes to become
 //! visible on the API's event stream, and how fast robot pose queries are answered meanwhile.
 
+use crate::FLEET;
 use anyhow::{Context, Result};
 use clap::Args;
 use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
@@ -9,15 +10,12 @@ use mapper::MapperConfig;
 use serde::Serialize;
 use slam::geodesy::Geodetic;
 use std::collections::HashMap;
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
+use std::io::BufRead;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use wire::session::SessionConfig;
 use wire::{Message, v1};
-
-const FLEET: &str = "park";
 
 /// Load-test the mapper: N simulated robots publishing nodes and odometry over Zenoh, with
 /// pose queries over HTTP at the same time.
@@ -176,7 +174,7 @@ fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u
 }
 
 pub fn run(args: &BenchFleetArgs) -> Result<()> {
-    crate::services::runtime()?.block_on(run_async(args))
+    crate::runtime()?.block_on(run_async(args))
 }
 
 async fn run_async(args: &BenchFleetArgs) -> Result<()> {
@@ -393,25 +391,32 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     mapper.stop().await
 }
 
-/// Reads `/api/v1/events` and notes when each node event arrives.
+/// An HTTP client that hands every status back (a 404 is an answer, not an error).
+fn agent() -> ureq::Agent {
+    ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .build()
+        .into()
+}
+
+/// Reads `/api/v1/events` and notes when each node event arrives. Blocks on the stream
+/// between events; the thread ends with the mapper (or the process).
 fn follow_events(http: &str, seen: &Mutex<HashMap<(String, u64), Instant>>, stop: &AtomicBool) {
-    let Ok(mut stream) = TcpStream::connect(http) else {
+    let Ok(response) = agent()
+        .get(format!("http://{http}/api/v1/events"))
+        .header("Accept", "text/event-stream")
+        .call()
+    else {
         return;
     };
-    let _ = stream.set_read_timeout(Some(Duration::from_millis(200)));
-    let _ = write!(
-        stream,
-        "GET /api/v1/events HTTP/1.1\r\nHost: {http}\r\nAccept: text/event-stream\r\n\r\n"
-    );
-    let mut reader = BufReader::new(stream);
-    let mut line = String::new();
-    while !stop.load(Ordering::SeqCst) {
-        line.clear();
-        match reader.read_line(&mut line) {
-            Ok(0) => return,
-            Ok(_) => {}
-            Err(_) => continue,
+    let reader = std::io::BufReader::new(response.into_body().into_reader());
+    for line in reader.lines() {
+        if stop.load(Ordering::SeqCst) {
+            return;
         }
+        let Ok(line) = line else {
+            return;
+        };
         let Some(data) = line.trim_end().strip_prefix("data: ") else {
             continue;
         };
@@ -429,8 +434,8 @@ fn follow_events(http: &str, seen: &Mutex<HashMap<(String, u64), Instant>>, stop
     }
 }
 
-/// GETs robot poses at `rate` per second on one keep-alive connection; returns latencies
-/// (ms) and errors.
+/// GETs robot poses at `rate` per second on one keep-alive connection (the agent's pool of
+/// one thread's sequential requests); returns latencies (ms) and errors.
 fn query_poses(
     http: &str,
     robots: usize,
@@ -440,7 +445,7 @@ fn query_poses(
 ) -> (Vec<f64>, u64) {
     let (mut latencies, mut errors) = (Vec::new(), 0u64);
     let period = Duration::from_secs_f64(1.0 / rate.max(1.0));
-    let mut stream: Option<BufReader<TcpStream>> = None;
+    let agent = agent();
     let started = Instant::now();
     let mut k = 0u64;
     while !stop.load(Ordering::SeqCst) {
@@ -450,56 +455,19 @@ fn query_poses(
         }
         let robot = (k as usize * 7 + connection) % robots;
         k += 1;
-        let path = format!("/api/v1/fleets/{FLEET}/robots/robot{robot}/pose");
+        let url = format!("http://{http}/api/v1/fleets/{FLEET}/robots/robot{robot}/pose");
         let t0 = Instant::now();
-        match get_keep_alive(&mut stream, http, &path) {
+        // The body is read to the end so that the connection can be used again.
+        let status = agent.get(&url).call().and_then(|mut response| {
+            response.body_mut().read_to_vec()?;
+            Ok(response.status().as_u16())
+        });
+        match status {
             Ok(200) => latencies.push(t0.elapsed().as_secs_f64() * 1e3),
             // 404 until the robot's first node is in: not a latency sample.
             Ok(404) => {}
-            _ => {
-                errors += 1;
-                stream = None;
-            }
+            _ => errors += 1,
         }
     }
     (latencies, errors)
-}
-
-fn get_keep_alive(
-    stream: &mut Option<BufReader<TcpStream>>,
-    http: &str,
-    path: &str,
-) -> std::io::Result<u16> {
-    if stream.is_none() {
-        let s = TcpStream::connect(http)?;
-        s.set_nodelay(true)?;
-        *stream = Some(BufReader::new(s));
-    }
-    let reader = stream.as_mut().expect("connected");
-    write!(
-        reader.get_mut(),
-        "GET {path} HTTP/1.1\r\nHost: {http}\r\n\r\n"
-    )?;
-    let mut line = String::new();
-    reader.read_line(&mut line)?;
-    let status: u16 = line
-        .split_whitespace()
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .ok_or_else(|| std::io::Error::other("no status"))?;
-    let mut length = 0usize;
-    loop {
-        line.clear();
-        reader.read_line(&mut line)?;
-        let l = line.trim_end();
-        if l.is_empty() {
-            break;
-        }
-        if let Some(v) = l.to_ascii_lowercase().strip_prefix("content-length:") {
-            length = v.trim().parse().unwrap_or(0);
-        }
-    }
-    let mut body = vec![0u8; length];
-    reader.read_exact(&mut body)?;
-    Ok(status)
 }

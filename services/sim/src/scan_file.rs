@@ -1,8 +1,10 @@
-//! levelmap simulator scans: a [`sim::SimScanFile`] as JSON (written by `levelmap simulate`),
-//! with the dead-reckoning track over the scan and ground truth per point.
+//! levelmap simulator scans: a [`SimScanFile`] as JSON (written by `levelmap simulate`),
+//! with the dead-reckoning track over the scan and ground truth per point. Read into
+//! scanio's [`LoadedScan`] like the real formats; here rather than in scanio so that the
+//! readers of real scans need no simulator.
 
-use crate::{LoadError, LoadedScan, read_nonempty};
-use sim::{SimScanFile, SurfaceKind};
+use crate::{SimScanFile, SurfaceKind};
+use scanio::{LoadError, LoadedScan, read_nonempty};
 use std::path::Path;
 
 /// Reads and checks a simulator scan; returns it ready to level, with per-point truth.
@@ -43,7 +45,7 @@ mod tests {
 
     #[test]
     fn round_trip_keeps_scan_track_and_truth() {
-        let file = sim::scenario::wall_drive_scan(3, 1.4);
+        let file = crate::scenario::wall_drive_scan(3, 1.4);
         let path =
             std::env::temp_dir().join(format!("levelmap-simfile-{}.json", std::process::id()));
         save(&path, &file).unwrap();

@@ -4,8 +4,8 @@
 //! written) against regressions. The aim is ≤ 0.03 m.
 
 use graphio::{carmen, relations};
-use scanio::shared_data;
 use slam::{Mapper2d, Mapper2dParams, Placed};
+use testdata::shared_data;
 
 #[test]
 fn aces_relations_error_stays_low() {

@@ -1,21 +1,19 @@
 //! `levelmap demo`: a mapper and three simulated robots in the hilly park, each robot its own
 //! edge service talking to the mapper over Zenoh TCP on loopback. At the end it scores the
 //! map against the simulator's ground truth, and scores the same run mapped from each robot's
-//! fixed horizontal 2D scanner (the paper's baseline) for comparison.
+//! fixed horizontal 2D scanner (the paper's baseline, [`crate::fixed2d`]) for comparison.
 
+use crate::{FLEET, sim_mapping_params};
 use anyhow::{Context, Result};
 use clap::Args;
-use edge::{EdgeConfig, NodeBuilder, PlanarScan, SimSourceConfig, SourceConfig};
-use leveling::nalgebra::Isometry3;
-use mapper::{FleetMap, MapperConfig};
+use edge::{EdgeConfig, SimSourceConfig, SourceConfig};
+use mapper::MapperConfig;
 use serde::Serialize;
 use sim::FleetRobot;
 use slam::Pose2;
 use std::path::PathBuf;
 use std::time::Instant;
 use wire::session::SessionConfig;
-
-const FLEET: &str = "park";
 
 /// Run the fleet demo: a mapper and simulated robots over real Zenoh, the map over HTTP.
 #[derive(Args, Debug)]
@@ -79,7 +77,7 @@ struct DemoReport {
 }
 
 pub fn run(args: &DemoArgs) -> Result<()> {
-    crate::services::runtime()?.block_on(run_async(args))
+    crate::runtime()?.block_on(run_async(args))
 }
 
 async fn run_async(args: &DemoArgs) -> Result<()> {
@@ -157,7 +155,8 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
             .expect("robotN");
         (*p, leveled_truth(robot, n.stamp_ns))
     }));
-    let (ate_fixed, fixed_closures) = map_fixed2d(args)?;
+    let (ate_fixed, fixed_closures) =
+        crate::fixed2d::map_fixed2d(usize::from(args.robots), args.duration, args.seed)?;
     let report = DemoReport {
         api: api.clone(),
         robots: view.robots.len(),
@@ -204,11 +203,6 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
     mapper.stop().await
 }
 
-/// The simulated robots' dead reckoning is precise (a fibre-optic-class gyro).
-fn sim_mapping_params() -> slam::Mapper2dParams {
-    slam::Mapper2dParams::precise_dead_reckoning()
-}
-
 fn robot_config(args: &DemoArgs, i: usize) -> EdgeConfig {
     EdgeConfig {
         fleet: FLEET.into(),
@@ -223,74 +217,4 @@ fn robot_config(args: &DemoArgs, i: usize) -> EdgeConfig {
         }),
         ..EdgeConfig::default()
     }
-}
-
-/// The same run (the simulator is deterministic per seed) from the fixed 2D scanners, mapped
-/// with the mapper's own code and parameters: the ATE and the loop closures.
-fn map_fixed2d(args: &DemoArgs) -> Result<(f64, usize)> {
-    let duration_ns = (args.duration * 1e9) as u64;
-    let defaults = MapperConfig::default();
-    let mut map = FleetMap::new(
-        FLEET,
-        sim_mapping_params(),
-        Some(slam::geodesy::GeoDatum {
-            origin: sim::PARK_DATUM.origin,
-        }),
-        defaults.max_range_m,
-    );
-    let mut robots: Vec<FleetRobot> = (0..usize::from(args.robots))
-        .map(|i| FleetRobot::new(edge::park(), i, duration_ns, args.seed).expect("park loop"))
-        .collect();
-    let base = EdgeConfig::default();
-    let mut builders: Vec<NodeBuilder> = (0..robots.len())
-        .map(|i| {
-            NodeBuilder::new(
-                FLEET,
-                &format!("robot{i}"),
-                base.node.clone(),
-                base.leveling,
-                0,
-            )
-        })
-        .collect();
-    let mut truth = Vec::new();
-    loop {
-        let mut any = false;
-        for (robot, builder) in robots.iter_mut().zip(&mut builders) {
-            let Some(scan) = robot.next_scan() else {
-                continue;
-            };
-            any = true;
-            let mount: Isometry3<f64> = robot.fixed_scanner().mount;
-            let stamp_ns = scan.scan.raw.columns[0].stamp_ns;
-            let planar = PlanarScan {
-                stamp_ns,
-                bearings_rad: scan.fixed2d.iter().map(|b| b.bearing_rad as f32).collect(),
-                ranges_m: scan
-                    .fixed2d
-                    .iter()
-                    .map(|b| b.range_m.unwrap_or(0.0) as f32)
-                    .collect(),
-                robot_at_start: scan.odometry_at_start,
-                sensor_in_robot: mount,
-                gps: scan
-                    .gps_since_previous
-                    .iter()
-                    .map(|f| edge::sim_gps_reading(robot, f, 0))
-                    .collect(),
-            };
-            let Some(node) = builder.offer_planar(&planar) else {
-                continue;
-            };
-            map.ingest(&wire::node_input(&node)?)?;
-            map.optimize_pending()?;
-            truth.push(Pose2::from_isometry3(&(scan.scan.truth_start_pose * mount)));
-        }
-        if !any {
-            break;
-        }
-    }
-    map.optimize_now()?;
-    let ate = slam::position_rmse(map.poses().iter().copied().zip(truth));
-    Ok((ate, map.stats().loop_closures))
 }

@@ -4,8 +4,8 @@
 //! in local minima from their default starts.
 
 use graphio::posegraph::{self, GraphFormat};
-use scanio::shared_data;
 use slam::{Init, OptimizeParams, Optimizer, initialize};
+use testdata::shared_data;
 
 fn optimum(file: &str, format: GraphFormat) -> (f64, u32) {
     let mut g = posegraph::read(&shared_data(file), format)

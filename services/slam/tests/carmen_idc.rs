@@ -5,13 +5,13 @@
 //! few centimetres and tenths of a degree (along corridors, by up to ~13 cm), so the
 //! thresholds below are set from what was measured, with margin.
 //!
-//! `cargo test -p graphio --test carmen_idc -- --nocapture` prints the figures quoted in the
+//! `cargo test -p slam --test carmen_idc -- --nocapture` prints the figures quoted in the
 //! comments (about 15 s: slam is optimized in test builds too).
 
 use graphio::carmen::{self, CarmenLog, FlaserBearings, LaserScan, ReadOptions};
-use scanio::shared_data;
 use slam::matching::{IdcParams, Match, QualityGate, Scan2, accept, idc};
 use slam::{Pose2, wrap_angle};
+use testdata::shared_data;
 
 fn read(relative: &str, flaser_bearings: FlaserBearings) -> CarmenLog {
     let options = ReadOptions {

@@ -1,0 +1,82 @@
+//! The paper's baseline: a fleet run mapped from each robot's fixed horizontal 2D scanner
+//! instead of its leveled 3D scans, with the mapper's own code ([`FleetMap`]) and parameters,
+//! scored against the simulator's ground truth.
+
+use crate::{FLEET, sim_mapping_params};
+use anyhow::Result;
+use edge::{EdgeConfig, NodeBuilder, PlanarScan};
+use leveling::nalgebra::Isometry3;
+use mapper::{FleetMap, MapperConfig};
+use sim::FleetRobot;
+use slam::Pose2;
+
+/// The run of `robots` of the park's loops, `duration_s` long with noise seed `seed` (the
+/// simulator is deterministic per seed, so this is the demo's run), from the fixed 2D
+/// scanners, mapped with the mapper's own code and parameters: the ATE and the loop closures.
+pub fn map_fixed2d(robots: usize, duration_s: f64, seed: u64) -> Result<(f64, usize)> {
+    let duration_ns = (duration_s * 1e9) as u64;
+    let defaults = MapperConfig::default();
+    let mut map = FleetMap::new(
+        FLEET,
+        sim_mapping_params(),
+        Some(slam::geodesy::GeoDatum {
+            origin: sim::PARK_DATUM.origin,
+        }),
+        defaults.max_range_m,
+    );
+    let mut robots: Vec<FleetRobot> = (0..robots)
+        .map(|i| FleetRobot::new(edge::park(), i, duration_ns, seed).expect("park loop"))
+        .collect();
+    let base = EdgeConfig::default();
+    let mut builders: Vec<NodeBuilder> = (0..robots.len())
+        .map(|i| {
+            NodeBuilder::new(
+                FLEET,
+                &format!("robot{i}"),
+                base.node.clone(),
+                base.leveling,
+                0,
+            )
+        })
+        .collect();
+    let mut truth = Vec::new();
+    loop {
+        let mut any = false;
+        for (robot, builder) in robots.iter_mut().zip(&mut builders) {
+            let Some(scan) = robot.next_scan() else {
+                continue;
+            };
+            any = true;
+            let mount: Isometry3<f64> = robot.fixed_scanner().mount;
+            let stamp_ns = scan.scan.raw.columns[0].stamp_ns;
+            let planar = PlanarScan {
+                stamp_ns,
+                bearings_rad: scan.fixed2d.iter().map(|b| b.bearing_rad as f32).collect(),
+                ranges_m: scan
+                    .fixed2d
+                    .iter()
+                    .map(|b| b.range_m.unwrap_or(0.0) as f32)
+                    .collect(),
+                robot_at_start: scan.odometry_at_start,
+                sensor_in_robot: mount,
+                gps: scan
+                    .gps_since_previous
+                    .iter()
+                    .map(|f| edge::sim_gps_reading(robot, f, 0))
+                    .collect(),
+            };
+            let Some(node) = builder.offer_planar(&planar) else {
+                continue;
+            };
+            map.ingest(&wire::node_input(&node)?)?;
+            map.optimize_pending()?;
+            truth.push(Pose2::from_isometry3(&(scan.scan.truth_start_pose * mount)));
+        }
+        if !any {
+            break;
+        }
+    }
+    map.optimize_now()?;
+    let ate = slam::position_rmse(map.poses().iter().copied().zip(truth));
+    Ok((ate, map.stats().loop_closures))
+}

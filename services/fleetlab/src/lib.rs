@@ -1,0 +1,28 @@
+//! The fleet lab: simulated robots of the hilly park against a real mapper, over Zenoh TCP on
+//! loopback. [`demo`] runs edge services and scores the map against the simulator's ground
+//! truth, beside [`fixed2d`], the same run mapped from a fixed horizontal 2D scanner (the
+//! paper's baseline). [`bench_fleet`] loads one mapper with many robots and measures it from
+//! outside, through HTTP. The `levelmap` command line calls these (its `lab` feature); a
+//! robot's build has none of it.
+
+pub mod bench_fleet;
+pub mod demo;
+pub mod fixed2d;
+
+pub use bench_fleet::BenchFleetArgs;
+pub use demo::DemoArgs;
+
+/// The fleet (site) every lab run maps.
+pub const FLEET: &str = "park";
+
+/// Zenoh needs Tokio's multi-thread runtime.
+pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    Ok(tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?)
+}
+
+/// The simulated robots' dead reckoning is precise (a fibre-optic-class gyro).
+pub fn sim_mapping_params() -> slam::Mapper2dParams {
+    slam::Mapper2dParams::precise_dead_reckoning()
+}
