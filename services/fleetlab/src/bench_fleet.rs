@@ -36,19 +36,22 @@ pub struct BenchFleetArgs {
     /// HTTP pose queries per second, spread over `--connections` keep-alive connections.
     #[arg(long, default_value_t = 2000.0)]
     pub query_rate: f64,
+    /// Keep-alive HTTP connections the pose queries use.
     #[arg(long, default_value_t = 4)]
     pub connections: usize,
     /// Zenoh client sessions the robots share (robots are grouped onto them).
     #[arg(long, default_value_t = 10)]
     pub sessions: usize,
-    /// The mapper's Zenoh endpoint and HTTP address (port 0: any free one).
+    /// The mapper's Zenoh endpoint.
     #[arg(long, default_value = "tcp/127.0.0.1:7448")]
     pub zenoh: String,
+    /// The mapper's HTTP address (port 0: any free one).
     #[arg(long, default_value = "127.0.0.1:0")]
     pub http: String,
     /// Folder for the mapper's store (emptied at start).
     #[arg(long, default_value = "levelmap-bench-fleet")]
     pub dir: std::path::PathBuf,
+    /// Print one JSON object of figures.
     #[arg(long)]
     pub json: bool,
     /// Keep the mapper serving (HTTP API and dashboard) after the run, until Ctrl-C.
@@ -173,6 +176,7 @@ fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u
     node
 }
 
+/// Runs the bench: a mapper, simulated robots over Zenoh, HTTP queries; prints the figures.
 pub fn run(args: &BenchFleetArgs) -> Result<()> {
     crate::runtime()?.block_on(run_async(args))
 }

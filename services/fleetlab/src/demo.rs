@@ -76,6 +76,7 @@ struct DemoReport {
     wall_s: f64,
 }
 
+/// Runs the demo: a mapper and simulated robots, the map scored against ground truth.
 pub fn run(args: &DemoArgs) -> Result<()> {
     crate::runtime()?.block_on(run_async(args))
 }

@@ -73,7 +73,7 @@ pub struct LevelArgs {
     /// SemanticKITTI .label file for the scan: adds landmark_precision and beam_precision.
     #[arg(long, value_name = "FILE.label")]
     pub labels: Option<PathBuf>,
-    /// TOML file with a [segment] table overriding the thresholds (see deploy/leveling.toml).
+    /// TOML file with a `[segment]` table overriding the thresholds (see deploy/leveling.toml).
     #[arg(long, value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
     /// Print one JSON object instead of text.

@@ -4,7 +4,7 @@
 //! views and events → run the solves that are due → answer operator requests. Under load,
 //! nodes batch up (one commit, one solve per fleet) instead of queueing behind one solve each.
 //! A node is acked only once it is committed: a failed commit stops the mapper taking nodes
-//! ([`Worker::store_failed`]), and the robots re-send to the restarted one.
+//! (`Worker::store_failed`), and the robots re-send to the restarted one.
 
 use crate::bus::Bus;
 use crate::config::MapperConfig;

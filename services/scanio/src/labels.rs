@@ -18,15 +18,20 @@ pub enum LabelScheme {
 /// Per-point ground truth: ground, not ground, or not scored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GroundTruth {
+    /// A ground class of the scheme.
     Ground,
+    /// Any other scored class.
     NotGround,
+    /// A class the scheme does not score (unlabelled, outlier).
     Unscored,
 }
 
 /// A label file's per-point classes.
 #[derive(Clone, Debug)]
 pub struct Labels {
+    /// How the ids are read.
     pub scheme: LabelScheme,
+    /// The semantic class id of each point, in the scan's order.
     pub ids: Vec<u16>,
 }
 

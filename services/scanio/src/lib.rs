@@ -15,28 +15,48 @@ use std::path::{Path, PathBuf};
 /// Why a scan file could not be read. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum LoadError {
+    /// The file cannot be read.
     #[error("{}: {error}", path.display())]
     Io {
+        /// The file.
         path: PathBuf,
         /// The cause, already in the message (not a chained source, so it prints once).
         error: std::io::Error,
     },
+    /// The file holds nothing.
     #[error("{}: empty file", path.display())]
-    Empty { path: PathBuf },
+    Empty {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A binary file whose length is not a whole number of point records.
     #[error("{}: truncated: {len} bytes is not a multiple of the {point_bytes}-byte point record", path.display())]
     Truncated {
+        /// The file.
         path: PathBuf,
+        /// Its length (bytes).
         len: usize,
+        /// The size of one point record (bytes).
         point_bytes: usize,
     },
+    /// A text file with a line that cannot be read.
     #[error("{}: line {line}: {message}", path.display())]
     Line {
+        /// The file.
         path: PathBuf,
+        /// The line's number, from 1.
         line: usize,
+        /// What is wrong with it.
         message: String,
     },
+    /// Contents that are not a scan.
     #[error("{}: {message}", path.display())]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 impl LoadError {
