@@ -2,12 +2,11 @@
 //! (section 4): nodes are collection positions, edges are odometry, scan matches (IDC) and
 //! GPS fixes; the network is solved as full nonlinear least squares on SE(2) (beyond the
 //! paper's linear solution). Pure library: no I/O, no async.
-
 //!
 //! The `solver` feature (default) adds everything that needs faer: the sparse linear algebra,
 //! the optimizer, chordal initialization and 2D mapping. Without it (`default-features =
-//! false`) the crate is the pure geometry a robot needs: poses, geodesy, the network's types,
-//! scan matching and the occupancy grid.
+//! false`) the crate is the pure geometry a robot needs: poses, geodesy, the GPS fix model
+//! ([`gnss`]), the network's types, scan matching and the occupancy grid.
 
 // Needs no faer.
 pub mod geodesy;
@@ -18,6 +17,7 @@ pub mod network;
 pub mod robust;
 pub mod se2;
 
+pub use gnss::GpsObservation;
 pub use grid::{CellState, GridError, GridParams, OccupancyGrid};
 pub use nalgebra;
 pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
@@ -37,6 +37,6 @@ pub mod optimize;
 #[cfg(feature = "solver")]
 pub use init::{Init, InitError, initialize};
 #[cfg(feature = "solver")]
-pub use mapping2d::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Placed};
+pub use mapping2d::{Mapper2d, Mapper2dParams, MapperStats, Placed};
 #[cfg(feature = "solver")]
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};
