@@ -49,6 +49,23 @@ impl Default for MapperConfig {
     }
 }
 
+impl MapperConfig {
+    /// A fleet's empty map, as this configuration sets it up.
+    pub fn new_fleet(&self, id: &str) -> crate::fleet::FleetMap {
+        crate::fleet::FleetMap::new(
+            id,
+            self.mapping.clone(),
+            self.datum.map(|origin| slam::geodesy::GeoDatum { origin }),
+            self.max_range_m,
+        )
+    }
+
+    /// Reads a TOML file; unknown keys are errors.
+    pub fn load(path: &Path) -> anyhow::Result<MapperConfig> {
+        wire::session::load_toml(path)
+    }
+}
+
 /// The mapping parameters for fleets of robots sending a node every metre or so (measured on
 /// the simulated park: `services/sim/tests/fleet_mapping.rs`).
 pub fn fleet_mapping_params() -> Mapper2dParams {
@@ -60,13 +77,6 @@ pub fn fleet_mapping_params() -> Mapper2dParams {
             ..defaults.idc.clone()
         },
         ..defaults
-    }
-}
-
-impl MapperConfig {
-    /// Reads a TOML file; unknown keys are errors.
-    pub fn load(path: &Path) -> anyhow::Result<MapperConfig> {
-        wire::session::load_toml(path)
     }
 }
 

@@ -158,18 +158,6 @@ async fn subscribe(
     Ok((nodes, odometry, queries))
 }
 
-/// A fleet's empty map, as the config sets it up.
-pub(crate) fn new_fleet(config: &MapperConfig, id: &str) -> FleetMap {
-    FleetMap::new(
-        id,
-        config.mapping.clone(),
-        config
-            .datum
-            .map(|origin| slam::geodesy::GeoDatum { origin }),
-        config.max_range_m,
-    )
-}
-
 /// Replays the store; checks the edges it rebuilt against the stored ones.
 fn restore(
     config: &MapperConfig,
@@ -179,7 +167,7 @@ fn restore(
     let mut fleets = HashMap::new();
     for stored in store.load()? {
         let started = Instant::now();
-        let mut map = new_fleet(config, &stored.id);
+        let mut map = config.new_fleet(&stored.id);
         let mut solves = stored.solves.iter().peekable();
         for (arrival, bytes) in stored.nodes.iter().enumerate() {
             let node = wire::decode_node(bytes)

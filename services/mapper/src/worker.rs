@@ -219,7 +219,7 @@ impl Worker {
         let map = self
             .fleets
             .entry(fleet.clone())
-            .or_insert_with(|| crate::server::new_fleet(config, &fleet));
+            .or_insert_with(|| config.new_fleet(&fleet));
         match map.sequence(&robot, input.node_seq) {
             Sequence::Next => {}
             Sequence::Duplicate => {
