@@ -68,7 +68,8 @@ pub struct LevelArgs {
     /// File format: kitti (Velodyne .bin, float32 x y z reflectance), 3dtk (.3d text in cm,
     /// with FILE.pose beside it if present) or sim (levelmap simulator JSON; lab builds only).
     /// Guessed from the extension (.bin, .3d, .json) when omitted.
-    #[arg(long, value_name = "kitti|3dtk|sim")]
+    #[cfg_attr(feature = "lab", arg(long, value_name = "kitti|3dtk|sim"))]
+    #[cfg_attr(not(feature = "lab"), arg(long, value_name = "kitti|3dtk"))]
     pub format: Option<String>,
     /// SemanticKITTI .label file for the scan: adds landmark_precision and beam_precision.
     #[arg(long, value_name = "FILE.label")]
