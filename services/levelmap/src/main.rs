@@ -41,6 +41,10 @@ enum Command {
     Level(level::LevelArgs),
     #[cfg(feature = "mapper")]
     Mapper(services::MapperArgs),
+    /// Print the mapping server's OpenAPI document (JSON), as it serves it at
+    /// /api/v1/openapi.json: made from its routes.
+    #[cfg(feature = "mapper")]
+    Openapi,
     #[cfg(feature = "mapper")]
     Optimize(optimize::OptimizeArgs),
     #[cfg(feature = "lab")]
@@ -64,6 +68,11 @@ fn main() -> ExitCode {
         #[cfg(feature = "lab")]
         Command::Pavilion(args) => pavilion::run(&args),
         Command::Level(args) => level::run(&args),
+        #[cfg(feature = "mapper")]
+        Command::Openapi => {
+            println!("{}", mapper::api::openapi_json());
+            Ok(())
+        }
         #[cfg(feature = "mapper")]
         Command::Optimize(args) => optimize::run(&args),
         #[cfg(feature = "lab")]
