@@ -147,6 +147,11 @@ impl MapperProcess {
         }
     }
 
+    /// The process, for signals and its exit.
+    pub fn child(&mut self) -> &mut Child {
+        &mut self.child
+    }
+
     /// SIGKILL: no chance to flush or close anything.
     pub fn kill(mut self) -> (String, String, PathBuf) {
         self.child.kill().expect("SIGKILL");

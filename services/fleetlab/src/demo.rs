@@ -115,9 +115,8 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         })));
     }
     let ctrl_c = tokio::spawn(async move {
-        if tokio::signal::ctrl_c().await.is_ok() {
-            let _ = stop_tx.send(true);
-        }
+        wire::session::shutdown_signal().await;
+        let _ = stop_tx.send(true);
     });
     let mut sends = (0, 0, 0);
     for robot in robots {
@@ -195,7 +194,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
     }
     if args.serve {
         if !args.json {
-            println!("serving {api}/summary until Ctrl-C");
+            println!("serving {api}/summary until Ctrl-C (or SIGTERM)");
         }
         let _ = ctrl_c.await;
     } else {

@@ -56,7 +56,7 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
             running.http_addr,
             config.store_path.display()
         );
-        tokio::signal::ctrl_c().await?;
+        wire::session::shutdown_signal().await;
         tracing::info!("stopping");
         running.stop().await
     })
@@ -71,10 +71,7 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
     };
     let report = runtime()?.block_on(async {
         let source = edge::open_source(&config, wire::session::now_ns())?;
-        edge::run(config, source, async {
-            let _ = tokio::signal::ctrl_c().await;
-        })
-        .await
+        edge::run(config, source, wire::session::shutdown_signal()).await
     })?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

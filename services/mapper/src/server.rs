@@ -15,9 +15,12 @@ use anyhow::{Context, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::mpsc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 use wire::Topic;
 use wire::session::now_ns;
+
+/// How long [`Running::stop`] lets open HTTP requests finish.
+pub const HTTP_DRAIN: Duration = Duration::from_secs(5);
 
 /// A running mapper: its HTTP address and the handle to stop it.
 pub struct Running {
@@ -39,9 +42,20 @@ impl Running {
             .map_err(|e| anyhow::anyhow!("optimizing fleet {fleet}: {e}"))
     }
 
-    /// Stops accepting, lets the worker finish what it holds, closes the session.
+    /// Stops accepting, ends the event streams, lets the worker finish what it holds, closes
+    /// the session. Open HTTP connections get [`HTTP_DRAIN`] to finish.
     pub async fn stop(mut self) -> Result<()> {
-        self.http.abort();
+        self.shared.stopping.send_replace(true);
+        if tokio::time::timeout(HTTP_DRAIN, &mut self.http)
+            .await
+            .is_err()
+        {
+            tracing::warn!("HTTP connections still open after {HTTP_DRAIN:?}: closed");
+            self.http.abort();
+        }
+        // The worker stops on this message, not when every sender is gone: requests still
+        // in flight on the HTTP side hold senders.
+        let _ = self.work.send(Work::Stop);
         drop(self.work);
         let worker = self.worker.take();
         self.session
@@ -94,8 +108,15 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
     let app = crate::api::router(shared.clone(), work_tx.clone(), store);
+    let mut stopping = shared.stopping.subscribe();
     let http = tokio::spawn(async move {
-        if let Err(e) = axum::serve(listener, app).await {
+        let stopped = async move {
+            let _ = stopping.wait_for(|s| *s).await;
+        };
+        if let Err(e) = axum::serve(listener, app)
+            .with_graceful_shutdown(stopped)
+            .await
+        {
             tracing::error!("HTTP server: {e}");
         }
     });

@@ -175,6 +175,8 @@ pub struct Shared {
     pub started_ns: u64,
     /// False once the store failed: `/healthz` reports it, so a supervisor restarts us.
     pub healthy: std::sync::atomic::AtomicBool,
+    /// Set when the mapper stops: open event streams end, so HTTP can shut down gracefully.
+    pub stopping: tokio::sync::watch::Sender<bool>,
 }
 
 impl Shared {
@@ -188,6 +190,7 @@ impl Shared {
             token,
             started_ns,
             healthy: std::sync::atomic::AtomicBool::new(true),
+            stopping: tokio::sync::watch::Sender::new(false),
         }
     }
 

@@ -35,6 +35,8 @@ pub enum Work {
         /// Its bytes.
         payload: Vec<u8>,
     },
+    /// Finish this turn, then stop (the HTTP side may still hold senders).
+    Stop,
     /// Re-optimize a fleet now.
     Optimize {
         /// The fleet.
@@ -90,6 +92,8 @@ struct Batch {
     /// Robots to re-ack (a duplicate or a gap): their highest node taken.
     reacks: Vec<(String, String)>,
     requests: Vec<(String, OptimizeReply)>,
+    /// A stop was asked for: this is the last turn.
+    stop: bool,
 }
 
 /// The worker's state: the maps, and what of them is stored.
@@ -143,6 +147,9 @@ impl Worker {
                 self.due_solves();
             }
             self.operator_requests(batch.requests);
+            if batch.stop {
+                break;
+            }
         }
     }
 
@@ -162,6 +169,7 @@ impl Worker {
                     }
                 }
                 Work::Optimize { fleet, reply } => batch.requests.push((fleet, reply)),
+                Work::Stop => batch.stop = true,
             }
         }
         batch

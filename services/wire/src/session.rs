@@ -93,3 +93,29 @@ impl SessionConfig {
             .map_err(|e| anyhow::anyhow!("zenoh session ({} mode): {e}", self.mode))
     }
 }
+
+/// Resolves when the process is asked to stop: Ctrl-C (SIGINT) or SIGTERM (`systemctl stop`,
+/// `docker stop`, `kill`), so that the services stop the same way under a supervisor as in a
+/// terminal.
+pub async fn shutdown_signal() {
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut term) => {
+                term.recv().await;
+            }
+            Err(e) => {
+                tracing_free_warning(&e);
+                std::future::pending::<()>().await;
+            }
+        }
+    };
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        _ = terminate => {}
+    }
+}
+
+/// wire has no logger: a SIGTERM handler that cannot be installed is said on stderr.
+fn tracing_free_warning(e: &std::io::Error) {
+    eprintln!("levelmap: SIGTERM cannot be handled ({e}); only Ctrl-C stops gracefully");
+}
