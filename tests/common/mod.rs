@@ -113,10 +113,12 @@ pub struct MapperProcess {
 
 impl MapperProcess {
     pub fn start(dir: &Path) -> MapperProcess {
-        let (http, zenoh) = (
-            format!("127.0.0.1:{}", free_port()),
-            format!("tcp/127.0.0.1:{}", free_port()),
-        );
+        Self::start_on(dir, format!("tcp/127.0.0.1:{}", free_port()))
+    }
+
+    /// A mapper listening for robots on `zenoh` (an endpoint the robots may already dial).
+    pub fn start_on(dir: &Path, zenoh: String) -> MapperProcess {
+        let http = format!("127.0.0.1:{}", free_port());
         let config = dir.join("mapper.toml");
         std::fs::write(
             &config,

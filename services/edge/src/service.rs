@@ -131,6 +131,19 @@ impl Sending {
         Ok(())
     }
 
+    /// Sends what the outbox holds beyond what was sent (nodes made before the link was up).
+    async fn send_backlog(&mut self, link: &Link) -> Result<()> {
+        self.next_to_send = send_pending(
+            &self.outbox,
+            &link.nodes,
+            self.next_to_send,
+            &mut self.header_seq,
+            &mut self.report,
+        )
+        .await?;
+        Ok(())
+    }
+
     /// Live odometry, best effort.
     async fn on_odometry(&mut self, link: &Link, mut odometry: Box<v1::Odometry>) {
         self.header_seq += 1;
@@ -199,6 +212,49 @@ impl Sending {
     }
 }
 
+/// How long one attempt to reach the mapper may take, and the wait before the next.
+const LINK_RETRY: Duration = Duration::from_secs(1);
+
+/// Opens the link, again every [`LINK_RETRY`] while the mapper is out of reach; the robot
+/// keeps making nodes meanwhile (they wait in the outbox). `None` when asked to stop first, or
+/// when the source ended and the config does not linger for acks.
+async fn connect(
+    config: &EdgeConfig,
+    sending: &mut Sending,
+    rx: &mut mpsc::Receiver<Produced>,
+    source_done: &mut bool,
+    mut shutdown: std::pin::Pin<&mut impl Future<Output = ()>>,
+) -> Option<Link> {
+    let robot = config.robot.as_str();
+    loop {
+        match tokio::time::timeout(5 * LINK_RETRY, Link::open(config)).await {
+            Ok(Ok(link)) => return Some(link),
+            Ok(Err(e)) => tracing::warn!(robot, "mapper not reachable ({e:#}); retrying"),
+            Err(_) => tracing::warn!(robot, "mapper not reachable (timed out); retrying"),
+        }
+        let retry = tokio::time::sleep(LINK_RETRY);
+        tokio::pin!(retry);
+        loop {
+            tokio::select! {
+                _ = shutdown.as_mut() => return None,
+                _ = &mut retry => break,
+                produced = rx.recv(), if !*source_done => match produced {
+                    Some(Produced::Node) => sending.report.nodes += 1,
+                    // Live odometry is best effort: nobody to send it to.
+                    Some(Produced::Odometry(_)) => {}
+                    Some(Produced::ScanError) => sending.report.scan_errors += 1,
+                    Some(Produced::End) | None => {
+                        *source_done = true;
+                        if !config.linger_for_acks {
+                            return None;
+                        }
+                    }
+                },
+            }
+        }
+    }
+}
+
 /// Runs the edge service until the source ends and every node is acked, or `shutdown`
 /// completes. With `linger_for_acks` false it stops as soon as the source ends.
 pub async fn run(
@@ -212,7 +268,6 @@ pub async fn run(
         Arc::new(Outbox::open(&config.outbox_path).with_context(|| {
             format!("{}: cannot open the outbox", config.outbox_path.display())
         })?);
-    let link = Link::open(&config).await?;
     let (tx, mut rx) = mpsc::channel::<Produced>(256);
     let producer = {
         let outbox = outbox.clone();
@@ -232,8 +287,26 @@ pub async fn run(
     };
     let robot = config.robot.as_str();
     let mut source_done = false;
-    let mut tick = tokio::time::interval(Duration::from_millis(100));
     tokio::pin!(shutdown);
+    let connected = connect(
+        &config,
+        &mut sending,
+        &mut rx,
+        &mut source_done,
+        shutdown.as_mut(),
+    )
+    .await;
+    let Some(link) = connected else {
+        // Asked to stop (or the source ended) before the mapper was reachable: every node
+        // made is in the outbox for the next run.
+        drop(rx);
+        producer.abort();
+        let mut report = sending.report;
+        report.outbox_pending = sending.outbox.len()?;
+        return Ok(report);
+    };
+    sending.send_backlog(&link).await?;
+    let mut tick = tokio::time::interval(Duration::from_millis(100));
     loop {
         tokio::select! {
             _ = &mut shutdown => break,
