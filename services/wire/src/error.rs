@@ -119,6 +119,29 @@ impl std::error::Error for WireError {
 }
 
 /// Checks that `value` is finite.
+/// The largest coordinate a position or range may have on the wire (m): 10,000 km, more than
+/// any site's extent from its robots' odometry origins. Finite but absurd values (1e200 m)
+/// would pass `finite` and break every later solve of the fleet's network.
+pub const MAX_COORDINATE_M: f64 = 1e7;
+
+/// `value` if finite and within ±[`MAX_COORDINATE_M`]; `field` names it in the error.
+pub(crate) fn coordinate(
+    field: &'static str,
+    index: Option<usize>,
+    value: f64,
+) -> Result<f64, WireError> {
+    let value = finite(field, index, value)?;
+    if value.abs() > MAX_COORDINATE_M {
+        return Err(WireError::InvalidValue {
+            field,
+            index,
+            value,
+            problem: "beyond 10,000 km",
+        });
+    }
+    Ok(value)
+}
+
 pub(crate) fn finite(
     field: &'static str,
     index: Option<usize>,

@@ -346,4 +346,47 @@ mod tests {
             "{err}"
         );
     }
+
+    #[test]
+    fn finite_but_absurd_positions_are_rejected() {
+        // 1e200 m is finite: it used to pass and break every later solve of the fleet.
+        let far = rejection(|n| n.odometry.as_mut().unwrap().pose.as_mut().unwrap().x_m = 1e200);
+        assert!(
+            matches!(far, WireError::InvalidValue { field: "Pose3D.x_m", problem, .. } if problem.contains("10,000 km")),
+            "{far:?}"
+        );
+        let origin = rejection(|n| {
+            n.scan_origin_in_robot = Some(v1::Pose2D {
+                x_m: -2e7,
+                y_m: 0.0,
+                yaw_rad: 0.0,
+            })
+        });
+        assert!(
+            matches!(
+                origin,
+                WireError::InvalidValue {
+                    field: "Pose2D.x_m",
+                    ..
+                }
+            ),
+            "{origin:?}"
+        );
+        let range = rejection(|n| n.scan.as_mut().unwrap().range_m[0] = 3e7);
+        assert!(
+            matches!(
+                range,
+                WireError::InvalidValue {
+                    field: "LeveledScan.range_m",
+                    index: Some(0),
+                    ..
+                }
+            ),
+            "{range:?}"
+        );
+        // At the bound, a position is still taken.
+        let mut edge = node();
+        edge.odometry.as_mut().unwrap().pose.as_mut().unwrap().x_m = MAX_COORDINATE_M;
+        validate_node(&edge).unwrap();
+    }
 }

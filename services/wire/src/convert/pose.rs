@@ -1,6 +1,6 @@
 //! Poses, vectors and covariances.
 
-use crate::error::finite;
+use crate::error::{coordinate, finite};
 use crate::{WireError, v1};
 use leveling::nalgebra::{Isometry2, Isometry3, Quaternion, Translation3, UnitQuaternion};
 use slam::Pose2;
@@ -23,9 +23,9 @@ pub fn pose3d_to_wire(pose: &Isometry3<f64>) -> v1::Pose3D {
 /// A 3D pose from the wire: every component finite, the quaternion non-zero (normalized
 /// here; an unset orientation is all zeros and therefore rejected).
 pub fn pose3d_from_wire(pose: &v1::Pose3D) -> Result<Isometry3<f64>, WireError> {
-    let x = finite("Pose3D.x_m", None, pose.x_m)?;
-    let y = finite("Pose3D.y_m", None, pose.y_m)?;
-    let z = finite("Pose3D.z_m", None, pose.z_m)?;
+    let x = coordinate("Pose3D.x_m", None, pose.x_m)?;
+    let y = coordinate("Pose3D.y_m", None, pose.y_m)?;
+    let z = coordinate("Pose3D.z_m", None, pose.z_m)?;
     let q = Quaternion::new(
         finite("Pose3D.qw", None, pose.qw)?,
         finite("Pose3D.qx", None, pose.qx)?,
@@ -60,8 +60,8 @@ pub fn pose2_to_wire(pose: &Pose2) -> v1::Pose2D {
 /// A planar pose from the wire, every component finite: the one way a `Pose2D` is read.
 pub fn pose2_from_wire(pose: &v1::Pose2D) -> Result<Pose2, WireError> {
     Ok(Pose2::new(
-        finite("Pose2D.x_m", None, pose.x_m)?,
-        finite("Pose2D.y_m", None, pose.y_m)?,
+        coordinate("Pose2D.x_m", None, pose.x_m)?,
+        coordinate("Pose2D.y_m", None, pose.y_m)?,
         finite("Pose2D.yaw_rad", None, pose.yaw_rad)?,
     ))
 }
@@ -81,7 +81,7 @@ pub fn pose2d_from_wire(pose: &v1::Pose2D) -> Result<Isometry2<f64>, WireError> 
 pub(crate) fn check_vec3(v: Option<&v1::Vec3>, field: &'static str) -> Result<(), WireError> {
     if let Some(v) = v {
         for (i, c) in [v.x, v.y, v.z].into_iter().enumerate() {
-            finite(field, Some(i), c)?;
+            coordinate(field, Some(i), c)?;
         }
     }
     Ok(())
