@@ -55,8 +55,10 @@ export async function loadGraph() {
   state.nodes = nodes;
   index.nodes = byId;
   graphNodes = gn.x.length;
-  // The poses moved: the uncertainty is the new network's.
-  state.covariances = new Map();
+  // The poses moved: the uncertainty is asked for again for the new network. The old ellipses
+  // stay drawn until their answers come, so a live map (a new graph every second or so) still
+  // gets ellipses when the answers take longer than the graph's next load.
+  state.covariancesAsked = new Set();
   refreshCovariances();
   const ge = g.edges;
   state.edges = ge.from.map((from, i) => ({ from, to: ge.to[i], kind: g.kinds[ge.kind[i]] }));
@@ -109,13 +111,13 @@ async function loadCovariances() {
   if (onScreen.length > MAX_ELLIPSE_NODES) {
     state.ellipses = `ellipses: zoom in (${onScreen.length} nodes on screen)`;
   } else {
-    const missing = onScreen.filter((n) => !state.covariances.has(n.id)).map((n) => n.id);
+    const missing = onScreen.filter((n) => !state.covariancesAsked.has(n.id)).map((n) => n.id);
     if (missing.length) {
       const loads = state.graphLoads;
       const c = await getJson(`/fleets/${state.fleet}/covariances?nodes=${missing.join(",")}`);
-      // A graph that came meanwhile makes these stale.
-      if (loads !== state.graphLoads) return;
       c.nodes.forEach((id, i) => state.covariances.set(id, c.covariance[i]));
+      // Of this graph: done; a graph that came meanwhile asks for them again.
+      if (loads === state.graphLoads) missing.forEach((id) => state.covariancesAsked.add(id));
       index.layerData += 1;
     }
     state.ellipses = `95% ellipses (${onScreen.length} nodes)`;

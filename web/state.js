@@ -22,6 +22,7 @@ export const state = {
   showGrid: true,
   inspector: null, // {id, points, counts}
   covariances: new Map(), // node id -> 3 × 3 marginal covariance of (x, y, θ), for the ellipses
+  covariancesAsked: new Set(), // node ids whose covariance is of the current graph
   ellipses: "", // what the legend says about them
   events: 0,
   autoFit: true,
