@@ -48,7 +48,6 @@ impl OpenApiDoc {
                         if t.starts_with('{') && t.ends_with('}') {
                             !p.is_empty()
                         } else {
-                            // A parameter inside a segment: `{robot}.tum`-style suffixes.
                             t == p
                         }
                     })

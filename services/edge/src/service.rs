@@ -120,28 +120,25 @@ impl Sending {
         self.report.nodes += 1;
         // The ack timer runs from the newest send, not from the last ack.
         self.last_progress = Instant::now();
-        self.next_to_send = send_pending(
-            &self.outbox,
-            &link.nodes,
-            self.next_to_send,
-            &mut self.header_seq,
-            &mut self.report,
-        )
-        .await?;
-        Ok(())
+        self.send_backlog(link).await
     }
 
     /// Sends what the outbox holds beyond what was sent (nodes made before the link was up).
     async fn send_backlog(&mut self, link: &Link) -> Result<()> {
-        self.next_to_send = send_pending(
+        self.next_to_send = self.send_from(link, self.next_to_send).await?;
+        Ok(())
+    }
+
+    /// Sends the outbox's nodes from `from` on (at most a window); the next node_seq to send.
+    async fn send_from(&mut self, link: &Link, from: u64) -> Result<u64> {
+        send_pending(
             &self.outbox,
             &link.nodes,
-            self.next_to_send,
+            from,
             &mut self.header_seq,
             &mut self.report,
         )
-        .await?;
-        Ok(())
+        .await
     }
 
     /// Live odometry, best effort.
@@ -196,14 +193,7 @@ impl Sending {
         if pending > 0 && self.last_progress.elapsed() >= self.resend_after {
             let from = self.outbox.acked_below()?;
             let before = self.report.node_sends;
-            let next = send_pending(
-                &self.outbox,
-                &link.nodes,
-                from,
-                &mut self.header_seq,
-                &mut self.report,
-            )
-            .await?;
+            let next = self.send_from(link, from).await?;
             self.next_to_send = next.max(self.next_to_send);
             self.report.node_resends += self.report.node_sends - before;
             self.last_progress = Instant::now();

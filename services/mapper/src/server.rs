@@ -191,8 +191,7 @@ fn restore(
         let mut map = config.new_fleet(&stored.id);
         let mut solves = stored.solves.iter().peekable();
         for (arrival, bytes) in stored.nodes.iter().enumerate() {
-            let node = wire::decode_node(bytes)
-                .and_then(|n| wire::node_input(&n))
+            let (node, _) = wire::decode_node_input(bytes)
                 .with_context(|| format!("store: a node of fleet {} is unreadable", stored.id))?;
             map.ingest(&node)
                 .with_context(|| format!("store: replaying fleet {}", stored.id))?;

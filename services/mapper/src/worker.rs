@@ -46,20 +46,31 @@ pub enum Work {
     },
 }
 
-impl Work {
-    /// The answer when the worker is gone.
-    pub const STOPPED: &str = "the mapping worker stopped";
+/// Why an optimize request got no report.
+#[derive(Debug, thiserror::Error)]
+pub enum OptimizeError {
+    /// The worker is gone: the mapper is stopping.
+    #[error("the mapping worker stopped")]
+    Stopped,
+    /// The worker refused: no such fleet, a network not anchored yet, a failed store or solve.
+    #[error("{0}")]
+    Refused(String),
+}
 
+impl Work {
     /// Asks the worker behind `work` to re-optimize `fleet` now and waits for its report.
     pub async fn optimize(
         work: &mpsc::Sender<Work>,
         fleet: &str,
-    ) -> Result<serde_json::Value, String> {
+    ) -> Result<serde_json::Value, OptimizeError> {
         let (reply, answer) = tokio::sync::oneshot::channel();
         let fleet = fleet.to_owned();
         work.send(Work::Optimize { fleet, reply })
-            .map_err(|_| Work::STOPPED.to_owned())?;
-        answer.await.map_err(|_| Work::STOPPED.to_owned())?
+            .map_err(|_| OptimizeError::Stopped)?;
+        answer
+            .await
+            .map_err(|_| OptimizeError::Stopped)?
+            .map_err(OptimizeError::Refused)
     }
 }
 
@@ -187,8 +198,7 @@ impl Worker {
             self.reject("unknown_fleet", key, &why);
             return None;
         }
-        let decoded = wire::decode_node(&payload).and_then(|n| Ok((wire::node_input(&n)?, n)));
-        let (input, mut node) = match decoded {
+        let (input, mut node) = match wire::decode_node_input(&payload) {
             Ok(d) => d,
             Err(e) => {
                 self.reject(e.reason(), key, &e);
@@ -268,9 +278,7 @@ impl Worker {
 
     /// Commits the batch's nodes, clouds and new edges in one transaction.
     fn commit(&mut self, accepted: &[Accepted]) -> Result<(), StoreError> {
-        let mut touched: Vec<&str> = accepted.iter().map(|a| a.fleet.as_str()).collect();
-        touched.sort_unstable();
-        touched.dedup();
+        let touched = fleets_of(accepted);
         if touched.is_empty() {
             return Ok(());
         }
@@ -345,10 +353,7 @@ impl Worker {
     /// New views of the fleets that got nodes, and a `node` event per node.
     fn publish(&self, accepted: &[Accepted], started: Instant) {
         let ms = started.elapsed().as_secs_f64() * 1e3;
-        let mut touched: Vec<&str> = accepted.iter().map(|a| a.fleet.as_str()).collect();
-        touched.sort_unstable();
-        touched.dedup();
-        for fleet in touched {
+        for fleet in fleets_of(accepted) {
             self.shared
                 .publish_view(FleetView::of(&self.fleets[fleet], ms, now_ns()));
         }
@@ -436,6 +441,14 @@ impl Worker {
         self.shared.metrics.reject("node", reason);
         tracing::warn!(key, reason, "node rejected: {detail}");
     }
+}
+
+/// The fleets that got nodes, each once.
+fn fleets_of(accepted: &[Accepted]) -> Vec<&str> {
+    let mut fleets: Vec<&str> = accepted.iter().map(|a| a.fleet.as_str()).collect();
+    fleets.sort_unstable();
+    fleets.dedup();
+    fleets
 }
 
 /// What arrived: waits up to `wake` for the first message (a solve may be due even when

@@ -104,7 +104,10 @@ pub async fn shutdown_signal() {
                 term.recv().await;
             }
             Err(e) => {
-                tracing_free_warning(&e);
+                // wire has no logger; this happens at start, where stderr is read.
+                eprintln!(
+                    "levelmap: SIGTERM cannot be handled ({e}); only Ctrl-C stops gracefully"
+                );
                 std::future::pending::<()>().await;
             }
         }
@@ -113,9 +116,4 @@ pub async fn shutdown_signal() {
         _ = tokio::signal::ctrl_c() => {}
         _ = terminate => {}
     }
-}
-
-/// wire has no logger: a SIGTERM handler that cannot be installed is said on stderr.
-fn tracing_free_warning(e: &std::io::Error) {
-    eprintln!("levelmap: SIGTERM cannot be handled ({e}); only Ctrl-C stops gracefully");
 }

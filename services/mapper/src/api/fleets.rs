@@ -4,7 +4,7 @@
 use super::service::authorized;
 use super::{Api, ApiError, Reply};
 use crate::state::{FleetView, RobotView};
-use crate::worker::Work;
+use crate::worker::{OptimizeError, Work};
 use axum::Json;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, header};
@@ -214,7 +214,7 @@ pub(super) async fn optimize(
     authorized(&api, &headers)?;
     match Work::optimize(&api.work, &fleet).await {
         Ok(report) => Ok(Json(report).into_response()),
-        Err(e) if e == Work::STOPPED => Err(ApiError::Unavailable("mapper stopping".into())),
-        Err(e) => Err(ApiError::NotFound(e)),
+        Err(OptimizeError::Stopped) => Err(ApiError::Unavailable("mapper stopping".into())),
+        Err(OptimizeError::Refused(why)) => Err(ApiError::NotFound(why)),
     }
 }

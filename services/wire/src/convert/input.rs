@@ -81,6 +81,13 @@ pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
     })
 }
 
+/// Decodes a node and parses it into its [`NodeInput`] (checked once); the message is
+/// returned too, for what is stored of it.
+pub fn decode_node_input(bytes: &[u8]) -> Result<(NodeInput, v1::Node), WireError> {
+    let node: v1::Node = super::decode("Node", bytes)?;
+    Ok((node_input(&node)?, node))
+}
+
 /// A robot's live odometry, checked.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OdometryInput {
