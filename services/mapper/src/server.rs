@@ -31,7 +31,7 @@ pub struct Running {
     session: zenoh::Session,
     http: tokio::task::JoinHandle<()>,
     worker: Option<std::thread::JoinHandle<()>>,
-    work: mpsc::Sender<Work>,
+    work: mpsc::SyncSender<Work>,
 }
 
 impl Running {
@@ -84,7 +84,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     let fleets = restore(&config, &store, &shared)?;
 
     let session = config.zenoh.open().await?;
-    let (work_tx, work_rx) = mpsc::channel::<Work>();
+    let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
     let subscriptions = subscribe(&session, &config, &shared, work_tx.clone()).await?;
     let worker = {
         let worker = Worker::new(
@@ -143,16 +143,22 @@ async fn subscribe(
     session: &zenoh::Session,
     config: &MapperConfig,
     shared: &Arc<Shared>,
-    work: mpsc::Sender<Work>,
+    work: mpsc::SyncSender<Work>,
 ) -> Result<Subscriptions> {
     let node_keys = format!("{}/*/robots/*/{}", wire::KEY_ROOT, Topic::Node);
+    let shed = shared.clone();
     let nodes = session
         .declare_subscriber(node_keys)
         .callback(move |sample| {
-            let _ = work.send(Work::Node {
+            let node = Work::Node {
                 key: sample.key_expr().as_str().to_owned(),
                 payload: sample.payload().to_bytes().into_owned(),
-            });
+            };
+            // Behind by a full queue: the node stays in its robot's outbox and comes again
+            // (the next node's gap asks for it), instead of the mapper's memory growing.
+            if let Err(mpsc::TrySendError::Full(_)) = work.try_send(node) {
+                shed.metrics.reject("node", "queue_full");
+            }
         })
         .await
         .map_err(anyhow::Error::from_boxed)?;

@@ -23,6 +23,11 @@ use wire::session::now_ns;
 /// Most messages taken into one batch (one solve, one store commit).
 const MAX_BATCH: usize = 512;
 
+/// Most messages waiting for the worker: nodes beyond it are shed (not acked, so their robots
+/// send them again), which bounds the mapper's memory when it falls behind (1,024 nodes with
+/// clouds are about 60 MB).
+pub const INGEST_QUEUE: usize = 1024;
+
 /// The answer to an operator's optimize request: the report as JSON, or why not.
 pub type OptimizeReply = tokio::sync::oneshot::Sender<Result<serde_json::Value, String>>;
 
@@ -52,6 +57,9 @@ pub enum OptimizeError {
     /// The worker is gone: the mapper is stopping.
     #[error("the mapping worker stopped")]
     Stopped,
+    /// The worker's queue is full: try again.
+    #[error("the mapping worker is busy")]
+    Busy,
     /// The worker refused: no such fleet, a network not anchored yet, a failed store or solve.
     #[error("{0}")]
     Refused(String),
@@ -60,13 +68,16 @@ pub enum OptimizeError {
 impl Work {
     /// Asks the worker behind `work` to re-optimize `fleet` now and waits for its report.
     pub async fn optimize(
-        work: &mpsc::Sender<Work>,
+        work: &mpsc::SyncSender<Work>,
         fleet: &str,
     ) -> Result<serde_json::Value, OptimizeError> {
         let (reply, answer) = tokio::sync::oneshot::channel();
         let fleet = fleet.to_owned();
-        work.send(Work::Optimize { fleet, reply })
-            .map_err(|_| OptimizeError::Stopped)?;
+        work.try_send(Work::Optimize { fleet, reply })
+            .map_err(|e| match e {
+                mpsc::TrySendError::Full(_) => OptimizeError::Busy,
+                mpsc::TrySendError::Disconnected(_) => OptimizeError::Stopped,
+            })?;
         answer
             .await
             .map_err(|_| OptimizeError::Stopped)?
@@ -87,6 +98,7 @@ struct Checked {
 struct Accepted {
     fleet: String,
     robot: String,
+    chain_id: u64,
     node_seq: u64,
     /// Its index in the fleet's map.
     node: usize,
@@ -96,12 +108,20 @@ struct Accepted {
     cloud: Option<Vec<u8>>,
 }
 
+/// A robot's chain to re-ack (a duplicate or a gap): its highest node taken, and where to
+/// re-send from after a gap.
+struct Reack {
+    fleet: String,
+    robot: String,
+    chain_id: u64,
+    resend_from: Option<u64>,
+}
+
 /// What one batch brought.
 #[derive(Default)]
 struct Batch {
     accepted: Vec<Accepted>,
-    /// Robots to re-ack (a duplicate or a gap): their highest node taken.
-    reacks: Vec<(String, String)>,
+    reacks: Vec<Reack>,
     requests: Vec<(String, OptimizeReply)>,
     /// A stop was asked for: this is the last turn.
     stop: bool,
@@ -221,12 +241,7 @@ impl Worker {
 
     /// Maps a checked node if it is the next of its robot; a duplicate or a node after a gap
     /// is not mapped, and its robot is re-acked (the ack says where to re-send from).
-    fn map(
-        &mut self,
-        key: &str,
-        checked: Checked,
-        reacks: &mut Vec<(String, String)>,
-    ) -> Option<Accepted> {
+    fn map(&mut self, key: &str, checked: Checked, reacks: &mut Vec<Reack>) -> Option<Accepted> {
         let Checked {
             input,
             payload,
@@ -238,35 +253,53 @@ impl Worker {
             .fleets
             .entry(fleet.clone())
             .or_insert_with(|| config.new_fleet(&fleet));
-        match map.sequence(&robot, input.node_seq) {
+        let reack = |resend_from| Reack {
+            fleet: fleet.clone(),
+            robot: robot.clone(),
+            chain_id: input.chain_id,
+            resend_from,
+        };
+        match map.sequence(&input) {
             Sequence::Next => {}
             Sequence::Duplicate => {
                 // Taken already: its ack was lost, so ack again once this batch is durable.
                 Metrics::bump(&self.shared.metrics.nodes_duplicate);
-                reacks.push((fleet, robot));
+                reacks.push(reack(None));
                 return None;
             }
             Sequence::Gap { expected } => {
                 let why = format!("node {} before {expected}", input.node_seq);
                 self.reject("out_of_order", key, &why);
-                reacks.push((fleet, robot));
+                reacks.push(reack(Some(expected)));
                 return None;
             }
         }
         let arrival = map.nodes().len() as u64;
         match map.ingest(&input) {
-            Ok(ingested) => Some(Accepted {
-                fleet,
-                robot,
-                node_seq: input.node_seq,
-                node: ingested.node,
-                arrival,
-                payload,
-                cloud,
-            }),
+            Ok(ingested) => {
+                if let Some(e) = &ingested.odometry_break {
+                    // Taken, but its odometry link is not: counted under the reason.
+                    tracing::warn!(key, "odometry break, a new odometry chain starts: {e}");
+                    self.shared.metrics.reject("odometry_step", e.reason());
+                }
+                Some(Accepted {
+                    fleet,
+                    robot,
+                    chain_id: input.chain_id,
+                    node_seq: input.node_seq,
+                    node: ingested.node,
+                    arrival,
+                    payload,
+                    cloud,
+                })
+            }
             Err(IngestError::Graph(e)) => {
                 tracing::error!(key, "node not mapped: {e}");
                 self.shared.metrics.reject("node", "graph");
+                None
+            }
+            Err(IngestError::Refused { source, .. }) => {
+                self.reject(source.reason(), key, &source);
                 None
             }
             Err(e) => {
@@ -331,22 +364,31 @@ impl Worker {
         e
     }
 
-    /// Acks each robot's highest node taken, once per robot.
+    /// Acks each robot chain's highest node taken, once per chain, with where to re-send
+    /// from when the batch showed a gap.
     fn ack(&self, batch: &Batch) {
-        let mut acks: HashMap<(&str, &str), u64> = HashMap::new();
-        for (fleet, robot) in &batch.reacks {
-            let map = &self.fleets[fleet];
-            if let Some(r) = map.robot_index(robot) {
-                acks.insert((fleet, robot), map.robots()[r].last_node_seq);
-            }
+        type Chain<'a> = (&'a str, &'a str, u64);
+        let mut resend: HashMap<Chain, Option<u64>> = HashMap::new();
+        for r in &batch.reacks {
+            let entry = resend.entry((&r.fleet, &r.robot, r.chain_id)).or_default();
+            *entry = (*entry).or(r.resend_from);
         }
         for a in &batch.accepted {
             Metrics::bump(&self.shared.metrics.nodes_accepted);
-            let seq = acks.entry((&a.fleet, &a.robot)).or_default();
-            *seq = (*seq).max(a.node_seq);
+            resend.entry((&a.fleet, &a.robot, a.chain_id)).or_default();
         }
-        for ((fleet, robot), seq) in acks {
-            self.bus.ack(&self.shared.metrics, fleet, robot, seq);
+        for ((fleet, robot, chain_id), resend_from) in resend {
+            let acked = self.fleets[fleet].chain_acked(robot, chain_id);
+            // A gap the batch filled after all needs no re-send.
+            let resend_from = resend_from.filter(|&r| acked.is_none_or(|a| r > a));
+            let ack = crate::bus::AckOf {
+                fleet,
+                robot,
+                chain_id,
+                acked,
+                resend_from,
+            };
+            self.bus.ack(&self.shared.metrics, &ack);
         }
     }
 

@@ -20,6 +20,10 @@ pub fn load_toml<T: DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
     toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }
 
+/// The largest Zenoh message a levelmap session takes: twice the largest valid node
+/// ([`crate::MAX_NODE_BYTES`]), so every valid node fits with room for its framing.
+pub const MAX_MESSAGE_BYTES: usize = 2 * crate::MAX_NODE_BYTES;
+
 /// Where a service's Zenoh session listens and connects. Mirrors Zenoh's own config keys
 /// (`mode`, `listen/endpoints`, `connect/endpoints`, `scouting/multicast/enabled`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -76,6 +80,11 @@ impl SessionConfig {
             (
                 "scouting/multicast/enabled",
                 serde_json::to_string(&self.multicast_scouting)?,
+            ),
+            // Zenoh's default is 1 GiB: a peer could make us buffer that much per message.
+            (
+                "transport/link/rx/max_message_size",
+                serde_json::to_string(&MAX_MESSAGE_BYTES)?,
             ),
         ];
         for (key, value) in values {

@@ -204,7 +204,7 @@ pub(super) async fn trajectory_tum(
         (status = 401, description = "No valid bearer token", body = String),
         (status = 403, description = "Write routes are off", body = String),
         (status = 404, description = "No such fleet, or not solvable yet", body = String),
-        (status = 503, description = "The mapper is stopping", body = String),
+        (status = 503, description = "The mapper is stopping or busy", body = String),
     ))]
 pub(super) async fn optimize(
     State(api): State<Api>,
@@ -215,6 +215,7 @@ pub(super) async fn optimize(
     match Work::optimize(&api.work, &fleet).await {
         Ok(report) => Ok(Json(report).into_response()),
         Err(OptimizeError::Stopped) => Err(ApiError::Unavailable("mapper stopping".into())),
+        Err(OptimizeError::Busy) => Err(ApiError::Unavailable("mapper busy, retry".into())),
         Err(OptimizeError::Refused(why)) => Err(ApiError::NotFound(why)),
     }
 }

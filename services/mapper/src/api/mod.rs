@@ -29,7 +29,7 @@ pub use web::WEB_DIR_ENV;
 #[derive(Clone)]
 struct Api {
     shared: Arc<Shared>,
-    work: mpsc::Sender<Work>,
+    work: mpsc::SyncSender<Work>,
     /// Covariance queries: one optimizer per fleet, its factorization kept.
     marginals: Arc<Marginals>,
     /// Read for the nodes' clouds, which no view holds.
@@ -170,7 +170,7 @@ pub fn openapi_json() -> String {
 }
 
 /// The HTTP API over the mapper's views, its worker and its store.
-pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>, store: Arc<Store>) -> Router {
+pub fn router(shared: Arc<Shared>, work: mpsc::SyncSender<Work>, store: Arc<Store>) -> Router {
     let (router, doc) = routes().split_for_parts();
     let openapi = Arc::new(OnceLock::new());
     let _ = openapi.set(doc.to_pretty_json().expect("the document serializes"));
