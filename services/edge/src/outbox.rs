@@ -161,14 +161,15 @@ impl Outbox {
     }
 }
 
-/// A chain id no other outbox has drawn: std's `RandomState` is seeded from the OS's random
-/// source, mixed with the time and process. Never 0 (the legacy chain).
+/// A chain id no other outbox of the robot has drawn: std's `RandomState` is seeded from the
+/// OS's random source, mixed with the time and process. 53 bits, so that JSON readers (the
+/// dashboard's JavaScript) keep it exact; never 0 (the legacy chain).
 fn new_chain_id() -> u64 {
     use std::hash::{BuildHasher, Hasher};
     let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
     hasher.write_u64(wire::session::now_ns());
     hasher.write_u32(std::process::id());
-    hasher.finish().max(1)
+    (hasher.finish() >> 11).max(1)
 }
 
 #[cfg(test)]

@@ -79,7 +79,7 @@ pub const MAX_ROBOTS_PER_FLEET: usize = 1024;
 pub const MAX_CHAINS_PER_ROBOT: usize = 256;
 
 /// One chain of a robot's nodes: what one outbox sent.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct ChainRecord {
     /// `Node.chain_id` (0: a robot from before chains).
     pub chain_id: u64,

@@ -17,8 +17,10 @@ pub struct RobotView {
     pub id: String,
     /// Its nodes in the map.
     pub nodes: usize,
-    /// Highest node_seq taken.
+    /// Highest node_seq taken of its newest chain.
     pub last_node_seq: u64,
+    /// Its chains (one per outbox it sent from), oldest first.
+    pub chains: Vec<crate::fleet::ChainRecord>,
     /// The robot frame's map pose at its last node, and its odometry pose there: live odometry
     /// since then, composed onto the first, gives the live map pose.
     pub map_pose_at_last_node: Pose2,
@@ -75,6 +77,7 @@ impl FleetView {
                     id: r.id.clone(),
                     nodes: r.nodes.len(),
                     last_node_seq: r.last_node_seq,
+                    chains: r.chains.clone(),
                     map_pose_at_last_node: poses[last].compose(&record.scan_origin.inverse()),
                     odometry_at_last_node: record.robot_odometry,
                 }

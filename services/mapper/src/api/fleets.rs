@@ -94,7 +94,11 @@ pub(super) struct RobotState {
     /// When that odometry arrived (0: none yet).
     last_seen_ns: u64,
     nodes: usize,
+    /// Highest node_seq taken of its newest chain.
     last_node_seq: u64,
+    /// Its chains of nodes, one per outbox it sent from (a robot whose outbox was lost starts
+    /// a new one), oldest first.
+    chains: Vec<crate::fleet::ChainRecord>,
 }
 
 /// The robot's pose on the map now: live odometry since its last node, or the node itself.
@@ -117,6 +121,7 @@ fn robot_state(api: &Api, v: &FleetView, robot: &RobotView) -> RobotState {
         last_seen_ns,
         nodes: robot.nodes,
         last_node_seq: robot.last_node_seq,
+        chains: robot.chains.clone(),
     }
 }
 
