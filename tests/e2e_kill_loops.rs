@@ -20,7 +20,7 @@ impl Pauses {
         let seed = std::env::var("LEVELMAP_DRILL_SEED")
             .ok()
             .and_then(|s| s.parse().ok())
-            .unwrap_or_else(|| wire::session::now_ns());
+            .unwrap_or_else(wire::session::now_ns);
         eprintln!("kill-loop seed: LEVELMAP_DRILL_SEED={seed}");
         Pauses(seed)
     }
@@ -40,6 +40,11 @@ fn assert_all_once(http: &str, robot: &str, report: &serde_json::Value) {
     assert_eq!(report["outbox_pending"], 0, "{robot}: {report}");
     let last = report["acked_node_seq"].as_u64().expect("acked");
     let seqs = node_seqs(http, "park", robot);
+    eprintln!(
+        "{robot}: {} nodes mapped once, {} re-sends",
+        last + 1,
+        report["node_resends"]
+    );
     assert_eq!(
         seqs,
         (0..=last).collect::<Vec<_>>(),
