@@ -4,9 +4,15 @@
 //! which restores the graph exactly; the stored edges check that it did. Clouds (tens of KB a
 //! node, for viewing only) are kept in a table of their own, in the node's transaction, and
 //! read one at a time on request: a replay never reads them.
+//!
+//! A failed commit (a full disk) closes the file: redb wants a database that met an I/O error
+//! opened again, which the next commit does. Each fleet is read on its own, so a fleet whose
+//! rows are damaged does not keep the others from being restored.
 
-use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
+use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition, TableHandle};
+use std::ops::Bound;
 use std::path::Path;
+use std::sync::RwLock;
 use wire::{Message, v1};
 
 /// (fleet, arrival index) → encoded `v1::Node`, without `Node.cloud`.
@@ -19,16 +25,25 @@ const SOLVES: TableDefinition<(&str, u64), ()> = TableDefinition::new("solves");
 /// (fleet, node index) → the node's encoded `v1::SegmentedCloud` (`Node.cloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
 
-/// A failure of the store (redb): the disk, the file, a transaction.
+/// A failure of the store.
 #[derive(Debug, thiserror::Error)]
-#[error("store: {0}")]
-pub struct StoreError(#[from] redb::Error);
+pub enum StoreError {
+    /// redb's: the disk, the file, a transaction.
+    #[error("store: {0}")]
+    Redb(#[from] redb::Error),
+    /// Closed after a failed commit, until the next commit opens it again.
+    #[error("store: closed after a failed commit; the next commit opens it again")]
+    Closed,
+    /// Rows that do not make a fleet's history (a gap in the indices).
+    #[error("store: {0}")]
+    Damaged(String),
+}
 
 macro_rules! from_redb {
     ($($t:ty),*) => {$(
         impl From<$t> for StoreError {
             fn from(e: $t) -> Self {
-                StoreError(e.into())
+                StoreError::Redb(e.into())
             }
         }
     )*};
@@ -41,9 +56,14 @@ from_redb!(
     redb::CommitError
 );
 
+/// Opens the database (again, after a failed commit).
+type Opener = Box<dyn Fn() -> Result<Database, redb::DatabaseError> + Send + Sync>;
+
 /// The mapper's durable store: one redb file.
 pub struct Store {
-    db: Database,
+    open: Opener,
+    /// `None` after a failed commit, until the next one opens the file again.
+    db: RwLock<Option<Database>>,
 }
 
 /// One fleet as stored.
@@ -96,85 +116,126 @@ pub fn split_cloud(node: &mut v1::Node, payload: Vec<u8>) -> (Vec<u8>, Option<Ve
 impl Store {
     /// Opens the store at `path`, made when missing.
     pub fn open(path: &Path) -> Result<Store, StoreError> {
-        let db = Database::create(path)?;
-        let txn = db.begin_write()?;
-        txn.open_table(NODES)?;
-        txn.open_table(EDGES)?;
-        txn.open_table(SOLVES)?;
-        txn.open_table(CLOUDS)?;
-        txn.commit()?;
-        Ok(Store { db })
+        let path = path.to_owned();
+        Store::with_opener(Box::new(move || Database::create(&path)))
+    }
+
+    fn with_opener(open: Opener) -> Result<Store, StoreError> {
+        let db = RwLock::new(Some(with_tables(open()?)?));
+        Ok(Store { open, db })
     }
 
     /// Commits a batch (nodes, their clouds, the edges they added, the solve after them) in
-    /// one transaction: durable when this returns.
+    /// one transaction: durable when this returns. After a failed commit the file is closed;
+    /// the next commit opens it again (redb repairs it then) and may be the same one again:
+    /// every row is keyed, so writing it twice stores it once.
     pub fn commit(&self, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
-        let txn = self.db.begin_write()?;
-        {
-            let mut nodes = txn.open_table(NODES)?;
-            let mut edges = txn.open_table(EDGES)?;
-            let mut solves = txn.open_table(SOLVES)?;
-            let mut clouds = txn.open_table(CLOUDS)?;
-            for batch in batches {
-                for &(arrival, bytes) in &batch.nodes {
-                    nodes.insert((batch.fleet, arrival), bytes)?;
-                }
-                for &(node, bytes) in &batch.clouds {
-                    clouds.insert((batch.fleet, node), bytes)?;
-                }
-                for (k, edge) in batch.edges.iter().enumerate() {
-                    edges.insert((batch.fleet, batch.first_edge + k as u64), edge.as_slice())?;
-                }
-                if let Some(arrival) = batch.solved_after {
-                    solves.insert((batch.fleet, arrival), ())?;
-                }
-            }
+        if self.db.read().expect("store lock").is_none() {
+            *self.db.write().expect("store lock") = Some(with_tables((self.open)()?)?);
         }
-        txn.commit()?;
-        Ok(())
+        let result = match &*self.db.read().expect("store lock") {
+            Some(db) => write(db, batches),
+            None => Err(StoreError::Closed),
+        };
+        if result.is_err() {
+            // redb fails every later operation after an I/O error until it is reopened.
+            *self.db.write().expect("store lock") = None;
+        }
+        result
     }
 
     /// The encoded cloud of a fleet's node, if it came with one.
     pub fn cloud(&self, fleet: &str, node: u64) -> Result<Option<Vec<u8>>, StoreError> {
-        let txn = self.db.begin_read()?;
+        let db = self.db.read().expect("store lock");
+        let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
         let table = txn.open_table(CLOUDS)?;
         Ok(table.get((fleet, node))?.map(|v| v.value().to_vec()))
     }
 
-    /// Every fleet, its nodes in arrival order (clouds are not read).
-    pub fn load(&self) -> Result<Vec<StoredFleet>, StoreError> {
-        let txn = self.db.begin_read()?;
-        let mut fleets: Vec<StoredFleet> = Vec::new();
-        let fleet_of = |id: &str, fleets: &mut Vec<StoredFleet>| -> usize {
-            match fleets.iter().position(|f| f.id == id) {
-                Some(i) => i,
-                None => {
-                    fleets.push(StoredFleet {
-                        id: id.to_owned(),
-                        ..Default::default()
-                    });
-                    fleets.len() - 1
-                }
-            }
-        };
-        for entry in txn.open_table(NODES)?.iter()? {
-            let (k, v) = entry?;
-            let i = fleet_of(k.value().0, &mut fleets);
-            fleets[i].nodes.push(v.value().to_vec());
+    /// The fleets that have nodes, sorted.
+    pub fn fleet_ids(&self) -> Result<Vec<String>, StoreError> {
+        let db = self.db.read().expect("store lock");
+        let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
+        let table = txn.open_table(NODES)?;
+        let mut ids: Vec<String> = Vec::new();
+        let mut next = table.first()?.map(|(k, _)| k.value().0.to_owned());
+        while let Some(id) = next {
+            // Past this fleet's last possible key: the next fleet's first node.
+            let after = (Bound::Excluded((id.as_str(), u64::MAX)), Bound::Unbounded);
+            next = match table.range::<(&str, u64)>(after)?.next() {
+                Some(entry) => Some(entry?.0.value().0.to_owned()),
+                None => None,
+            };
+            ids.push(id);
         }
-        for entry in txn.open_table(EDGES)?.iter()? {
-            let (k, v) = entry?;
-            let i = fleet_of(k.value().0, &mut fleets);
-            fleets[i].edges.push(v.value().to_vec());
-        }
-        for entry in txn.open_table(SOLVES)?.iter()? {
-            let (k, _) = entry?;
-            let (fleet, arrival) = k.value();
-            let i = fleet_of(fleet, &mut fleets);
-            fleets[i].solves.push(arrival);
-        }
-        Ok(fleets)
+        Ok(ids)
     }
+
+    /// One fleet, its nodes in arrival order (clouds are not read). Indices must run from 0
+    /// without a gap.
+    pub fn load_fleet(&self, id: &str) -> Result<StoredFleet, StoreError> {
+        let db = self.db.read().expect("store lock");
+        let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
+        let fleet = (id, 0u64)..=(id, u64::MAX);
+        let mut stored = StoredFleet {
+            id: id.to_owned(),
+            ..Default::default()
+        };
+        for (table, rows) in [(NODES, &mut stored.nodes), (EDGES, &mut stored.edges)] {
+            for (i, entry) in txn.open_table(table)?.range(fleet.clone())?.enumerate() {
+                let (k, v) = entry?;
+                let index = k.value().1;
+                if index != i as u64 {
+                    return Err(StoreError::Damaged(format!(
+                        "fleet {id}: {} row {index} where {i} was due",
+                        table.name()
+                    )));
+                }
+                rows.push(v.value().to_vec());
+            }
+        }
+        for entry in txn.open_table(SOLVES)?.range(fleet)? {
+            stored.solves.push(entry?.0.value().1);
+        }
+        Ok(stored)
+    }
+}
+
+/// The database, its tables made when missing.
+fn with_tables(db: Database) -> Result<Database, StoreError> {
+    let txn = db.begin_write()?;
+    txn.open_table(NODES)?;
+    txn.open_table(EDGES)?;
+    txn.open_table(SOLVES)?;
+    txn.open_table(CLOUDS)?;
+    txn.commit()?;
+    Ok(db)
+}
+
+fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
+    let txn = db.begin_write()?;
+    {
+        let mut nodes = txn.open_table(NODES)?;
+        let mut edges = txn.open_table(EDGES)?;
+        let mut solves = txn.open_table(SOLVES)?;
+        let mut clouds = txn.open_table(CLOUDS)?;
+        for batch in batches {
+            for &(arrival, bytes) in &batch.nodes {
+                nodes.insert((batch.fleet, arrival), bytes)?;
+            }
+            for &(node, bytes) in &batch.clouds {
+                clouds.insert((batch.fleet, node), bytes)?;
+            }
+            for (k, edge) in batch.edges.iter().enumerate() {
+                edges.insert((batch.fleet, batch.first_edge + k as u64), edge.as_slice())?;
+            }
+            if let Some(arrival) = batch.solved_after {
+                solves.insert((batch.fleet, arrival), ())?;
+            }
+        }
+    }
+    txn.commit()?;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -232,9 +293,108 @@ mod tests {
         assert_eq!(store.cloud("park", 0).unwrap(), None);
         assert_eq!(store.cloud("campus", 1).unwrap(), None);
         // The replay reads the nodes alone.
-        let fleets = store.load().unwrap();
-        assert_eq!(fleets.len(), 1);
-        assert_eq!(fleets[0].nodes, [b"node0".to_vec(), b"node1".to_vec()]);
+        assert_eq!(store.fleet_ids().unwrap(), ["park"]);
+        let park = store.load_fleet("park").unwrap();
+        assert_eq!(park.nodes, [b"node0".to_vec(), b"node1".to_vec()]);
+        drop(store);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A disk that can be filled: writes and growth fail with ENOSPC while `full`; what it
+    /// holds outlives each database opened on it (as a file does).
+    #[derive(Debug, Clone)]
+    struct Disk {
+        data: std::sync::Arc<redb::backends::InMemoryBackend>,
+        full: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    }
+
+    impl Disk {
+        fn space(&self) -> std::io::Result<()> {
+            if self.full.load(std::sync::atomic::Ordering::SeqCst) {
+                return Err(std::io::Error::from_raw_os_error(28)); // ENOSPC
+            }
+            Ok(())
+        }
+    }
+
+    impl redb::StorageBackend for Disk {
+        fn len(&self) -> std::io::Result<u64> {
+            self.data.len()
+        }
+        fn read(&self, offset: u64, out: &mut [u8]) -> std::io::Result<()> {
+            self.data.read(offset, out)
+        }
+        fn set_len(&self, len: u64) -> std::io::Result<()> {
+            self.space()?;
+            self.data.set_len(len)
+        }
+        fn sync_data(&self) -> std::io::Result<()> {
+            self.data.sync_data()
+        }
+        fn write(&self, offset: u64, data: &[u8]) -> std::io::Result<()> {
+            self.space()?;
+            self.data.write(offset, data)
+        }
+    }
+
+    fn nodes<'a>(fleet: &'a str, rows: &[(u64, &'a [u8])]) -> FleetBatch<'a> {
+        FleetBatch {
+            fleet,
+            nodes: rows.to_vec(),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_failed_commit_closes_the_store_and_a_later_one_stores_its_rows_once() {
+        use redb::StorageBackend as _;
+        let disk = Disk {
+            data: Default::default(),
+            full: Default::default(),
+        };
+        let opened = disk.clone();
+        let store = Store::with_opener(Box::new(move || {
+            Database::builder().create_with_backend(opened.clone())
+        }))
+        .unwrap();
+        store.commit(&[nodes("park", &[(0, b"n0")])]).unwrap();
+        disk.full.store(true, std::sync::atomic::Ordering::SeqCst);
+        let batch = [nodes("park", &[(1, b"n1"), (2, b"n2")])];
+        let e = store.commit(&batch).unwrap_err();
+        assert!(e.to_string().contains("No space left"), "{e}");
+        // Closed until a commit opens it again; while the disk is full that fails too.
+        assert!(matches!(store.cloud("park", 0), Err(StoreError::Closed)));
+        assert!(store.commit(&batch).is_err());
+        disk.full.store(false, std::sync::atomic::Ordering::SeqCst);
+        store.commit(&batch).unwrap();
+        // The same rows again (a commit that reached the disk but reported a failure).
+        store.commit(&batch).unwrap();
+        assert_eq!(store.fleet_ids().unwrap(), ["park"]);
+        let park = store.load_fleet("park").unwrap();
+        assert_eq!(park.nodes, [b"n0".to_vec(), b"n1".to_vec(), b"n2".to_vec()]);
+        assert!(disk.data.len().unwrap() > 0);
+    }
+
+    #[test]
+    fn a_gap_in_one_fleets_rows_leaves_the_others_readable() {
+        let dir = std::env::temp_dir().join(format!("levelmap-gap-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("gap.redb");
+        let _ = std::fs::remove_file(&path);
+        let store = Store::open(&path).unwrap();
+        store
+            .commit(&[
+                nodes("campus", &[(0, b"c0"), (2, b"c2")]),
+                nodes("park", &[(0, b"p0"), (1, b"p1")]),
+            ])
+            .unwrap();
+        assert_eq!(store.fleet_ids().unwrap(), ["campus", "park"]);
+        let e = store.load_fleet("campus").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "store: fleet campus: nodes row 2 where 1 was due"
+        );
+        assert_eq!(store.load_fleet("park").unwrap().nodes.len(), 2);
         drop(store);
         std::fs::remove_dir_all(&dir).ok();
     }
