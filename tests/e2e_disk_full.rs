@@ -73,8 +73,8 @@ fn a_full_disk_stops_the_acks_and_the_mapper_resumes_when_there_is_room() {
     let zenoh = format!("tcp/127.0.0.1:{}", free_port());
     let mapper = MapperProcess::start_with(&dir, zenoh.clone(), &format!("store_path = {store:?}"));
     let http = mapper.http.clone();
-    // 160 s of park at 4x: a node a second or so, each with its 3D cloud (~67 KB stored).
-    let robot = spawn_edge(&dir, 0, &zenoh, 160.0, 4.0);
+    // 120 s of park at 4x: a node a second or so, each with its 3D cloud (~67 KB stored).
+    let robot = spawn_edge(&dir, 0, &zenoh, 120.0, 4.0);
     let seqs = || node_seqs(&http, "park", "robot0");
     wait_for(Duration::from_secs(60), || {
         (seqs().len() >= 3).then_some(())

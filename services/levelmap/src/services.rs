@@ -8,8 +8,8 @@ use std::path::PathBuf;
 #[cfg(feature = "mapper")]
 #[derive(Args, Debug)]
 pub struct MapperArgs {
-    /// TOML configuration (see deploy/mapper.toml); defaults without one. Any key may be set
-    /// by a LEVELMAP_<KEY> environment variable (`__` between nested keys).
+    /// TOML configuration (see deploy/mapper.toml); defaults without one. Environment
+    /// variables set keys too: LEVELMAP_HTTP_LISTEN, LEVELMAP_ZENOH__LISTEN (nested: __).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
 }
@@ -18,8 +18,8 @@ pub struct MapperArgs {
 #[cfg(feature = "edge")]
 #[derive(Args, Debug)]
 pub struct EdgeArgs {
-    /// TOML configuration (see deploy/edge.toml); defaults without one. Any key may be set
-    /// by a LEVELMAP_<KEY> environment variable (`__` between nested keys).
+    /// TOML configuration (see deploy/edge.toml); defaults without one. Environment
+    /// variables set keys too: LEVELMAP_ROBOT, LEVELMAP_ZENOH__CONNECT (nested: __).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Print the final report as JSON.

@@ -1,5 +1,5 @@
 //! The Zenoh session of a levelmap service: mode and endpoints from the service's config file;
-//! the config loader both services share ([`load_toml`], with [`env`] overrides).
+//! the config loader both services share ([`load_toml`], with [`mod@env`] overrides).
 
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -16,7 +16,7 @@ pub fn now_ns() -> u64 {
 pub mod env;
 
 /// Reads a service's config: its TOML file (none: every key at its default), then the
-/// `LEVELMAP_…` variables of the environment ([`env`]). Unknown keys are errors, in the file
+/// `LEVELMAP_…` variables of the environment ([`mod@env`]). Unknown keys are errors, in the file
 /// when `T` denies them, in the environment always (a typo must not silently become a
 /// default). Errors name the file or the variable.
 pub fn load_toml<T>(path: Option<&Path>) -> anyhow::Result<T>
