@@ -333,7 +333,7 @@ impl Worker {
     }
 
     /// Commits the nodes' rows, their clouds, the new edges of their fleets and the solve
-    /// points in one transaction. Keeps `/healthz`'s store fault up to date.
+    /// points in one transaction.
     fn commit(&mut self, work: &Unstored) -> Result<(), StoreError> {
         let accepted = &work.batch.accepted;
         let touched = fleets_of(accepted);
@@ -371,13 +371,19 @@ impl Worker {
             }
         }
         drop(batches);
+        self.note_store(&result, accepted.len());
+        result
+    }
+
+    /// A commit's outcome as `/healthz` shows it; logged when it changes, not every retry.
+    fn note_store(&self, result: &Result<(), StoreError>, nodes: usize) {
         let mut fault = self.shared.store_fault.write().expect("fault lock");
-        match (&result, fault.is_some()) {
+        match (result, fault.is_some()) {
+            (Ok(()), false) => {}
             (Ok(()), true) => {
-                tracing::info!(nodes = accepted.len(), "the store commits again: resumed");
+                tracing::info!(nodes, "the store commits again: resumed");
                 *fault = None;
             }
-            (Ok(()), false) => {}
             (Err(e), was_failing) => {
                 if !was_failing {
                     tracing::error!("store commit failed; no acks until it succeeds: {e}");
@@ -385,7 +391,6 @@ impl Worker {
                 *fault = Some(e.to_string());
             }
         }
-        result
     }
 
     /// Keeps what a failed commit held, to be committed again after [`STORE_RETRY`].
