@@ -12,7 +12,8 @@ use crate::bus::Bus;
 use crate::config::MapperConfig;
 use crate::fleet::{FleetMap, IngestError, Sequence};
 use crate::state::{FleetView, Metrics, Shared};
-use crate::store::{FleetBatch, Store, StoreError};
+use crate::store::{Store, StoreError};
+use commit::Unstored;
 use serde_json::json;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -21,11 +22,10 @@ use std::time::{Duration, Instant};
 use wire::NodeInput;
 use wire::session::now_ns;
 
+mod commit;
+
 /// Most messages taken into one batch (one solve, one store commit).
 const MAX_BATCH: usize = 512;
-
-/// How often a commit that failed is tried again.
-const STORE_RETRY: Duration = Duration::from_secs(1);
 
 /// The answer to an operator's optimize request: the report as JSON, or why not.
 pub type OptimizeReply = tokio::sync::oneshot::Sender<Result<serde_json::Value, OptimizeError>>;
@@ -111,17 +111,6 @@ struct Batch {
     stop: bool,
 }
 
-/// What the maps hold and the store does not: a batch or solve points whose commit failed.
-/// The maps cannot give nodes back, so it is committed again until that succeeds; its nodes
-/// are acked and shown only then.
-#[derive(Default)]
-struct Unstored {
-    /// Nodes mapped, and robots to re-ack.
-    batch: Batch,
-    /// (fleet, arrival index) of solves whose point is not stored.
-    solves: Vec<(String, u64)>,
-}
-
 /// The worker's state: the maps, and what of them is stored.
 pub struct Worker {
     config: MapperConfig,
@@ -184,30 +173,12 @@ impl Worker {
                 break;
             }
         }
-    }
-
-    /// Commits what the maps took, then acks it, shows it and runs the solves that are due.
-    /// On a failure it is kept for [`Self::retry_store`]: nothing of it is acked or shown.
-    fn store_and_ack(&mut self, work: Unstored, started: Instant) {
-        if self.commit(&work).is_err() {
-            self.store_failed(work);
-            return;
-        }
-        self.ack(&work.batch);
-        self.publish(&work.batch.accepted, started);
-        for (fleet, _) in &work.solves {
-            self.publish_solve(fleet, started);
-        }
-        self.due_solves();
-    }
-
-    /// Commits what a failed commit left, once [`STORE_RETRY`] has passed since.
-    fn retry_store(&mut self) {
-        if Instant::now() < self.retry_at {
-            return;
-        }
-        if let Some(work) = self.unstored.take() {
-            self.store_and_ack(work, Instant::now());
+        if let Some(unstored) = &self.unstored {
+            let nodes = unstored.batch.accepted.len();
+            tracing::warn!(
+                nodes,
+                "stopped with a batch not stored: its robots keep its nodes"
+            );
         }
     }
 
@@ -330,76 +301,6 @@ impl Worker {
     /// Whether `key` is a node of a quarantined fleet.
     fn quarantined(&self, key: &str) -> bool {
         wire::parse_robot_key(key).is_ok_and(|k| self.shared.quarantine(k.fleet).is_some())
-    }
-
-    /// Commits the nodes' rows, their clouds, the new edges of their fleets and the solve
-    /// points in one transaction.
-    fn commit(&mut self, work: &Unstored) -> Result<(), StoreError> {
-        let accepted = &work.batch.accepted;
-        let touched = fleets_of(accepted);
-        if touched.is_empty() && work.solves.is_empty() {
-            return Ok(());
-        }
-        let mut batches: Vec<FleetBatch> = touched
-            .iter()
-            .map(|&fleet| {
-                let stored = self.edges_stored.get(fleet).copied().unwrap_or(0);
-                let of_fleet = || accepted.iter().filter(move |a| a.fleet == fleet);
-                FleetBatch {
-                    fleet,
-                    solved_after: None,
-                    nodes: of_fleet()
-                        .map(|a| (a.arrival, a.payload.as_slice()))
-                        .collect(),
-                    clouds: of_fleet()
-                        .filter_map(|a| Some((a.node as u64, a.cloud.as_deref()?)))
-                        .collect(),
-                    first_edge: stored as u64,
-                    edges: crate::store::encode_edges(&self.fleets[fleet].graph().edges[stored..]),
-                }
-            })
-            .collect();
-        batches.extend(work.solves.iter().map(|(fleet, arrival)| FleetBatch {
-            fleet,
-            solved_after: Some(*arrival),
-            ..Default::default()
-        }));
-        let result = self.store.commit(&batches);
-        if result.is_ok() {
-            for b in &batches {
-                *self.edges_stored.entry(b.fleet.to_owned()).or_default() += b.edges.len();
-            }
-        }
-        drop(batches);
-        self.note_store(&result, accepted.len());
-        result
-    }
-
-    /// A commit's outcome as `/healthz` shows it; logged when it changes, not every retry.
-    fn note_store(&self, result: &Result<(), StoreError>, nodes: usize) {
-        let mut fault = self.shared.store_fault.write().expect("fault lock");
-        match (result, fault.is_some()) {
-            (Ok(()), false) => {}
-            (Ok(()), true) => {
-                tracing::info!(nodes, "the store commits again: resumed");
-                *fault = None;
-            }
-            (Err(e), was_failing) => {
-                if !was_failing {
-                    tracing::error!("store commit failed; no acks until it succeeds: {e}");
-                }
-                *fault = Some(e.to_string());
-            }
-        }
-    }
-
-    /// Keeps what a failed commit held, to be committed again after [`STORE_RETRY`].
-    fn store_failed(&mut self, work: Unstored) {
-        self.retry_at = Instant::now() + STORE_RETRY;
-        let kept = self.unstored.get_or_insert_default();
-        kept.batch.accepted.extend(work.batch.accepted);
-        kept.batch.reacks.extend(work.batch.reacks);
-        kept.solves.extend(work.solves);
     }
 
     /// Acks each robot's highest node taken, once per robot.
