@@ -118,13 +118,24 @@ impl MapperProcess {
 
     /// A mapper listening for robots on `zenoh` (an endpoint the robots may already dial).
     pub fn start_on(dir: &Path, zenoh: String) -> MapperProcess {
+        Self::start_with(dir, zenoh, "")
+    }
+
+    /// A mapper with more top-level config lines (`fleets = [...]`, a `store_path`, which
+    /// comes after the default one and wins).
+    pub fn start_with(dir: &Path, zenoh: String, extra: &str) -> MapperProcess {
         let http = format!("127.0.0.1:{}", free_port());
         let config = dir.join("mapper.toml");
+        let store = format!("store_path = {:?}\n", dir.join("mapper.redb"));
+        let store = if extra.contains("store_path") {
+            ""
+        } else {
+            &store
+        };
         std::fs::write(
             &config,
             format!(
-                "http_listen = {http:?}\nstore_path = {:?}\n[zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\n",
-                dir.join("mapper.redb")
+                "http_listen = {http:?}\n{store}{extra}\n[zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\n",
             ),
         )
         .expect("mapper config");
@@ -182,6 +193,31 @@ pub fn spawn_edge(dir: &Path, robot: usize, connect: &str, duration_s: f64, spee
 
 /// An edge service process with the given `[source.…]` table.
 pub fn spawn_edge_with(dir: &Path, robot: usize, connect: &str, speed: f64, source: &str) -> Child {
+    edge_command(dir, robot, connect, speed, source)
+        .spawn()
+        .expect("levelmap edge starts")
+}
+
+/// A simulated robot's edge service with `LEVELMAP_…` keys in its environment.
+pub fn spawn_edge_env(
+    dir: &Path,
+    robot: usize,
+    connect: &str,
+    (duration_s, speed): (f64, f64),
+    env: &[(&str, &str)],
+) -> Child {
+    let source = format!(
+        "[source.sim]\nloop_index = {}\nduration_s = {duration_s}\n",
+        robot % 3
+    );
+    edge_command(dir, robot, connect, speed, &source)
+        .envs(env.iter().copied())
+        .spawn()
+        .expect("levelmap edge starts")
+}
+
+/// The command of an edge service with its config file written.
+fn edge_command(dir: &Path, robot: usize, connect: &str, speed: f64, source: &str) -> Command {
     let config = dir.join(format!("robot{robot}.toml"));
     std::fs::write(
         &config,
@@ -192,13 +228,13 @@ pub fn spawn_edge_with(dir: &Path, robot: usize, connect: &str, speed: f64, sour
         ),
     )
     .expect("edge config");
-    levelmap()
+    let mut command = levelmap();
+    command
         .args(["edge", "--json", "--config"])
         .arg(&config)
         .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("levelmap edge starts")
+        .stderr(Stdio::null());
+    command
 }
 
 /// Waits for an edge process (at most `timeout`) and returns its JSON report.

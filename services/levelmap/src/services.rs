@@ -8,7 +8,8 @@ use std::path::PathBuf;
 #[cfg(feature = "mapper")]
 #[derive(Args, Debug)]
 pub struct MapperArgs {
-    /// TOML configuration (see deploy/mapper.toml); defaults without one.
+    /// TOML configuration (see deploy/mapper.toml); defaults without one. Environment
+    /// variables set keys too: LEVELMAP_HTTP_LISTEN, LEVELMAP_ZENOH__LISTEN (nested: __).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
 }
@@ -17,7 +18,8 @@ pub struct MapperArgs {
 #[cfg(feature = "edge")]
 #[derive(Args, Debug)]
 pub struct EdgeArgs {
-    /// TOML configuration (see deploy/edge.toml); defaults without one.
+    /// TOML configuration (see deploy/edge.toml); defaults without one. Environment
+    /// variables set keys too: LEVELMAP_ROBOT, LEVELMAP_ZENOH__CONNECT (nested: __).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Print the final report as JSON.
@@ -44,10 +46,7 @@ fn init_logging() {
 #[cfg(feature = "mapper")]
 pub fn run_mapper(args: &MapperArgs) -> Result<()> {
     init_logging();
-    let config = match &args.config {
-        Some(path) => mapper::MapperConfig::load(path)?,
-        None => mapper::MapperConfig::default(),
-    };
+    let config = mapper::MapperConfig::load(args.config.as_deref())?;
     runtime()?.block_on(async {
         let running = mapper::start(config.clone()).await?;
         tracing::info!(
@@ -65,10 +64,7 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
 #[cfg(feature = "edge")]
 pub fn run_edge(args: &EdgeArgs) -> Result<()> {
     init_logging();
-    let config = match &args.config {
-        Some(path) => edge::EdgeConfig::load(path)?,
-        None => edge::EdgeConfig::default(),
-    };
+    let config = edge::EdgeConfig::load(args.config.as_deref())?;
     let report = runtime()?.block_on(async {
         let source = edge::open_source(&config, wire::session::now_ns())?;
         edge::run(config, source, wire::session::shutdown_signal()).await

@@ -60,8 +60,9 @@ impl MapperConfig {
         )
     }
 
-    /// Reads a TOML file; unknown keys are errors.
-    pub fn load(path: &Path) -> anyhow::Result<MapperConfig> {
+    /// Reads a TOML file (none: the defaults), then the `LEVELMAP_…` environment variables
+    /// (`wire::session::env`); unknown keys are errors.
+    pub fn load(path: Option<&Path>) -> anyhow::Result<MapperConfig> {
         wire::session::load_toml(path)
     }
 }
@@ -87,7 +88,74 @@ mod tests {
     #[test]
     fn the_deploy_file_states_the_defaults() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/mapper.toml");
-        assert_eq!(MapperConfig::load(&path).unwrap(), MapperConfig::default());
+        let file = wire::session::load_toml_with(Some(&path), []).unwrap();
+        assert_eq!(MapperConfig::default(), file);
+    }
+
+    fn env(pairs: &[(&str, &str)]) -> Vec<(std::ffi::OsString, std::ffi::OsString)> {
+        pairs.iter().map(|(k, v)| (k.into(), v.into())).collect()
+    }
+
+    #[test]
+    fn every_key_can_come_from_the_environment_without_a_file() {
+        let config: MapperConfig = wire::session::load_toml_with(
+            None,
+            env(&[
+                ("LEVELMAP_HTTP_LISTEN", "0.0.0.0:8080"),
+                ("LEVELMAP_FLEETS", r#"["park", "campus"]"#),
+                ("LEVELMAP_STORE_PATH", "/var/lib/levelmap-mapper/store.redb"),
+                ("LEVELMAP_ZENOH__LISTEN", r#"["tcp/10.0.0.1:7447"]"#),
+                ("LEVELMAP_MAPPING__IDC__MIN_CORRESPONDENCES", "12"),
+                ("LEVELMAP_DATUM__LATITUDE_DEG", "52.39"),
+                ("LEVELMAP_DATUM__LONGITUDE_DEG", "9.71"),
+                ("LEVELMAP_DATUM__HEIGHT_M", "55"),
+                ("LEVELMAP_DATA", "../shared/data"),
+            ]),
+        )
+        .unwrap();
+        let defaults = MapperConfig::default();
+        assert_eq!(config.http_listen, "0.0.0.0:8080");
+        assert_eq!(config.fleets, ["park", "campus"]);
+        assert_eq!(
+            config.store_path,
+            Path::new("/var/lib/levelmap-mapper/store.redb")
+        );
+        assert_eq!(config.zenoh.listen, ["tcp/10.0.0.1:7447"]);
+        assert_eq!(config.zenoh.mode, defaults.zenoh.mode);
+        assert_eq!(config.mapping.idc.min_correspondences, 12);
+        // The fleet's mapping defaults, not the library's, around the key that was set.
+        assert_eq!(config.mapping.odometry_sigma_xy_per_m, 0.02);
+        assert_eq!(config.datum.map(|d| d.height_m), Some(55.0));
+        assert_eq!(config.solve_interval_ms, defaults.solve_interval_ms);
+    }
+
+    #[test]
+    fn a_variable_that_names_no_key_is_an_error() {
+        let load = |pairs| wire::session::load_toml_with::<MapperConfig>(None, env(pairs));
+        // A typo among the denied keys, and one among the mapping's (which serde ignores).
+        let e = load(&[("LEVELMAP_HTTP_LISTN", "x")]).unwrap_err();
+        assert!(e.to_string().contains("LEVELMAP_HTTP_LISTN"), "{e}");
+        assert!(e.to_string().contains("http_listn"), "{e}");
+        let e = load(&[("LEVELMAP_MAPPING__ODOMETRY_SIGMA", "0.1")]).unwrap_err();
+        assert!(e.to_string().contains("mapping.odometry_sigma"), "{e}");
+        // A value of the wrong type, as in the file.
+        let e = load(&[("LEVELMAP_SOLVE_INTERVAL_MS", "soon")]).unwrap_err();
+        assert!(e.to_string().contains("LEVELMAP_SOLVE_INTERVAL_MS"), "{e}");
+    }
+
+    #[test]
+    fn the_environment_wins_over_the_file() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/mapper.toml");
+        let config: MapperConfig =
+            wire::session::load_toml_with(Some(&path), env(&[("LEVELMAP_TOKEN", "s3cret")]))
+                .unwrap();
+        assert_eq!(
+            config,
+            MapperConfig {
+                token: "s3cret".into(),
+                ..MapperConfig::default()
+            }
+        );
     }
 
     #[test]

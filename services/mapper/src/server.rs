@@ -185,43 +185,62 @@ async fn subscribe(
     Ok((nodes, odometry, queries))
 }
 
-/// Replays the store; checks the edges it rebuilt against the stored ones.
+/// Replays the store, fleet by fleet. A fleet whose rows do not replay is quarantined (its
+/// reason kept in `shared`): the others are restored and served.
 fn restore(
     config: &MapperConfig,
     store: &Store,
     shared: &Shared,
 ) -> Result<HashMap<String, FleetMap>> {
     let mut fleets = HashMap::new();
-    for stored in store.load()? {
-        let started = Instant::now();
-        let mut map = config.new_fleet(&stored.id);
-        let mut solves = stored.solves.iter().peekable();
-        for (arrival, bytes) in stored.nodes.iter().enumerate() {
-            let (node, _) = wire::decode_node_input(bytes)
-                .with_context(|| format!("store: a node of fleet {} is unreadable", stored.id))?;
-            map.ingest(&node)
-                .with_context(|| format!("store: replaying fleet {}", stored.id))?;
-            if solves.next_if_eq(&&(arrival as u64)).is_some() {
-                map.optimize_now()?;
+    for id in store.fleet_ids()? {
+        match replay(config, store, &id) {
+            Ok(map) => {
+                shared.publish_view(FleetView::of(&map, 0.0, now_ns()));
+                fleets.insert(id, map);
+            }
+            Err(e) => {
+                let reason = format!("{e:#}");
+                tracing::error!(fleet = %id, "quarantined: its stored map does not replay: {reason}");
+                shared
+                    .quarantined
+                    .write()
+                    .expect("quarantine lock")
+                    .insert(id, reason);
             }
         }
-        let rebuilt = crate::store::encode_edges(&map.graph().edges);
-        anyhow::ensure!(
-            rebuilt == stored.edges,
-            "store: fleet {} replays to {} edges that differ from the {} stored",
-            stored.id,
-            rebuilt.len(),
-            stored.edges.len()
-        );
-        tracing::info!(
-            fleet = %stored.id,
-            nodes = stored.nodes.len(),
-            edges = stored.edges.len(),
-            "restored in {:.0} ms",
-            started.elapsed().as_secs_f64() * 1e3
-        );
-        shared.publish_view(FleetView::of(&map, 0.0, now_ns()));
-        fleets.insert(stored.id.clone(), map);
     }
     Ok(fleets)
+}
+
+/// One fleet's map rebuilt from its rows; its edges checked against the stored ones.
+fn replay(config: &MapperConfig, store: &Store, id: &str) -> Result<FleetMap> {
+    let started = Instant::now();
+    let stored = store.load_fleet(id)?;
+    let mut map = config.new_fleet(id);
+    let mut solves = stored.solves.iter().peekable();
+    for (arrival, bytes) in stored.nodes.iter().enumerate() {
+        let (node, _) = wire::decode_node_input(bytes)
+            .with_context(|| format!("store: node {arrival} of fleet {id} is unreadable"))?;
+        map.ingest(&node)
+            .with_context(|| format!("store: replaying node {arrival} of fleet {id}"))?;
+        if solves.next_if_eq(&&(arrival as u64)).is_some() {
+            map.optimize_now()?;
+        }
+    }
+    let rebuilt = crate::store::encode_edges(&map.graph().edges);
+    anyhow::ensure!(
+        rebuilt == stored.edges,
+        "store: fleet {id} replays to {} edges that differ from the {} stored",
+        rebuilt.len(),
+        stored.edges.len()
+    );
+    tracing::info!(
+        fleet = %id,
+        nodes = stored.nodes.len(),
+        edges = stored.edges.len(),
+        "restored in {:.0} ms",
+        started.elapsed().as_secs_f64() * 1e3
+    );
+    Ok(map)
 }

@@ -176,8 +176,12 @@ pub struct Shared {
     pub token: String,
     /// When the mapper started (ns since the Unix epoch).
     pub started_ns: u64,
-    /// False once the store failed: `/healthz` reports it, so a supervisor restarts us.
-    pub healthy: std::sync::atomic::AtomicBool,
+    /// Why the store cannot commit, while it cannot: nodes are neither taken nor acked, the
+    /// routes that need the store answer 503, and the worker tries again every second.
+    pub store_fault: RwLock<Option<String>>,
+    /// Fleets whose stored map did not replay at start, with the reason: their routes answer
+    /// 503 and their nodes are not taken (the robots keep them); the other fleets run.
+    pub quarantined: RwLock<BTreeMap<String, String>>,
     /// Set when the mapper stops: open event streams end, so HTTP can shut down gracefully.
     pub stopping: tokio::sync::watch::Sender<bool>,
 }
@@ -192,7 +196,8 @@ impl Shared {
             events: broadcast::channel(1024).0,
             token,
             started_ns,
-            healthy: std::sync::atomic::AtomicBool::new(true),
+            store_fault: RwLock::default(),
+            quarantined: RwLock::default(),
             stopping: tokio::sync::watch::Sender::new(false),
         }
     }
@@ -200,6 +205,20 @@ impl Shared {
     /// A fleet's latest view.
     pub fn fleet(&self, id: &str) -> Option<Arc<FleetView>> {
         self.fleets.read().expect("views lock").get(id).cloned()
+    }
+
+    /// Why the store cannot commit, while it cannot.
+    pub fn store_fault(&self) -> Option<String> {
+        self.store_fault.read().expect("fault lock").clone()
+    }
+
+    /// Why a fleet is quarantined, if it is.
+    pub fn quarantine(&self, fleet: &str) -> Option<String> {
+        self.quarantined
+            .read()
+            .expect("quarantine lock")
+            .get(fleet)
+            .cloned()
     }
 
     /// Replaces the fleet's view: readers see the new one from now on.

@@ -217,10 +217,12 @@ pub(super) async fn optimize(
     headers: HeaderMap,
 ) -> Reply<Response> {
     authorized(&api, &headers)?;
+    api.available(&fleet)?;
     match Work::optimize(&api.work, &fleet).await {
         Ok(report) => Ok(Json(report).into_response()),
         Err(OptimizeError::Stopped) => Err(ApiError::Unavailable("mapper stopping".into())),
         Err(OptimizeError::Busy) => Err(ApiError::Unavailable("mapper busy, retry".into())),
         Err(OptimizeError::Refused(why)) => Err(ApiError::NotFound(why)),
+        Err(OptimizeError::StoreFailed(why)) => Err(super::Degraded::store(why)),
     }
 }

@@ -4,6 +4,7 @@
 //! `/api/v1/openapi.json` is made from the same list as the router.
 
 mod events;
+mod faults;
 mod fleets;
 mod graph;
 mod map;
@@ -23,6 +24,7 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+pub use faults::Degraded;
 pub use web::WEB_DIR_ENV;
 
 /// What every handler shares.
@@ -53,6 +55,8 @@ pub enum ApiError {
     Unprocessable(String),
     /// 503: the mapper is stopping.
     Unavailable(String),
+    /// 503 as JSON: a quarantined fleet, or a store that cannot commit.
+    Degraded(Degraded),
     /// 500: a fault of the server (the store, a task).
     Internal(String),
 }
@@ -69,7 +73,7 @@ impl ApiError {
             ApiError::Forbidden(_) => StatusCode::FORBIDDEN,
             ApiError::NotFound(_) => StatusCode::NOT_FOUND,
             ApiError::Unprocessable(_) => StatusCode::UNPROCESSABLE_ENTITY,
-            ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::Unavailable(_) | ApiError::Degraded(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -83,12 +87,19 @@ impl ApiError {
             | ApiError::Unprocessable(r)
             | ApiError::Unavailable(r)
             | ApiError::Internal(r) => r,
+            ApiError::Degraded(d) => &d.reason,
         }
     }
 }
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
+        if let ApiError::Degraded(d) = &self {
+            let retry = d
+                .retry_after_s
+                .map(|s| [(axum::http::header::RETRY_AFTER, s)]);
+            return (self.status(), retry, axum::Json(d)).into_response();
+        }
         (self.status(), self.reason().to_owned()).into_response()
     }
 }
@@ -96,11 +107,32 @@ impl IntoResponse for ApiError {
 type Reply<T = Response> = Result<T, ApiError>;
 
 impl Api {
-    /// The fleet's current view.
+    /// The fleet's current view; 503 for a quarantined fleet.
     fn view(&self, fleet: &str) -> Reply<Arc<FleetView>> {
+        self.available(fleet)?;
         self.shared.fleet(fleet).ok_or_else(|| {
             ApiError::NotFound(format!("no fleet {fleet:?} (no node received yet?)"))
         })
+    }
+}
+
+impl Api {
+    /// 503 with the reason when the fleet is quarantined.
+    fn available(&self, fleet: &str) -> Reply<()> {
+        match self.shared.quarantine(fleet) {
+            Some(reason) => Err(Degraded::quarantined(fleet, reason)),
+            None => Ok(()),
+        }
+    }
+
+    /// 503 for a store that is closed after a failed commit; 500 for any other failure.
+    fn store_error(&self, e: crate::store::StoreError) -> ApiError {
+        match e {
+            crate::store::StoreError::Closed => {
+                Degraded::store(self.shared.store_fault().unwrap_or_else(|| e.to_string()))
+            }
+            e => ApiError::internal(e),
+        }
     }
 }
 
@@ -163,15 +195,22 @@ fn routes() -> OpenApiRouter<Api> {
         .routes(routes!(web::web_file))
 }
 
+/// The router and the document, the fleets' 503 added to the latter.
+fn parts() -> (Router<Api>, utoipa::openapi::OpenApi) {
+    let (router, mut doc) = routes().split_for_parts();
+    faults::document(&mut doc);
+    (router, doc)
+}
+
 /// The OpenAPI document of every route, as JSON.
 pub fn openapi_json() -> String {
-    let (_, doc) = routes().split_for_parts();
+    let (_, doc) = parts();
     doc.to_pretty_json().expect("the document serializes")
 }
 
 /// The HTTP API over the mapper's views, its worker and its store.
 pub fn router(shared: Arc<Shared>, work: mpsc::SyncSender<Work>, store: Arc<Store>) -> Router {
-    let (router, doc) = routes().split_for_parts();
+    let (router, doc) = parts();
     let openapi = Arc::new(OnceLock::new());
     let _ = openapi.set(doc.to_pretty_json().expect("the document serializes"));
     router.with_state(Api {

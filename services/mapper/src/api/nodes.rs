@@ -132,11 +132,15 @@ pub(super) async fn node_detail(
 
 /// A node's encoded cloud from the store (a blocking read, off the async threads).
 async fn stored_cloud(api: &Api, fleet: &str, node: usize) -> Reply<Option<Vec<u8>>> {
+    // 503 for as long as commits fail, whether or not the file is open between attempts.
+    if let Some(fault) = api.shared.store_fault() {
+        return Err(super::Degraded::store(fault));
+    }
     let (store, fleet) = (api.store.clone(), fleet.to_owned());
     tokio::task::spawn_blocking(move || store.cloud(&fleet, node as u64))
         .await
         .map_err(ApiError::internal)?
-        .map_err(ApiError::internal)
+        .map_err(|e| api.store_error(e))
 }
 
 /// Points per class of a cloud.

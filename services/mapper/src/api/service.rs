@@ -6,24 +6,57 @@ use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::sync::atomic::Ordering;
 use utoipa::ToSchema;
 
-/// Liveness: 503 once the store failed (a supervisor should restart the mapper).
+/// The mapper's health: `ok`, or `degraded` with what is wrong.
+#[derive(Serialize, ToSchema)]
+pub(super) struct Health {
+    /// `ok`, or `degraded`: the store cannot commit, or a fleet is quarantined.
+    status: &'static str,
+    /// Why the store cannot commit, while it cannot: nodes are not acked, and the routes
+    /// that need the store answer 503; the mapper resumes by itself once a commit succeeds.
+    store: Option<String>,
+    /// Fleets whose stored map did not replay at start, each with why: their routes answer
+    /// 503 and their nodes are not taken; the other fleets run.
+    quarantined: BTreeMap<String, String>,
+}
+
+/// Health: 503 (with `Retry-After`) while the store cannot commit, 200 otherwise; a
+/// quarantined fleet makes it `degraded` but not 503, as the other fleets are served and a
+/// restart would not mend it.
 #[utoipa::path(get, path = "/healthz", tag = "service", responses(
-    (status = 200, description = "ok", content_type = "text/plain", body = String),
-    (status = 503, description = "the store failed", content_type = "text/plain", body = String),
+    (status = 200, description = "ok, or degraded by a quarantined fleet", body = Health),
+    (status = 503, description = "the store cannot commit", body = Health),
 ))]
-pub(super) async fn healthz(State(api): State<Api>) -> (StatusCode, &'static str) {
-    if api.shared.healthy.load(Ordering::Relaxed) {
-        (StatusCode::OK, "ok\n")
+pub(super) async fn healthz(State(api): State<Api>) -> Response {
+    let store = api.shared.store_fault();
+    let quarantined = api
+        .shared
+        .quarantined
+        .read()
+        .expect("quarantine lock")
+        .clone();
+    let (code, retry) = match store {
+        Some(_) => {
+            let retry = [(header::RETRY_AFTER, super::faults::RETRY_AFTER_S)];
+            (StatusCode::SERVICE_UNAVAILABLE, Some(retry))
+        }
+        None => (StatusCode::OK, None),
+    };
+    let status = if code == StatusCode::OK && quarantined.is_empty() {
+        "ok"
     } else {
-        (
-            StatusCode::SERVICE_UNAVAILABLE,
-            "the store failed: restart the mapper\n",
-        )
-    }
+        "degraded"
+    };
+    let health = Health {
+        status,
+        store,
+        quarantined,
+    };
+    (code, retry, Json(health)).into_response()
 }
 
 /// Prometheus text: accepted, duplicate and rejected messages by reason, map sizes.
