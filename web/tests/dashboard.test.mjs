@@ -135,6 +135,7 @@ test("the page asks for the read token before it reads, and refuses a wrong one"
   await enterToken(page, "not-the-token");
   await waitFor("the prompt's refusal", async () => /token refused/.test(await page.textContent("#token-prompt-why")), 5_000);
   assert.equal(await page.isVisible("#token-prompt"), true);
+  await page.screenshot({ path: path.join(artifacts, "0-token-prompt.png") });
   // Nothing but the token check was asked so far: no request met a 401.
   assert.deepEqual([...new Set(apiRequests.map(([p]) => p))], ["/api/v1/auth"]);
   await enterToken(page, READ_TOKEN);
@@ -360,5 +361,7 @@ test("the inspector shows the node's segmented 3D cloud, which orbits and zooms"
 });
 
 test("no console errors", () => {
+  const busy = apiRequests.filter(([, status]) => status === 503).length;
+  console.log(`API requests of the page: ${apiRequests.length}, answered 503 (busy): ${busy}`);
   assert.deepEqual(consoleErrors, []);
 });
