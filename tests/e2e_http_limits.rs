@@ -171,11 +171,16 @@ async fn event_streams_over_the_cap_are_refused_and_a_closed_one_frees_its_place
         assert!(head.contains("retry-after: 1\r\n"), "{head}");
         // The client goes away: the server notices and gives the place back.
         drop(first);
+        let closed = Instant::now();
         let again = wait_for(Duration::from_secs(30), || {
             let (s, head) = open_events(&h, Some(READ));
             head.starts_with("http/1.1 200").then_some(s)
         });
         assert!(again.is_some(), "a closed stream never freed its place");
+        println!(
+            "place given back {:.0} ms after the close",
+            closed.elapsed().as_secs_f64() * 1e3
+        );
         let metrics = http_get(&h, "/metrics").unwrap().1;
         assert_eq!(metric(&metrics, "levelmap_http_event_streams"), 1);
     })
@@ -188,11 +193,12 @@ async fn event_streams_over_the_cap_are_refused_and_a_closed_one_frees_its_place
 async fn cors_answers_the_listed_origins_only() {
     let dir = temp_dir("cors");
     let origin = "http://dashboard.example:8443";
-    let mut http = HttpConfig::default();
-    http.cors_origins = vec![CorsOrigin::try_from(origin.to_owned()).unwrap()];
     let config = MapperConfig {
         read_token: READ.into(),
-        http,
+        http: HttpConfig {
+            cors_origins: vec![CorsOrigin::try_from(origin.to_owned()).unwrap()],
+            ..HttpConfig::default()
+        },
         ..MapperConfig::default()
     };
     let (mapper, session, addr) = in_process_mapper_with(&dir, config).await;

@@ -2,8 +2,8 @@
 //! fleet views that call the domain (`slam`, `graphio`) for any work. Every route is
 //! registered through [`utoipa_axum`], so the OpenAPI document served at
 //! `/api/v1/openapi.json` is made from the same lists as the router. Routes are open
-//! ([`open_routes`]) or guarded by the read token ([`guarded_routes`]); heavy handlers run
-//! their work through [`limits`]; [`access`] holds the tokens and CORS.
+//! (`open_routes`) or guarded by the read token (`guarded_routes`); heavy handlers run their
+//! work through `limits`; `access` holds the tokens and CORS.
 
 mod access;
 mod events;

@@ -261,7 +261,10 @@ async fn event_streams_are_capped_and_a_closed_one_frees_its_place() {
     let events = "/api/v1/events";
     let first = get(&app, events, Some("r-token")).await;
     let second = get(&app, events, Some("w-token")).await;
-    assert_eq!((first.status().as_u16(), second.status().as_u16()), (200, 200));
+    assert_eq!(
+        (first.status().as_u16(), second.status().as_u16()),
+        (200, 200)
+    );
     let third = get(&app, events, Some("r-token")).await;
     assert_eq!(third.status(), 503);
     assert_eq!(third.headers()["retry-after"], "1");
