@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 use slam::Mapper2dParams;
 use slam::geodesy::Geodetic;
+use std::num::{NonZeroU64, NonZeroUsize};
 use std::path::{Path, PathBuf};
 use wire::session::SessionConfig;
 
@@ -19,8 +20,14 @@ pub struct MapperConfig {
     pub store_path: PathBuf,
     /// Fleets this mapper serves; nodes of any other fleet are rejected (and counted).
     pub fleets: Vec<String>,
-    /// Bearer token of write and operator routes; empty: those routes are refused.
+    /// Bearer token of write and operator routes; empty: those routes are refused. It also
+    /// reads.
     pub token: String,
+    /// Bearer token of every `/api` route but `/api/v1/auth`; empty: reading needs no token.
+    /// `/healthz`, `/metrics` and the dashboard's files stay open.
+    pub read_token: String,
+    /// What the HTTP API serves at once, and to which other origins.
+    pub http: HttpConfig,
     /// The map's GPS datum (WGS84): the origin of its east-north frame, where the robots'
     /// odometry frames start. Unset: the first fix of each fleet.
     pub datum: Option<Geodetic>,
@@ -41,6 +48,8 @@ impl Default for MapperConfig {
             store_path: PathBuf::from("levelmap-mapper.redb"),
             fleets: vec!["park".into()],
             token: String::new(),
+            read_token: String::new(),
+            http: HttpConfig::default(),
             datum: None,
             max_range_m: 40.0,
             solve_interval_ms: 500,
@@ -64,6 +73,77 @@ impl MapperConfig {
     /// (`wire::session::env`); unknown keys are errors.
     pub fn load(path: Option<&Path>) -> anyhow::Result<MapperConfig> {
         wire::session::load_toml(path)
+    }
+}
+
+/// The HTTP API's limits and cross-origin access (`[http]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HttpConfig {
+    /// Heavy requests (the grid, the graph, covariances, a node's detail and cloud, GeoJSON)
+    /// worked on at once; one more is answered 503 with `Retry-After` instead of queuing.
+    pub heavy_requests: NonZeroUsize,
+    /// How long a heavy request is waited for (ms) before it is answered 503. Its work runs
+    /// on and keeps its place among `heavy_requests` until it ends.
+    pub heavy_timeout_ms: NonZeroU64,
+    /// Event streams (`/api/v1/events`) open at once; one more is answered 503.
+    pub event_streams: NonZeroUsize,
+    /// Origins (`https://host[:port]`) whose pages may call the API (CORS); empty: no CORS
+    /// headers, so only pages served by the mapper itself can read its answers.
+    pub cors_origins: Vec<CorsOrigin>,
+}
+
+impl Default for HttpConfig {
+    fn default() -> Self {
+        HttpConfig {
+            heavy_requests: NonZeroUsize::new(4).expect("nonzero"),
+            heavy_timeout_ms: NonZeroU64::new(10_000).expect("nonzero"),
+            event_streams: NonZeroUsize::new(64).expect("nonzero"),
+            cors_origins: Vec::new(),
+        }
+    }
+}
+
+/// A web origin as browsers send it in `Origin`: scheme, host and optional port, no path.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub struct CorsOrigin(String);
+
+impl CorsOrigin {
+    /// The origin as written.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl TryFrom<String> for CorsOrigin {
+    type Error = String;
+
+    fn try_from(origin: String) -> Result<Self, String> {
+        let host = origin
+            .strip_prefix("https://")
+            .or_else(|| origin.strip_prefix("http://"));
+        // Browsers send the origin without a path and in lower case: anything else never
+        // matches, so it is refused here rather than silently ignored.
+        let valid = host.is_some_and(|h| {
+            !h.is_empty()
+                && h.bytes()
+                    .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b"-.:[]".contains(&b))
+        });
+        if valid {
+            Ok(CorsOrigin(origin))
+        } else {
+            Err(format!(
+                "cors_origins: {origin:?} is not an origin: want http[s]://host[:port] in lower \
+                 case, without a path or a trailing /"
+            ))
+        }
+    }
+}
+
+impl From<CorsOrigin> for String {
+    fn from(o: CorsOrigin) -> String {
+        o.0
     }
 }
 
@@ -156,6 +236,28 @@ mod tests {
                 ..MapperConfig::default()
             }
         );
+    }
+
+    #[test]
+    fn cors_origins_are_checked_when_read() {
+        let ok: MapperConfig =
+            toml::from_str("[http]\ncors_origins = [\"https://ops.example.org:8443\"]").unwrap();
+        assert_eq!(
+            ok.http.cors_origins[0].as_str(),
+            "https://ops.example.org:8443"
+        );
+        for bad in [
+            "https://ops.example.org/",
+            "ops.example.org",
+            "*",
+            "https://Ops.example.org",
+        ] {
+            let text = format!("[http]\ncors_origins = [{bad:?}]");
+            let e = toml::from_str::<MapperConfig>(&text).unwrap_err();
+            assert!(e.to_string().contains("not an origin"), "{bad}: {e}");
+        }
+        let e = toml::from_str::<MapperConfig>("[http]\nheavy_requests = 0").unwrap_err();
+        assert!(e.to_string().contains("heavy_requests"), "{e}");
     }
 
     #[test]

@@ -107,7 +107,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
-    let app = crate::api::router(shared.clone(), work_tx.clone(), store);
+    let app = crate::api::router(shared.clone(), work_tx.clone(), store, &config);
     let mut stopping = shared.stopping.subscribe();
     let http = tokio::spawn(async move {
         let stopped = async move {

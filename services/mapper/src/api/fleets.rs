@@ -1,7 +1,7 @@
 //! Fleets: which have a map, each one's summary, its robots (live), a robot's trajectory,
 //! and the operator's re-optimization.
 
-use super::service::authorized;
+use super::access::authorized;
 use super::{Api, ApiError, Reply};
 use crate::state::{FleetView, RobotView};
 use crate::worker::{OptimizeError, Work};
@@ -207,7 +207,7 @@ pub(super) async fn trajectory_tum(
     responses(
         (status = 200, description = "The optimizer's report", body = OptimizeReport),
         (status = 401, description = "No valid bearer token", body = String),
-        (status = 403, description = "Write routes are off", body = String),
+        (status = 403, description = "Write routes are off, or the token only reads", body = String),
         (status = 404, description = "No such fleet, or not solvable yet", body = String),
         (status = 503, description = "The mapper is stopping or busy", body = String),
     ))]
