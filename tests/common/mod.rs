@@ -263,8 +263,9 @@ pub fn spawn_edge_env(
         .expect("levelmap edge starts")
 }
 
-/// The command of an edge service with its config file written.
-fn edge_command(dir: &Path, robot: usize, connect: &str, speed: f64, source: &str) -> Command {
+/// The command of an edge service with its config file written (the partition drill runs its
+/// program and arguments inside a network namespace).
+pub fn edge_command(dir: &Path, robot: usize, connect: &str, speed: f64, source: &str) -> Command {
     let config = dir.join(format!("robot{robot}.toml"));
     std::fs::write(
         &config,
