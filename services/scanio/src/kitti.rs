@@ -16,7 +16,17 @@ pub const DEFAULT_COLUMNS: usize = 2048;
 
 /// Reads a KITTI `.bin` file and organizes it into `columns` azimuth columns.
 pub fn load(path: &Path, columns: usize) -> Result<LoadedScan, LoadError> {
-    let bytes = read_nonempty(path)?;
+    parse(&read_nonempty(path)?, path, columns)
+}
+
+/// Parses the bytes of a KITTI `.bin` file (`path` names it in errors) and organizes them
+/// into `columns` azimuth columns. Empty bytes or a partial point record are errors.
+pub fn parse(bytes: &[u8], path: &Path, columns: usize) -> Result<LoadedScan, LoadError> {
+    if bytes.is_empty() {
+        return Err(LoadError::Empty {
+            path: path.to_owned(),
+        });
+    }
     if bytes.len() % POINT_BYTES != 0 {
         return Err(LoadError::Truncated {
             path: path.to_owned(),

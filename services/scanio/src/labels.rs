@@ -39,7 +39,16 @@ impl Labels {
     /// Reads a `.label` file holding `expected_points` labels; the scheme is detected: every
     /// id below 20 means network training ids.
     pub fn load(path: &Path, expected_points: usize) -> Result<Labels, LoadError> {
-        let bytes = read_nonempty(path)?;
+        Labels::parse(&read_nonempty(path)?, path, expected_points)
+    }
+
+    /// Parses the bytes of a `.label` file (`path` names it in errors), as [`Labels::load`].
+    pub fn parse(bytes: &[u8], path: &Path, expected_points: usize) -> Result<Labels, LoadError> {
+        if bytes.is_empty() {
+            return Err(LoadError::Empty {
+                path: path.to_owned(),
+            });
+        }
         if bytes.len() % 4 != 0 {
             return Err(LoadError::Truncated {
                 path: path.to_owned(),

@@ -24,8 +24,22 @@ fn to_robot_frame(v: [f64; 3]) -> Vector3<f64> {
 
 /// Reads `FILE.3d` and, when present, `FILE.pose` beside it (identity otherwise).
 pub fn load(path: &Path) -> Result<LoadedScan, LoadError> {
-    let bytes = read_nonempty(path)?;
-    let text = std::str::from_utf8(&bytes)
+    let mut scan = parse(&read_nonempty(path)?, path)?;
+    if let Some(pose) = load_pose(&path.with_extension("pose"))? {
+        scan.track = PoseTrack::stationary(pose);
+    }
+    Ok(scan)
+}
+
+/// Parses the bytes of a `.3d` file (`path` names it in errors) into a scan of a standing
+/// robot at the identity pose; [`load`] puts it at its `.pose`.
+pub fn parse(bytes: &[u8], path: &Path) -> Result<LoadedScan, LoadError> {
+    if bytes.is_empty() {
+        return Err(LoadError::Empty {
+            path: path.to_owned(),
+        });
+    }
+    let text = std::str::from_utf8(bytes)
         .map_err(|e| LoadError::invalid(path, format!("not text: {e}")))?;
     let mut xyz_cm = Vec::with_capacity(text.len() / 24);
     for (n, line) in text.lines().enumerate() {
@@ -74,10 +88,9 @@ pub fn load(path: &Path) -> Result<LoadedScan, LoadError> {
             file_index.push(i as u32);
         }
     }
-    let pose = load_pose(&path.with_extension("pose"))?.unwrap_or_else(Isometry3::identity);
     Ok(LoadedScan {
         raw,
-        track: PoseTrack::stationary(pose),
+        track: PoseTrack::stationary(Isometry3::identity()),
         sensor_in_robot: Isometry3::identity(),
         file_index,
     })
@@ -95,6 +108,11 @@ pub fn load_pose(path: &Path) -> Result<Option<Isometry3<f64>>, LoadError> {
             });
         }
     };
+    parse_pose(&text, path).map(Some)
+}
+
+/// Parses the text of a `.pose` file (`path` names it in errors) as [`load_pose`].
+pub fn parse_pose(text: &str, path: &Path) -> Result<Isometry3<f64>, LoadError> {
     let numbers: Result<Vec<f64>, _> = text.split_whitespace().map(|f| f.parse::<f64>()).collect();
     let numbers =
         numbers.map_err(|e| LoadError::invalid(path, format!("expected 6 numbers: {e}")))?;
@@ -121,8 +139,8 @@ pub fn load_pose(path: &Path) -> Result<Option<Isometry3<f64>>, LoadError> {
     let c = Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
     let rotation = Rotation3::from_matrix_unchecked(c * r_3dtk.matrix() * c.transpose());
     let t = to_robot_frame([tx, ty, tz]) / 100.0;
-    Ok(Some(Isometry3::from_parts(
+    Ok(Isometry3::from_parts(
         Translation3::from(t),
         UnitQuaternion::from_rotation_matrix(&rotation),
-    )))
+    ))
 }
