@@ -111,6 +111,23 @@ mod tests {
     use super::*;
 
     #[test]
+    fn parse_takes_whole_point_records() {
+        let path = Path::new("t.bin");
+        let bytes: Vec<u8> = [[5.0f32, 0.1, 1.0, 0.3], [f32::NAN, 0.0, 0.0, 0.0]]
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let scan = parse(&bytes, path, 4).unwrap();
+        assert_eq!((scan.raw.points.len(), scan.raw.columns.len()), (2, 4));
+        assert!(matches!(
+            parse(&bytes[..20], path, 4),
+            Err(LoadError::Truncated { len: 20, .. })
+        ));
+        assert!(matches!(parse(&[], path, 4), Err(LoadError::Empty { .. })));
+    }
+
+    #[test]
     fn columns_are_sorted_bottom_up_and_keep_every_point() {
         let xyz = [
             [5.0, 0.1, 1.0],

@@ -104,3 +104,33 @@ impl Labels {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_reads_the_lower_16_bits_and_wants_a_label_per_point() {
+        let path = Path::new("t.label");
+        let bytes: Vec<u8> = [40u32 | 7 << 16, 10, 1]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let labels = Labels::parse(&bytes, path, 3).unwrap();
+        assert_eq!(labels.ids, [40, 10, 1]);
+        assert_eq!(labels.scheme, LabelScheme::SemanticKitti);
+        assert_eq!(labels.truth(0), GroundTruth::Ground);
+        assert!(matches!(
+            Labels::parse(&bytes, path, 4),
+            Err(LoadError::Invalid { .. })
+        ));
+        assert!(matches!(
+            Labels::parse(&bytes[..5], path, 1),
+            Err(LoadError::Truncated { .. })
+        ));
+        assert!(matches!(
+            Labels::parse(&[], path, 0),
+            Err(LoadError::Empty { .. })
+        ));
+    }
+}

@@ -144,3 +144,43 @@ pub fn parse_pose(text: &str, path: &Path) -> Result<Isometry3<f64>, LoadError> 
         UnitQuaternion::from_rotation_matrix(&rotation),
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_takes_whole_scan_lines_and_the_pose_its_six_numbers() {
+        let path = Path::new("t.3d");
+        // A resolution header, then two lines of 360 points; the first point has no echo.
+        let mut text = String::from("W x H\n0 0 0\n");
+        for i in 1..2 * POINTS_PER_LINE {
+            text.push_str(&format!("{} 10 500\n", i % 90));
+        }
+        let scan = parse(text.as_bytes(), path).unwrap();
+        assert_eq!(scan.raw.columns.len(), POINTS_PER_LINE);
+        assert_eq!(scan.raw.column_points(0).len(), 2);
+        assert!(!scan.raw.points[0].is_valid());
+        // (0, 10, 500) cm: 5 m ahead, 0.1 m up.
+        let p = scan.raw.column_points(0)[1].to_xyz();
+        assert!(
+            (p[0] - 5.0).abs() < 1e-6 && (p[2] - 0.1).abs() < 1e-6,
+            "{p:?}"
+        );
+        assert!(matches!(
+            parse(b"1 2 3\n", path),
+            Err(LoadError::Invalid { .. })
+        ));
+        assert!(matches!(
+            parse(b"1 2 3\nx\n", path),
+            Err(LoadError::Line { line: 2, .. })
+        ));
+
+        let pose = parse_pose("100 0 -200 0 90 0", Path::new("t.pose")).unwrap();
+        // 3DTK (x right, y up, z forward) cm → x forward, y left, z up m.
+        assert!((pose.translation.vector - Vector3::new(-2.0, -1.0, 0.0)).norm() < 1e-12);
+        for bad in ["1 2 3 4 5", "1 2 3 4 5 nan", "1 2 3 4 5 x"] {
+            assert!(parse_pose(bad, Path::new("t.pose")).is_err(), "{bad}");
+        }
+    }
+}
