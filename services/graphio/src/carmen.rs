@@ -380,10 +380,21 @@ impl<'a, 'b> Fields<'a, 'b> {
         }
     }
 
+    /// A count of the fields that follow: never more than the line has, so that the field
+    /// positions computed from counts cannot overflow.
     fn count(&self, i: usize, name: &str) -> Result<usize, String> {
         let text = self.get(i, name)?;
-        text.parse::<usize>()
-            .map_err(|_| format!("{}: {name} (field {i}) is not a count: {text:?}", self.kind))
+        let n = text
+            .parse::<usize>()
+            .map_err(|_| format!("{}: {name} (field {i}) is not a count: {text:?}", self.kind))?;
+        if n > self.fields.len() {
+            return Err(format!(
+                "{}: truncated: {name} (field {i}) is {n}, more than the line's {} fields",
+                self.kind,
+                self.fields.len()
+            ));
+        }
+        Ok(n)
     }
 
     fn pose(&self, i: usize, name: &str) -> Result<Pose2, String> {
@@ -511,6 +522,30 @@ mod tests {
         assert!(message.contains("16 fields, 15 expected"), "{message}");
         let (line, _) = line_error("PARAM robot_front_laser_max inf x 0\n");
         assert_eq!(line, 1);
+    }
+
+    #[test]
+    fn counts_beyond_the_line_are_errors() {
+        // A count near usize::MAX overflowed the field positions computed from it.
+        let max = usize::MAX;
+        for (text, name) in [
+            (format!("FLASER {max} 1.0 2.0\n"), "num_readings"),
+            (
+                format!("ROBOTLASER1 0 0 0 0 0 0 0 {max} 1.0\n"),
+                "num_readings",
+            ),
+            (
+                format!("ROBOTLASER1 0 0 0 0 0 0 0 1 1.0 {max} 0\n"),
+                "num_remissions",
+            ),
+        ] {
+            let (line, message) = line_error(&text);
+            assert_eq!(line, 1);
+            assert!(
+                message.contains("truncated") && message.contains(name),
+                "{message}"
+            );
+        }
     }
 
     #[test]

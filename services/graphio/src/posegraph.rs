@@ -163,7 +163,8 @@ pub fn parse(text: &str, format: GraphFormat) -> Result<GraphFile, (usize, Strin
             to: index[&j],
             measurement: z,
             information,
-            kind: if j == i + 1 {
+            // Checked: i may be i64::MAX (a file's ids are any integers).
+            kind: if i.checked_add(1) == Some(j) {
                 EdgeKind::Odometry
             } else {
                 EdgeKind::LoopClosure
@@ -275,6 +276,21 @@ mod tests {
         );
         assert!(err("EDGE3 0 1\n").1.contains("unknown element"));
         assert_eq!(err("EDGE_SE2 0 x 1 0 0 1 0 0 1 0 1\n").0, 1);
+    }
+
+    #[test]
+    fn extreme_vertex_ids_are_ids() {
+        // i64::MAX + 1 overflowed (found by fuzz/, target g2o).
+        let text = "EDGE_SE2 9223372036854775807 -9223372036854775808 1 0 0 1 0 0 1 0 1\n";
+        let file = parse(text, GraphFormat::G2o).unwrap();
+        assert_eq!(file.ids, [i64::MIN, i64::MAX]);
+        assert_eq!(file.graph.edges[0].kind, EdgeKind::LoopClosure);
+        let toro = parse(
+            "EDGE2 9223372036854775806 9223372036854775807 1 0 0 1 0 1 1 0 0\n",
+            GraphFormat::Toro,
+        )
+        .unwrap();
+        assert_eq!(toro.graph.edges[0].kind, EdgeKind::Odometry);
     }
 
     #[test]

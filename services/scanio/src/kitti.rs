@@ -16,7 +16,17 @@ pub const DEFAULT_COLUMNS: usize = 2048;
 
 /// Reads a KITTI `.bin` file and organizes it into `columns` azimuth columns.
 pub fn load(path: &Path, columns: usize) -> Result<LoadedScan, LoadError> {
-    let bytes = read_nonempty(path)?;
+    parse(&read_nonempty(path)?, path, columns)
+}
+
+/// Parses the bytes of a KITTI `.bin` file (`path` names it in errors) and organizes them
+/// into `columns` azimuth columns. Empty bytes or a partial point record are errors.
+pub fn parse(bytes: &[u8], path: &Path, columns: usize) -> Result<LoadedScan, LoadError> {
+    if bytes.is_empty() {
+        return Err(LoadError::Empty {
+            path: path.to_owned(),
+        });
+    }
     if bytes.len() % POINT_BYTES != 0 {
         return Err(LoadError::Truncated {
             path: path.to_owned(),
@@ -99,6 +109,23 @@ pub fn organize(xyz: &[[f32; 3]], columns: usize) -> (Scan3d, Vec<u32>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parse_takes_whole_point_records() {
+        let path = Path::new("t.bin");
+        let bytes: Vec<u8> = [[5.0f32, 0.1, 1.0, 0.3], [f32::NAN, 0.0, 0.0, 0.0]]
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let scan = parse(&bytes, path, 4).unwrap();
+        assert_eq!((scan.raw.points.len(), scan.raw.columns.len()), (2, 4));
+        assert!(matches!(
+            parse(&bytes[..20], path, 4),
+            Err(LoadError::Truncated { len: 20, .. })
+        ));
+        assert!(matches!(parse(&[], path, 4), Err(LoadError::Empty { .. })));
+    }
 
     #[test]
     fn columns_are_sorted_bottom_up_and_keep_every_point() {

@@ -39,7 +39,16 @@ impl Labels {
     /// Reads a `.label` file holding `expected_points` labels; the scheme is detected: every
     /// id below 20 means network training ids.
     pub fn load(path: &Path, expected_points: usize) -> Result<Labels, LoadError> {
-        let bytes = read_nonempty(path)?;
+        Labels::parse(&read_nonempty(path)?, path, expected_points)
+    }
+
+    /// Parses the bytes of a `.label` file (`path` names it in errors), as [`Labels::load`].
+    pub fn parse(bytes: &[u8], path: &Path, expected_points: usize) -> Result<Labels, LoadError> {
+        if bytes.is_empty() {
+            return Err(LoadError::Empty {
+                path: path.to_owned(),
+            });
+        }
         if bytes.len() % 4 != 0 {
             return Err(LoadError::Truncated {
                 path: path.to_owned(),
@@ -93,5 +102,35 @@ impl Labels {
                 _ => GroundTruth::NotGround,
             },
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_reads_the_lower_16_bits_and_wants_a_label_per_point() {
+        let path = Path::new("t.label");
+        let bytes: Vec<u8> = [40u32 | 7 << 16, 10, 1]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let labels = Labels::parse(&bytes, path, 3).unwrap();
+        assert_eq!(labels.ids, [40, 10, 1]);
+        assert_eq!(labels.scheme, LabelScheme::SemanticKitti);
+        assert_eq!(labels.truth(0), GroundTruth::Ground);
+        assert!(matches!(
+            Labels::parse(&bytes, path, 4),
+            Err(LoadError::Invalid { .. })
+        ));
+        assert!(matches!(
+            Labels::parse(&bytes[..5], path, 1),
+            Err(LoadError::Truncated { .. })
+        ));
+        assert!(matches!(
+            Labels::parse(&[], path, 0),
+            Err(LoadError::Empty { .. })
+        ));
     }
 }

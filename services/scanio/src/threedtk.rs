@@ -24,8 +24,22 @@ fn to_robot_frame(v: [f64; 3]) -> Vector3<f64> {
 
 /// Reads `FILE.3d` and, when present, `FILE.pose` beside it (identity otherwise).
 pub fn load(path: &Path) -> Result<LoadedScan, LoadError> {
-    let bytes = read_nonempty(path)?;
-    let text = std::str::from_utf8(&bytes)
+    let mut scan = parse(&read_nonempty(path)?, path)?;
+    if let Some(pose) = load_pose(&path.with_extension("pose"))? {
+        scan.track = PoseTrack::stationary(pose);
+    }
+    Ok(scan)
+}
+
+/// Parses the bytes of a `.3d` file (`path` names it in errors) into a scan of a standing
+/// robot at the identity pose; [`load`] puts it at its `.pose`.
+pub fn parse(bytes: &[u8], path: &Path) -> Result<LoadedScan, LoadError> {
+    if bytes.is_empty() {
+        return Err(LoadError::Empty {
+            path: path.to_owned(),
+        });
+    }
+    let text = std::str::from_utf8(bytes)
         .map_err(|e| LoadError::invalid(path, format!("not text: {e}")))?;
     let mut xyz_cm = Vec::with_capacity(text.len() / 24);
     for (n, line) in text.lines().enumerate() {
@@ -74,10 +88,9 @@ pub fn load(path: &Path) -> Result<LoadedScan, LoadError> {
             file_index.push(i as u32);
         }
     }
-    let pose = load_pose(&path.with_extension("pose"))?.unwrap_or_else(Isometry3::identity);
     Ok(LoadedScan {
         raw,
-        track: PoseTrack::stationary(pose),
+        track: PoseTrack::stationary(Isometry3::identity()),
         sensor_in_robot: Isometry3::identity(),
         file_index,
     })
@@ -95,6 +108,11 @@ pub fn load_pose(path: &Path) -> Result<Option<Isometry3<f64>>, LoadError> {
             });
         }
     };
+    parse_pose(&text, path).map(Some)
+}
+
+/// Parses the text of a `.pose` file (`path` names it in errors) as [`load_pose`].
+pub fn parse_pose(text: &str, path: &Path) -> Result<Isometry3<f64>, LoadError> {
     let numbers: Result<Vec<f64>, _> = text.split_whitespace().map(|f| f.parse::<f64>()).collect();
     let numbers =
         numbers.map_err(|e| LoadError::invalid(path, format!("expected 6 numbers: {e}")))?;
@@ -121,8 +139,48 @@ pub fn load_pose(path: &Path) -> Result<Option<Isometry3<f64>>, LoadError> {
     let c = Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
     let rotation = Rotation3::from_matrix_unchecked(c * r_3dtk.matrix() * c.transpose());
     let t = to_robot_frame([tx, ty, tz]) / 100.0;
-    Ok(Some(Isometry3::from_parts(
+    Ok(Isometry3::from_parts(
         Translation3::from(t),
         UnitQuaternion::from_rotation_matrix(&rotation),
-    )))
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_takes_whole_scan_lines_and_the_pose_its_six_numbers() {
+        let path = Path::new("t.3d");
+        // A resolution header, then two lines of 360 points; the first point has no echo.
+        let mut text = String::from("W x H\n0 0 0\n");
+        for i in 1..2 * POINTS_PER_LINE {
+            text.push_str(&format!("{} 10 500\n", i % 90));
+        }
+        let scan = parse(text.as_bytes(), path).unwrap();
+        assert_eq!(scan.raw.columns.len(), POINTS_PER_LINE);
+        assert_eq!(scan.raw.column_points(0).len(), 2);
+        assert!(!scan.raw.points[0].is_valid());
+        // (0, 10, 500) cm: 5 m ahead, 0.1 m up.
+        let p = scan.raw.column_points(0)[1].to_xyz();
+        assert!(
+            (p[0] - 5.0).abs() < 1e-6 && (p[2] - 0.1).abs() < 1e-6,
+            "{p:?}"
+        );
+        assert!(matches!(
+            parse(b"1 2 3\n", path),
+            Err(LoadError::Invalid { .. })
+        ));
+        assert!(matches!(
+            parse(b"1 2 3\nx\n", path),
+            Err(LoadError::Line { line: 2, .. })
+        ));
+
+        let pose = parse_pose("100 0 -200 0 90 0", Path::new("t.pose")).unwrap();
+        // 3DTK (x right, y up, z forward) cm → x forward, y left, z up m.
+        assert!((pose.translation.vector - Vector3::new(-2.0, -1.0, 0.0)).norm() < 1e-12);
+        for bad in ["1 2 3 4 5", "1 2 3 4 5 nan", "1 2 3 4 5 x"] {
+            assert!(parse_pose(bad, Path::new("t.pose")).is_err(), "{bad}");
+        }
+    }
 }
