@@ -27,7 +27,7 @@ pub fn parse(bytes: &[u8], path: &Path, columns: usize) -> Result<LoadedScan, Lo
             path: path.to_owned(),
         });
     }
-    if bytes.len() % POINT_BYTES != 0 {
+    if !bytes.len().is_multiple_of(POINT_BYTES) {
         return Err(LoadError::Truncated {
             path: path.to_owned(),
             len: bytes.len(),

@@ -49,7 +49,7 @@ impl Labels {
                 path: path.to_owned(),
             });
         }
-        if bytes.len() % 4 != 0 {
+        if !bytes.len().is_multiple_of(4) {
             return Err(LoadError::Truncated {
                 path: path.to_owned(),
                 len: bytes.len(),
