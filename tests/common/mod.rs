@@ -118,12 +118,19 @@ impl MapperProcess {
 
     /// A mapper listening for robots on `zenoh` (an endpoint the robots may already dial).
     pub fn start_on(dir: &Path, zenoh: String) -> MapperProcess {
+        let table = format!("mode = \"router\"\nlisten = [{zenoh:?}]\n");
+        Self::start_with_zenoh(dir, zenoh, &table)
+    }
+
+    /// A mapper whose `[zenoh]` table (with any subtables) is `zenoh_toml`, listening for
+    /// robots on `zenoh`.
+    pub fn start_with_zenoh(dir: &Path, zenoh: String, zenoh_toml: &str) -> MapperProcess {
         let http = format!("127.0.0.1:{}", free_port());
         let config = dir.join("mapper.toml");
         std::fs::write(
             &config,
             format!(
-                "http_listen = {http:?}\nstore_path = {:?}\n[zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\n",
+                "http_listen = {http:?}\nstore_path = {:?}\n[zenoh]\n{zenoh_toml}",
                 dir.join("mapper.redb")
             ),
         )
@@ -328,7 +335,7 @@ pub async fn in_process_mapper(
     .await
     .expect("mapper starts");
     let session = wire::session::SessionConfig::client(&zenoh)
-        .open()
+        .open(wire::session::Role::Client)
         .await
         .expect("client session");
     let http = mapper.http_addr.to_string();

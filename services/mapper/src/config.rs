@@ -36,7 +36,7 @@ pub struct MapperConfig {
 impl Default for MapperConfig {
     fn default() -> Self {
         MapperConfig {
-            zenoh: SessionConfig::router("tcp/0.0.0.0:7447"),
+            zenoh: SessionConfig::default(),
             http_listen: "127.0.0.1:8080".into(),
             store_path: PathBuf::from("levelmap-mapper.redb"),
             fleets: vec!["park".into()],
