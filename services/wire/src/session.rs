@@ -128,7 +128,7 @@ impl SessionConfig {
     pub fn to_zenoh(&self, role: Role) -> anyhow::Result<zenoh::Config> {
         let mut config = match &self.config_file {
             Some(path) => zenoh::Config::from_file(path)
-                .map_err(|e| anyhow!("[zenoh] config_file {}: {e}", path.display()))?,
+                .map_err(|e| anyhow!("[zenoh] config_file {}: {}", path.display(), one_line(e)))?,
             None => zenoh::Config::default(),
         };
         let zenoh_default = zenoh::Config::default();
@@ -137,6 +137,11 @@ impl SessionConfig {
                 && config.get_json(key).ok() != zenoh_default.get_json(key).ok()
         };
 
+        if let Some(mode) = &self.mode
+            && !["router", "peer", "client"].contains(&mode.as_str())
+        {
+            bail!("[zenoh] mode {mode:?}: one of \"router\", \"peer\", \"client\"");
+        }
         let mode = match (&self.mode, file_sets(&config, "mode")) {
             (Some(mode), _) => Some(mode.clone()),
             (None, true) => None,
@@ -224,9 +229,13 @@ impl SessionConfig {
     pub async fn open(&self, role: Role) -> anyhow::Result<zenoh::Session> {
         let config = self.to_zenoh(role)?;
         let mode = get(&config, "mode").unwrap_or_default();
-        zenoh::open(config)
-            .await
-            .map_err(|e| anyhow!("zenoh session ({} mode): {e}", mode.trim_matches('"')))
+        zenoh::open(config).await.map_err(|e| {
+            anyhow!(
+                "zenoh session ({} mode): {}",
+                mode.trim_matches('"'),
+                one_line(e)
+            )
+        })
     }
 }
 
@@ -240,7 +249,21 @@ fn json<T: Serialize + ?Sized>(value: &T) -> String {
 fn insert_json(config: &mut zenoh::Config, key: &str, value: &str) -> anyhow::Result<()> {
     config
         .insert_json5(key, value)
-        .map_err(|e| anyhow!("zenoh config {key} = {value}: {e}"))
+        .map_err(|e| anyhow!("zenoh config {key} = {value}: {}", one_line(e)))
+}
+
+/// A Zenoh error on one line, without the source location Zenoh appends (" at
+/// /…/file.rs:N.").
+fn one_line(e: impl std::fmt::Display) -> String {
+    let text = e
+        .to_string()
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
+    match text.rfind(" at ") {
+        Some(at) if text.ends_with('.') && text[at..].contains(".rs:") => text[..at].to_owned(),
+        _ => text,
+    }
 }
 
 fn insert(config: &mut zenoh::Config, key: &str, value: &str) -> anyhow::Result<()> {
@@ -443,6 +466,52 @@ mod tests {
     }
 
     #[test]
+    fn the_deploy_files_state_the_session_defaults_in_their_comments() {
+        for (file, role) in [("edge.toml", Role::Client), ("mapper.toml", Role::Router)] {
+            let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../deploy")
+                .join(file);
+            let text = std::fs::read_to_string(&path).unwrap();
+            // The [zenoh] table with its commented session keys set as written.
+            let mut section = "";
+            let stated: String = text
+                .lines()
+                .map(|line| {
+                    if line.starts_with('[') {
+                        section = line;
+                    }
+                    let key = line.trim_start_matches("# ").split(" = ").next().unwrap();
+                    let session_key =
+                        ["mode", "listen", "connect", "multicast_scouting"].contains(&key);
+                    match line.strip_prefix("# ") {
+                        Some(setting) if section == "[zenoh]" && session_key => setting,
+                        _ => line,
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join("\n");
+            let table: toml::Table = toml::from_str(&stated).unwrap();
+            let stated: SessionConfig = table["zenoh"].clone().try_into().unwrap();
+            assert!(
+                stated.mode.is_some() && stated.multicast_scouting.is_some(),
+                "{file}"
+            );
+            let (stated, default) = (
+                stated.to_zenoh(role).unwrap(),
+                SessionConfig::default().to_zenoh(role).unwrap(),
+            );
+            for key in [
+                "mode",
+                "listen/endpoints",
+                "connect/endpoints",
+                "scouting/multicast/enabled",
+            ] {
+                assert_eq!(value(&stated, key), value(&default, key), "{file}: {key}");
+            }
+        }
+    }
+
+    #[test]
     fn the_file_sets_what_the_table_leaves_unset_and_the_table_wins() {
         let dir = Dir::new("merge");
         let file = dir.file(
@@ -612,6 +681,26 @@ mod tests {
         assert!(
             e.starts_with("[zenoh] config_file ") && e.contains("none.json5"),
             "{e}"
+        );
+        let broken = dir.file("broken.json5", "{ mode: \"router\",\n");
+        let e = error(
+            &SessionConfig {
+                config_file: Some(broken),
+                ..SessionConfig::default()
+            },
+            Role::Router,
+        );
+        assert!(
+            e.starts_with("[zenoh] config_file ") && !e.contains(".rs:"),
+            "{e}"
+        );
+        let typo = SessionConfig {
+            mode: Some("routr".into()),
+            ..SessionConfig::default()
+        };
+        assert_eq!(
+            error(&typo, Role::Router),
+            r#"[zenoh] mode "routr": one of "router", "peer", "client""#
         );
     }
 }
