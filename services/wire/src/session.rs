@@ -252,6 +252,16 @@ fn insert_json(config: &mut zenoh::Config, key: &str, value: &str) -> anyhow::Re
         .map_err(|e| anyhow!("zenoh config {key} = {value}: {}", one_line(e)))
 }
 
+fn insert(config: &mut zenoh::Config, key: &str, value: &str) -> anyhow::Result<()> {
+    insert_json(config, key, &json(value))
+}
+
+fn get(config: &zenoh::Config, key: &str) -> anyhow::Result<String> {
+    config
+        .get_json(key)
+        .map_err(|e| anyhow!("zenoh config {key}: {e}"))
+}
+
 /// A Zenoh error on one line, without the source location Zenoh appends (" at
 /// /…/file.rs:N.").
 fn one_line(e: impl std::fmt::Display) -> String {
@@ -264,16 +274,6 @@ fn one_line(e: impl std::fmt::Display) -> String {
         Some(at) if text.ends_with('.') && text[at..].contains(".rs:") => text[..at].to_owned(),
         _ => text,
     }
-}
-
-fn insert(config: &mut zenoh::Config, key: &str, value: &str) -> anyhow::Result<()> {
-    insert_json(config, key, &json(value))
-}
-
-fn get(config: &zenoh::Config, key: &str) -> anyhow::Result<String> {
-    config
-        .get_json(key)
-        .map_err(|e| anyhow!("zenoh config {key}: {e}"))
 }
 
 /// The effective TLS settings hold together and every file they name is readable PEM of the
