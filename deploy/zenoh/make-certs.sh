@@ -22,6 +22,9 @@
 #                          robot checks the host of its tls/HOST:PORT endpoint against them)
 #   LEVELMAP_LISTEN        the router's endpoint (default tls/0.0.0.0:7447)
 #   LEVELMAP_CERT_DAYS     validity of new certificates in days (default 825)
+#   LEVELMAP_CERT_DIR      the folder router.json5 names the CA and mapper files in (default
+#                          OUT_DIR, absolute): where the mapper will read them, when the
+#                          files are made on another machine
 #
 # Run again with more robots: the CA and the certificates already in OUT_DIR are kept, the
 # missing ones are made, and router.json5 is written anew for exactly the robots named (one
@@ -60,6 +63,7 @@ done
 mkdir -p "$out"
 out="$(cd "$out" && pwd)" # router.json5 names its files by absolute path
 days="${LEVELMAP_CERT_DAYS:-825}"
+cert_dir="${LEVELMAP_CERT_DIR:-$out}"
 listen="${LEVELMAP_LISTEN:-tls/0.0.0.0:7447}"
 umask 077 # keys readable by their owner only
 work="$(mktemp -d)"
@@ -153,9 +157,9 @@ cat >"$out/router.json5" <<EOF
   transport: {
     link: {
       tls: {
-        root_ca_certificate: "$out/ca.pem",
-        listen_certificate: "$out/mapper.pem",
-        listen_private_key: "$out/mapper.key",
+        root_ca_certificate: "$cert_dir/ca.pem",
+        listen_certificate: "$cert_dir/mapper.pem",
+        listen_private_key: "$cert_dir/mapper.key",
         // Every client must present a certificate signed by ca.pem: its common name is the
         // subject of the access-control list.
         enable_mtls: true,
