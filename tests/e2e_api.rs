@@ -1,14 +1,21 @@
 //! The HTTP API over a real mapper fed real nodes over Zenoh: every route answers in the
 //! format users' tools read (JSON, TUM, g2o, PNG, PGM + YAML for map_server, GeoJSON), a
-//! node's 3D cloud is served when it came with one, and write routes need the token.
+//! node's 3D cloud is served when it came with one, reading needs the read (or write) token
+//! and write routes the write token.
 
 mod common;
 
 use common::*;
-use std::time::Duration;
-use wire::Message;
 
+/// The write token (it reads too).
 const TOKEN: &str = "s3cret";
+/// The read token: every `/api` route but `/api/v1/auth` needs one of the two.
+const READ: &str = "r3ad-only";
+
+/// GET with the read token: (status, body).
+fn read(http: &str, path: &str) -> Option<(u16, String)> {
+    http_get_with(http, path, Some(READ)).map(|a| (a.status, a.body))
+}
 
 /// POST with an optional bearer token: the status.
 fn http_post(addr: &str, path: &str, token: Option<&str>) -> u16 {
@@ -22,37 +29,32 @@ fn http_post(addr: &str, path: &str, token: Option<&str>) -> u16 {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_route_answers_in_its_format() {
     let dir = temp_dir("api");
-    let (mapper, session, http) = in_process_mapper(&dir, TOKEN).await;
-    let key = wire::node_key("park", "robot0").unwrap();
+    let config = mapper::MapperConfig {
+        token: TOKEN.into(),
+        read_token: READ.into(),
+        ..Default::default()
+    };
+    let (mapper, session, http) = in_process_mapper_with(&dir, config).await;
     let mut nodes = real_nodes(3);
     // Nodes 0 and 1 come with their segmented cloud, node 2 without.
     let cloud = nodes[1].cloud.clone().expect("a cloud");
     nodes[2].cloud = None;
-    // Re-sent until all are in, as the edge does.
-    loop {
-        for n in &nodes {
-            session.put(key.clone(), n.encode_to_vec()).await.unwrap();
-        }
-        tokio::time::sleep(Duration::from_millis(300)).await;
-        let h = http.clone();
-        let seqs = tokio::task::spawn_blocking(move || node_seqs(&h, "park", "robot0"))
-            .await
-            .unwrap();
-        if seqs.len() == 3 {
-            break;
-        }
-    }
+    put_until_mapped(&session, &http, Some(READ), &nodes).await;
     let h = http.clone();
-    tokio::task::spawn_blocking(move || check_routes(&h, &cloud))
-        .await
-        .unwrap();
+    tokio::task::spawn_blocking(move || {
+        check_routes(&h, &cloud);
+        check_tokens(&h);
+    })
+    .await
+    .unwrap();
     session.close().await.unwrap();
     mapper.stop().await.unwrap();
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// Each route of the document answers: nothing falls through to the router's own 404 (an
-/// empty body) or 405. The event stream, which never ends, is left out.
+/// Each route of the document answers, to the read token: nothing falls through to the
+/// router's own 404 (an empty body) or 405, nothing is refused. The event stream, which never
+/// ends, is left out.
 fn every_documented_route_is_served(http: &str, doc: &common::openapi::OpenApiDoc) {
     let ops = doc.operations();
     assert!(ops.len() >= 23, "{} operations documented", ops.len());
@@ -66,7 +68,7 @@ fn every_documented_route_is_served(http: &str, doc: &common::openapi::OpenApiDo
             .replace("{node}", "0")
             .replace("{file}", "style.css");
         let (status, body) = match method.as_str() {
-            "get" => http_get(http, &path).unwrap_or_else(|| panic!("GET {path}: no answer")),
+            "get" => read(http, &path).unwrap_or_else(|| panic!("GET {path}: no answer")),
             "post" => (http_post(http, &path, None), String::from("(not read)")),
             other => panic!("{other} {template}: a method the test does not know"),
         };
@@ -74,18 +76,22 @@ fn every_documented_route_is_served(http: &str, doc: &common::openapi::OpenApiDo
             status != 405 && !(status == 404 && body.is_empty()),
             "{method} {template} is documented but not served ({status})"
         );
+        assert!(
+            method == "post" || status != 401,
+            "GET {template} refuses the read token"
+        );
     }
 }
 
 fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
     let base = "/api/v1/fleets/park";
     let get = |path: &str| {
-        let (status, body) = http_get(http, path).unwrap_or_else(|| panic!("{path}: no answer"));
+        let (status, body) = read(http, path).unwrap_or_else(|| panic!("{path}: no answer"));
         assert_eq!(status, 200, "{path}: {body}");
         body
     };
     // Each JSON answer is checked against the schema its route documents.
-    let doc = common::openapi::OpenApiDoc::fetch(http);
+    let doc = common::openapi::OpenApiDoc::fetch_with(http, Some(READ));
     let json = |path: &str| -> serde_json::Value {
         let value = serde_json::from_str(&get(path)).unwrap_or_else(|e| panic!("{path}: {e}"));
         doc.check_json(path, &value);
@@ -132,13 +138,13 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
         }
     }
     assert_eq!(
-        http_get(http, &format!("{base}/covariances?nodes=7"))
+        read(http, &format!("{base}/covariances?nodes=7"))
             .unwrap()
             .0,
         404
     );
     assert_eq!(
-        http_get(http, &format!("{base}/covariances?nodes=x"))
+        read(http, &format!("{base}/covariances?nodes=x"))
             .unwrap()
             .0,
         400
@@ -146,12 +152,9 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
     let node = json(&format!("{base}/nodes/1"));
     assert_eq!(node["node_seq"], 1);
     assert!(!node["scan"]["range_m"].as_array().unwrap().is_empty());
-    assert_eq!(http_get(http, &format!("{base}/nodes/99")).unwrap().0, 404);
+    assert_eq!(read(http, &format!("{base}/nodes/99")).unwrap().0, 404);
     check_clouds(http, &node, sent_cloud);
-    assert_eq!(
-        http_get(http, "/api/v1/fleets/nowhere/summary").unwrap().0,
-        404
-    );
+    assert_eq!(read(http, "/api/v1/fleets/nowhere/summary").unwrap().0, 404);
 
     // TUM: a comment line, then `t x y z qx qy qz qw` per node.
     let tum = get(&format!("{base}/robots/robot0/trajectory.tum"));
@@ -171,10 +174,10 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
         yaml.contains("image: map.pgm") && yaml.contains("resolution:"),
         "{yaml}"
     );
-    let pgm = http_get(http, &format!("{base}/map.pgm")).unwrap();
+    let pgm = read(http, &format!("{base}/map.pgm")).unwrap();
     assert_eq!(pgm.0, 200);
     assert!(pgm.1.starts_with("P5"), "PGM header");
-    let png = http_get(http, &format!("{base}/map.png")).unwrap();
+    let png = read(http, &format!("{base}/map.png")).unwrap();
     assert_eq!(png.0, 200);
     assert!(png.1.as_bytes().starts_with(b"\x89PNG") || png.1.contains("PNG"));
     // Where the PNG lies: a positive cell size and a grid of cells.
@@ -212,18 +215,16 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
         "{coarse}"
     );
     assert_eq!(
-        http_get(http, &format!("{base}/map.png?bbox=1,2,3"))
-            .unwrap()
-            .0,
+        read(http, &format!("{base}/map.png?bbox=1,2,3")).unwrap().0,
         400
     );
     // The dashboard at / and its modules under /web/.
-    let page = http_get(http, "/").unwrap();
+    let page = read(http, "/").unwrap();
     assert_eq!(page.0, 200);
     assert!(page.1.contains("/web/app.js"), "the page loads its module");
-    assert_eq!(http_get(http, "/web/app.js").unwrap().0, 200);
-    assert_eq!(http_get(http, "/web/cloud.js").unwrap().0, 200);
-    assert_eq!(http_get(http, "/web/nope.js").unwrap().0, 404);
+    assert_eq!(read(http, "/web/app.js").unwrap().0, 200);
+    assert_eq!(read(http, "/web/cloud.js").unwrap().0, 200);
+    assert_eq!(read(http, "/web/nope.js").unwrap().0, 404);
     // GeoJSON in WGS84 near the simulated park's datum (lon 9.71, lat 52.39).
     let geo = json(&format!("{base}/map.geojson"));
     assert_eq!(geo["type"], "FeatureCollection");
@@ -235,15 +236,52 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
     assert!(openapi["paths"]["/api/v1/fleets/{fleet}/summary"].is_object());
     assert!(openapi["paths"]["/api/v1/fleets/{fleet}/nodes/{node}/cloud"].is_object());
     assert!(get("/metrics").contains("levelmap_nodes_accepted_total 3"));
-    // Write routes need the token.
-    let optimize = format!("{base}/optimize");
-    assert_eq!(http_post(http, &optimize, None), 401);
-    assert_eq!(http_post(http, &optimize, Some("wrong")), 401);
-    assert_eq!(http_post(http, &optimize, Some(TOKEN)), 200);
-    // The token can be checked without a 401.
-    let auth = json("/api/v1/auth");
-    assert_eq!(auth["write_routes"], true);
-    assert_eq!(auth["authorized"], false, "{auth}");
+}
+
+/// Reading needs the read or the write token (401 with `WWW-Authenticate: Bearer` without);
+/// writing needs the write token; the probes, the metrics, the page and the token check are
+/// open.
+fn check_tokens(http: &str) {
+    let summary = "/api/v1/fleets/park/summary";
+    for token in [None, Some("wrong"), Some(&READ[1..])] {
+        let a = http_get_with(http, summary, token).unwrap();
+        assert_eq!(a.status, 401, "{token:?}");
+        assert_eq!(
+            a.header("www-authenticate"),
+            Some("Bearer realm=\"levelmap\"")
+        );
+    }
+    for token in [READ, TOKEN] {
+        assert_eq!(
+            http_get_with(http, summary, Some(token)).unwrap().status,
+            200
+        );
+    }
+    for open in ["/healthz", "/metrics", "/", "/web/app.js", "/api/v1/auth"] {
+        assert_eq!(http_get(http, open).unwrap().0, 200, "{open}");
+    }
+    let optimize = "/api/v1/fleets/park/optimize";
+    assert_eq!(http_post(http, optimize, None), 401);
+    assert_eq!(http_post(http, optimize, Some("wrong")), 401);
+    assert_eq!(http_post(http, optimize, Some(READ)), 403);
+    assert_eq!(http_post(http, optimize, Some(TOKEN)), 200);
+    // A page finds out what it needs without meeting a 401.
+    let auth = get_json(http, "/api/v1/auth").unwrap();
+    assert_eq!(
+        (
+            &auth["read_required"],
+            &auth["read"],
+            &auth["write_routes"],
+            &auth["authorized"]
+        ),
+        (&true.into(), &false.into(), &true.into(), &false.into()),
+        "{auth}"
+    );
+    let auth = get_json_with(http, "/api/v1/auth", Some(READ)).unwrap();
+    assert_eq!(
+        (&auth["read"], &auth["authorized"]),
+        (&true.into(), &false.into())
+    );
 }
 
 /// Node 1's cloud as sent (to the centimetre, in the leveled frame, classes 1..3); node 2 came
@@ -251,7 +289,7 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
 fn check_clouds(http: &str, node1: &serde_json::Value, sent: &wire::v1::SegmentedCloud) {
     let base = "/api/v1/fleets/park/nodes";
     assert_eq!(node1["cloud"], true, "{node1}");
-    let (status, body) = http_get(http, &format!("{base}/1/cloud")).unwrap();
+    let (status, body) = read(http, &format!("{base}/1/cloud")).unwrap();
     assert_eq!(status, 200, "{body}");
     let c: serde_json::Value = serde_json::from_str(&body).unwrap();
     assert_eq!(
@@ -286,13 +324,13 @@ fn check_clouds(http: &str, node1: &serde_json::Value, sent: &wire::v1::Segmente
         (Some(6000), Some(0.1))
     );
 
-    let node2 = get_json(http, &format!("{base}/2")).unwrap();
+    let node2 = get_json_with(http, &format!("{base}/2"), Some(READ)).unwrap();
     assert_eq!(node2["cloud"], false);
-    let (status, body) = http_get(http, &format!("{base}/2/cloud")).unwrap();
+    let (status, body) = read(http, &format!("{base}/2/cloud")).unwrap();
     assert_eq!(status, 404);
     assert!(
         body.contains("node 2") && body.contains("no 3D cloud"),
         "{body}"
     );
-    assert_eq!(http_get(http, &format!("{base}/99/cloud")).unwrap().0, 404);
+    assert_eq!(read(http, &format!("{base}/99/cloud")).unwrap().0, 404);
 }

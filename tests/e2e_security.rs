@@ -136,17 +136,20 @@ fn forge(mapper: &MapperProcess, certs: &Path) -> Forgery {
     );
     let acks = robot0.declare_subscriber(&ack_key).wait().unwrap();
     let overheard = robot1_ear.declare_subscriber(&ack_key).wait().unwrap();
-    let node = real_nodes(1).remove(0).encode_to_vec();
+    let node = real_nodes(1).remove(0);
     let forged_ack = v1::Ack {
         header: Some(v1::Header::new(FLEET, "robot0", 0, now_ns(), now_ns())),
-        acked_node_seq: 999,
+        acked_node_seq: Some(999),
+        chain_id: node.chain_id,
+        resend_from: None,
     }
     .encode_to_vec();
+    let node = node.encode_to_vec();
     let mut acked = Vec::new();
     let drain = |acked: &mut Vec<u64>| {
         while let Ok(Some(sample)) = acks.try_recv() {
             let ack = wire::decode_ack(&sample.payload().to_bytes()).expect("an ack");
-            acked.push(ack.acked_node_seq);
+            acked.extend(ack.acked_node_seq);
         }
     };
 
@@ -173,7 +176,7 @@ fn forge(mapper: &MapperProcess, certs: &Path) -> Forgery {
     let acks_overheard = std::iter::from_fn(|| overheard.try_recv().ok().flatten())
         .filter(|sample| {
             let ack = wire::decode_ack(&sample.payload().to_bytes()).expect("an ack");
-            ack.acked_node_seq != 999
+            ack.acked_node_seq != Some(999)
         })
         .count();
     Forgery {

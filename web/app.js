@@ -1,22 +1,25 @@
 // levelmap dashboard: the first fleet's map, robots, pose network and node inspector, live
 // from the mapping server's API and its event stream (docs/services.md). This module starts
 // the page; the parts are state.js (what it shows), data.js (the API), grid.js, layer.js and
-// frame.js (the map), sidebar.js (the panels) and input.js (pointer, controls, token).
+// frame.js (the map), sidebar.js (the panels), input.js (pointer, controls), auth.js (the
+// token) and stream.js (the event stream).
 
-import { API, state, note, redraw } from "./state.js";
+import { state, note, redraw } from "./state.js";
 import { findFleet, loadGraph, loadRobots, loadSummary, onEvent, refreshRobots } from "./data.js";
 import { refreshGrid } from "./grid.js";
 import { renderRobots } from "./sidebar.js";
 import "./frame.js"; // sets the frame redraw() draws
-import { checkToken } from "./input.js";
+import "./input.js"; // the map's pointer and the header's controls
+import { ensureToken } from "./auth.js";
+import { streamEvents } from "./stream.js";
 
 async function start() {
   redraw();
-  checkToken().catch(note);
+  // Nothing is read before the page has a token the mapper takes (when it needs one).
+  await ensureToken().catch(note);
   await findFleet();
   state.timings.fleet = performance.now();
-  const events = new EventSource(`${API}/events`);
-  events.onmessage = onEvent;
+  streamEvents(onEvent);
   await Promise.all([loadGraph(), loadRobots(), loadSummary()]).catch(note);
   state.timings.loaded = performance.now();
   refreshGrid();

@@ -7,6 +7,7 @@
 // 2 landmark, 3 overhang).
 
 import { fillList } from "./panel.js";
+import { apiFetch } from "./state.js";
 
 export const CLASSES = [
   { code: 1, name: "ground", colour: "#b59a6a" },
@@ -187,24 +188,24 @@ export class CloudView {
 let view = null;
 let request = 0;
 
-/// Loads and shows a node's cloud in the inspector (`url`: its …/cloud route; null: the node
-/// has none). Resolves to what is shown, `{points, ground, landmark, overhang, source_points,
+/// Loads and shows a node's cloud in the inspector (`path`: its …/cloud route under the API;
+/// null: the node has none). Resolves to what is shown, `{points, ground, landmark, overhang, source_points,
 /// drawn, loadMs, drawMs, shownAt, camera}`, or null when the node has no cloud or another
 /// node was opened meanwhile.
-export async function showCloud(url) {
+export async function showCloud(path) {
   const mine = ++request;
   const box = $("cloud-box");
   const note = $("cloud-note");
   box.hidden = false;
-  box.classList.toggle("empty", !url);
-  if (!url) {
+  box.classList.toggle("empty", !path);
+  if (!path) {
     note.textContent = "not sent by its robot";
     return null;
   }
   note.textContent = "loading…";
   const t0 = performance.now();
-  const r = await fetch(url);
-  if (!r.ok) throw new Error(`${url}: ${r.status} ${(await r.text()).trim()}`);
+  const r = await apiFetch(path);
+  if (!r.ok) throw new Error(`${path}: ${r.status} ${(await r.text()).trim()}`);
   const c = await r.json();
   if (mine !== request) return null;
   view ??= new CloudView($("cloud"));

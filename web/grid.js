@@ -3,13 +3,13 @@
 // the part on screen (and half a screen around) at the cells the zoom can show.
 
 import { visibleBox } from "./view.js";
-import { API, state, view, ctx, throttled } from "./state.js";
+import { apiFetch, state, view, ctx, throttled } from "./state.js";
 
 const GRID_MAX_CELLS = 2048 * 2048;
 const GRID_FINEST_M = 0.1; // the mapper's default cell
 
 async function fetchGrid(query) {
-  const r = await fetch(`${API}/fleets/${state.fleet}/map.png?max_cells=${GRID_MAX_CELLS}${query}`, { cache: "no-store" });
+  const r = await apiFetch(`/fleets/${state.fleet}/map.png?max_cells=${GRID_MAX_CELLS}${query}`, { cache: "no-store" });
   if (!r.ok) throw new Error(`map.png${query}: ${r.status} ${(await r.text()).trim()}`);
   // Where the picture lies comes with it, so it always matches the picture.
   const placement = JSON.parse(r.headers.get("levelmap-grid"));

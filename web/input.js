@@ -1,9 +1,9 @@
 // The page's input: pointer, pinch and wheel on the map (pan, zoom, click a node to inspect
-// it), the status bar under the pointer, the header's toggles, and the bearer token.
+// it), the status bar under the pointer, the header's toggles (the token: auth.js).
 
 import { enuToGeodetic, formatLatLon } from "./geo.js";
-import { API, state, view, $, canvas, note, redraw } from "./state.js";
-import { refreshCovariances, refreshGraph, refreshSummary } from "./data.js";
+import { state, view, $, canvas, note, redraw } from "./state.js";
+import { refreshCovariances } from "./data.js";
 import { refreshGridDetail } from "./grid.js";
 import { inspect } from "./sidebar.js";
 
@@ -149,52 +149,4 @@ $("inspector-close").addEventListener("click", () => {
   state.inspector = null;
   $("inspector").hidden = true;
   redraw();
-});
-
-// The bearer token, kept in this browser. The page asks /auth whether the mapper takes it
-// (no write is tried with a token it refuses) and shows the answer on the token field and
-// the re-optimize button.
-const TOKEN_KEY = "levelmap.token";
-$("token").value = localStorage.getItem(TOKEN_KEY) || "";
-const bearer = () => ({ Authorization: `Bearer ${$("token").value}` });
-
-export async function checkToken() {
-  const r = await fetch(`${API}/auth`, { headers: bearer() });
-  const a = await r.json();
-  state.auth = !a.write_routes ? "off" : a.authorized ? "ok" : $("token").value ? "refused" : "none";
-  document.body.dataset.auth = state.auth;
-  const why = {
-    off: "the mapper has no token: its write routes are off",
-    none: "enter the mapper's bearer token to re-optimize",
-    refused: `token refused: ${a.reason}`,
-    ok: "token accepted",
-  }[state.auth];
-  $("token").title = why;
-  $("optimize").disabled = state.auth !== "ok";
-  $("optimize").title = why;
-  $("optimize-status").textContent = state.auth === "refused" ? "token refused" : state.auth === "off" ? "read-only" : "";
-}
-
-$("token").addEventListener("change", (e) => {
-  localStorage.setItem(TOKEN_KEY, e.target.value);
-  checkToken().catch(note);
-});
-$("optimize").addEventListener("click", async () => {
-  const status = $("optimize-status");
-  if (!state.fleet) return;
-  status.textContent = "solving…";
-  try {
-    const r = await fetch(`${API}/fleets/${state.fleet}/optimize`, { method: "POST", headers: bearer() });
-    if (r.ok) {
-      const rep = await r.json();
-      status.textContent = rep.final_chi2 !== undefined ? `χ² ${rep.final_chi2.toFixed(1)}` : "done";
-      refreshSummary();
-      refreshGraph();
-    } else {
-      status.textContent = `${r.status}: ${(await r.text()).trim()}`;
-      checkToken().catch(note);
-    }
-  } catch (e) {
-    status.textContent = String(e);
-  }
 });

@@ -3,7 +3,7 @@
 
 import { fillList } from "./panel.js";
 import { showCloud } from "./cloud.js";
-import { API, state, $, getJson, redraw } from "./state.js";
+import { state, $, getJson, redraw } from "./state.js";
 
 export function renderSummary() {
   const s = state.summary;
@@ -68,7 +68,7 @@ export async function inspect(id) {
   ]);
   redraw();
   // The segmented 3D cloud (cloud.js): state.inspector.cloud = {points, ground, landmark, overhang, …}.
-  const cloud = await showCloud(n.cloud ? `${API}/fleets/${state.fleet}/nodes/${id}/cloud` : null);
+  const cloud = await showCloud(n.cloud ? `/fleets/${state.fleet}/nodes/${id}/cloud` : null);
   if (state.inspector?.id === id) state.inspector.cloud = cloud;
 }
 

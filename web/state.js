@@ -1,6 +1,6 @@
 // What the page shows and the helpers every part of it uses: the state (window.levelmapState),
-// the camera, the map canvas, the API's JSON, the robots' colours, the node index, redraw and
-// the throttle of refreshes.
+// the camera, the map canvas, the API's requests (with the bearer token) and JSON, the robots'
+// colours, the node index, redraw and the throttle of refreshes.
 
 import { View } from "./view.js";
 
@@ -27,6 +27,7 @@ export const state = {
   events: 0,
   autoFit: true,
   errors: [],
+  auth: null, // the token's standing (auth.js): needed, refused, none, off, read, ok
   cursor: null, // {x, y} map metres under the pointer, with latitude_deg, longitude_deg if the map has a datum
   firstFullFrameMs: null, // performance.now() of the first frame with every node of the summary drawn
   graphLoads: 0,
@@ -63,8 +64,55 @@ export function trackMap() {
   return index.tracks;
 }
 
+// The bearer token the page sends: one the mapper took (auth.js checks a token before it is
+// used), kept in this browser.
+const TOKEN_KEY = "levelmap.token";
+let token = localStorage.getItem(TOKEN_KEY) || "";
+export const sentToken = () => token;
+export function useToken(t) {
+  token = t;
+  localStorage.setItem(TOKEN_KEY, t);
+}
+export const authHeaders = (t = token) => (t ? { Authorization: `Bearer ${t}` } : {});
+
+// On a 401 the page asks for a token (auth.js sets how) and every request waits until one is
+// taken, then goes again with it.
+let askForToken = async () => {
+  throw new Error("the mapper wants a token");
+};
+export function onTokenWanted(ask) {
+  askForToken = ask;
+}
+let tokenWait = null;
+export function tokenWanted() {
+  tokenWait ??= askForToken().finally(() => (tokenWait = null));
+  return tokenWait;
+}
+
+export const sleep = (ms) => new Promise((ok) => setTimeout(ok, ms));
+const BUSY_RETRIES = 3;
+
+// A request to the API with the token. A 503 with Retry-After (the mapper at a limit: busy)
+// is sent again after the wait, a few times; what comes then is the caller's.
+export async function apiFetch(path, init = {}) {
+  for (let busy = 0; ; ) {
+    if (tokenWait) await tokenWait;
+    const r = await fetch(API + path, { ...init, headers: { ...authHeaders(), ...init.headers } });
+    if (r.status === 401) {
+      await tokenWanted();
+      continue;
+    }
+    const retryS = Number(r.headers.get("retry-after"));
+    if (r.status === 503 && retryS > 0 && busy++ < BUSY_RETRIES) {
+      await sleep(retryS * 1000);
+      continue;
+    }
+    return r;
+  }
+}
+
 export async function getJson(path) {
-  const r = await fetch(API + path);
+  const r = await apiFetch(path);
   if (!r.ok) throw new Error(`${path}: ${r.status}`);
   return r.json();
 }

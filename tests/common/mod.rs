@@ -43,22 +43,64 @@ pub fn agent() -> ureq::Agent {
 
 /// GET `path` from `addr`: (status, body); `None` when nothing answers.
 pub fn http_get(addr: &str, path: &str) -> Option<(u16, String)> {
-    let mut response = agent().get(format!("http://{addr}{path}")).call().ok()?;
-    let status = response.status().as_u16();
-    // Bodies as text (a PNG's bytes too, lossily: the tests look at its signature only).
+    http_get_with(addr, path, None).map(|a| (a.status, a.body))
+}
+
+/// An HTTP answer: status, headers and the body as text (a PNG's bytes too, lossily: the
+/// tests look at its signature only).
+pub struct Answer {
+    pub status: u16,
+    pub headers: ureq::http::HeaderMap,
+    pub body: String,
+}
+
+impl Answer {
+    /// A header's value as text.
+    pub fn header(&self, name: &str) -> Option<&str> {
+        self.headers.get(name).and_then(|v| v.to_str().ok())
+    }
+}
+
+/// `method path` with these headers; `None` when nothing answers.
+pub fn http_call(addr: &str, method: &str, path: &str, headers: &[(&str, &str)]) -> Option<Answer> {
+    let mut request = ureq::http::Request::builder()
+        .method(method)
+        .uri(format!("http://{addr}{path}"));
+    for (k, v) in headers {
+        request = request.header(*k, *v);
+    }
+    let mut response = agent().run(request.body(()).ok()?).ok()?;
     let body = response
         .body_mut()
         .with_config()
         .limit(u64::MAX)
         .read_to_vec()
         .ok()?;
-    Some((status, String::from_utf8_lossy(&body).into_owned()))
+    Some(Answer {
+        status: response.status().as_u16(),
+        headers: response.headers().clone(),
+        body: String::from_utf8_lossy(&body).into_owned(),
+    })
+}
+
+/// GET `path` with a bearer token (none: without one).
+pub fn http_get_with(addr: &str, path: &str, token: Option<&str>) -> Option<Answer> {
+    let auth = token.map(|t| format!("Bearer {t}"));
+    let headers: Vec<(&str, &str)> = auth.iter().map(|a| ("Authorization", a.as_str())).collect();
+    http_call(addr, "GET", path, &headers)
 }
 
 /// GET a JSON document, 200 expected.
 pub fn get_json(addr: &str, path: &str) -> Option<Value> {
-    match http_get(addr, path)? {
-        (200, body) => serde_json::from_str(&body).ok(),
+    get_json_with(addr, path, None)
+}
+
+/// GET a JSON document with a bearer token, 200 expected.
+pub fn get_json_with(addr: &str, path: &str, token: Option<&str>) -> Option<Value> {
+    match http_get_with(addr, path, token)? {
+        Answer {
+            status: 200, body, ..
+        } => serde_json::from_str(&body).ok(),
         _ => None,
     }
 }
@@ -86,7 +128,12 @@ pub fn metric(text: &str, series: &str) -> u64 {
 
 /// Node sequence numbers of `robot` in the fleet's graph, in map order.
 pub fn node_seqs(http: &str, fleet: &str, robot: &str) -> Vec<u64> {
-    get_json(http, &format!("/api/v1/fleets/{fleet}/graph"))
+    node_seqs_with(http, fleet, robot, None)
+}
+
+/// [`node_seqs`] with a bearer token.
+pub fn node_seqs_with(http: &str, fleet: &str, robot: &str, token: Option<&str>) -> Vec<u64> {
+    get_json_with(http, &format!("/api/v1/fleets/{fleet}/graph"), token)
         .map(|g| {
             g["nodes"]
                 .as_array()
@@ -118,21 +165,34 @@ impl MapperProcess {
 
     /// A mapper listening for robots on `zenoh` (an endpoint the robots may already dial).
     pub fn start_on(dir: &Path, zenoh: String) -> MapperProcess {
+        Self::start_with(dir, zenoh, "")
+    }
+
+    /// A mapper with more top-level config lines (`fleets = [...]`, a `store_path`, which
+    /// comes after the default one and wins).
+    pub fn start_with(dir: &Path, zenoh: String, extra: &str) -> MapperProcess {
         let table = format!("mode = \"router\"\nlisten = [{zenoh:?}]\n");
-        Self::start_with_zenoh(dir, zenoh, &table)
+        Self::start_configured(dir, zenoh, extra, &table)
     }
 
     /// A mapper whose `[zenoh]` table (with any subtables) is `zenoh_toml`, listening for
     /// robots on `zenoh`.
     pub fn start_with_zenoh(dir: &Path, zenoh: String, zenoh_toml: &str) -> MapperProcess {
+        Self::start_configured(dir, zenoh, "", zenoh_toml)
+    }
+
+    fn start_configured(dir: &Path, zenoh: String, extra: &str, zenoh_toml: &str) -> MapperProcess {
         let http = format!("127.0.0.1:{}", free_port());
         let config = dir.join("mapper.toml");
+        let store = format!("store_path = {:?}\n", dir.join("mapper.redb"));
+        let store = if extra.contains("store_path") {
+            ""
+        } else {
+            &store
+        };
         std::fs::write(
             &config,
-            format!(
-                "http_listen = {http:?}\nstore_path = {:?}\n[zenoh]\n{zenoh_toml}",
-                dir.join("mapper.redb")
-            ),
+            format!("http_listen = {http:?}\n{store}{extra}\n[zenoh]\n{zenoh_toml}",),
         )
         .expect("mapper config");
         Self::spawn(http, zenoh, config)
@@ -189,6 +249,32 @@ pub fn spawn_edge(dir: &Path, robot: usize, connect: &str, duration_s: f64, spee
 
 /// An edge service process with the given `[source.…]` table.
 pub fn spawn_edge_with(dir: &Path, robot: usize, connect: &str, speed: f64, source: &str) -> Child {
+    edge_command(dir, robot, connect, speed, source)
+        .spawn()
+        .expect("levelmap edge starts")
+}
+
+/// A simulated robot's edge service with `LEVELMAP_…` keys in its environment.
+pub fn spawn_edge_env(
+    dir: &Path,
+    robot: usize,
+    connect: &str,
+    (duration_s, speed): (f64, f64),
+    env: &[(&str, &str)],
+) -> Child {
+    let source = format!(
+        "[source.sim]\nloop_index = {}\nduration_s = {duration_s}\n",
+        robot % 3
+    );
+    edge_command(dir, robot, connect, speed, &source)
+        .envs(env.iter().copied())
+        .spawn()
+        .expect("levelmap edge starts")
+}
+
+/// The command of an edge service with its config file written (the partition drill runs its
+/// program and arguments inside a network namespace).
+pub fn edge_command(dir: &Path, robot: usize, connect: &str, speed: f64, source: &str) -> Command {
     let config = dir.join(format!("robot{robot}.toml"));
     std::fs::write(
         &config,
@@ -199,13 +285,13 @@ pub fn spawn_edge_with(dir: &Path, robot: usize, connect: &str, speed: f64, sour
         ),
     )
     .expect("edge config");
-    levelmap()
+    let mut command = levelmap();
+    command
         .args(["edge", "--json", "--config"])
         .arg(&config)
         .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("levelmap edge starts")
+        .stderr(Stdio::null());
+    command
 }
 
 /// Waits for an edge process (at most `timeout`) and returns its JSON report.
@@ -324,13 +410,24 @@ pub async fn in_process_mapper(
     dir: &Path,
     token: &str,
 ) -> (mapper::Running, zenoh::Session, String) {
+    let config = mapper::MapperConfig {
+        token: token.into(),
+        ..Default::default()
+    };
+    in_process_mapper_with(dir, config).await
+}
+
+/// [`in_process_mapper`] with the rest of `config` (its ports and store are chosen here).
+pub async fn in_process_mapper_with(
+    dir: &Path,
+    config: mapper::MapperConfig,
+) -> (mapper::Running, zenoh::Session, String) {
     let zenoh = format!("tcp/127.0.0.1:{}", free_port());
     let mapper = mapper::start(mapper::MapperConfig {
         zenoh: wire::session::SessionConfig::router(&zenoh),
         http_listen: "127.0.0.1:0".into(),
         store_path: dir.join("mapper.redb"),
-        token: token.into(),
-        ..Default::default()
+        ..config
     })
     .await
     .expect("mapper starts");
@@ -340,4 +437,30 @@ pub async fn in_process_mapper(
         .expect("client session");
     let http = mapper.http_addr.to_string();
     (mapper, session, http)
+}
+
+/// Puts `nodes` of robot0 in fleet park, again and again as the edge does, until all are in
+/// the map (read with `token`).
+pub async fn put_until_mapped(
+    session: &zenoh::Session,
+    http: &str,
+    token: Option<&str>,
+    nodes: &[wire::v1::Node],
+) {
+    use wire::Message;
+    let key = wire::node_key("park", "robot0").unwrap();
+    loop {
+        for n in nodes {
+            session.put(key.clone(), n.encode_to_vec()).await.unwrap();
+        }
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let (h, t) = (http.to_owned(), token.map(str::to_owned));
+        let seqs =
+            tokio::task::spawn_blocking(move || node_seqs_with(&h, "park", "robot0", t.as_deref()))
+                .await
+                .unwrap();
+        if seqs.len() == nodes.len() {
+            return;
+        }
+    }
 }

@@ -11,7 +11,13 @@ pub struct OpenApiDoc {
 
 impl OpenApiDoc {
     pub fn fetch(http: &str) -> OpenApiDoc {
-        let doc = super::get_json(http, "/api/v1/openapi.json").expect("the OpenAPI document");
+        Self::fetch_with(http, None)
+    }
+
+    /// The document from a mapper that wants a bearer token to read.
+    pub fn fetch_with(http: &str, token: Option<&str>) -> OpenApiDoc {
+        let doc = super::get_json_with(http, "/api/v1/openapi.json", token)
+            .expect("the OpenAPI document");
         assert!(
             doc["openapi"].as_str().is_some_and(|v| v.starts_with("3.")),
             "{doc}"

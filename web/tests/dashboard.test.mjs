@@ -45,6 +45,9 @@ function freePort() {
 }
 
 const TOKEN = "web-test-token";
+// The demo's mapper needs a token to read: the page asks for it, and the tests enter it in
+// the page's prompt as a user would.
+const READ_TOKEN = "web-test-read-token";
 let demo;
 let demoLog = "";
 let dir;
@@ -52,6 +55,7 @@ let browser;
 let page;
 let base;
 const consoleErrors = [];
+const apiRequests = []; // every API request of the first page, in order: [path, status]
 
 async function waitFor(what, fn, timeoutMs) {
   const end = Date.now() + timeoutMs;
@@ -80,7 +84,7 @@ before(async () => {
     findBinary(),
     ["demo", "--speed", "4", "--duration", "120", "--serve", "--http", `127.0.0.1:${http}`,
       "--zenoh", `tcp/127.0.0.1:${zenoh}`, "--dir", dir],
-    { stdio: ["ignore", "pipe", "pipe"], env: { ...process.env, LEVELMAP_TOKEN: TOKEN } },
+    { stdio: ["ignore", "pipe", "pipe"], env: { ...process.env, LEVELMAP_TOKEN: TOKEN, LEVELMAP_READ_TOKEN: READ_TOKEN } },
   );
   demo.stdout.on("data", (d) => (demoLog += d));
   demo.stderr.on("data", (d) => (demoLog += d));
@@ -96,8 +100,19 @@ before(async () => {
     if (m.type() === "error") consoleErrors.push(m.text());
   });
   page.on("pageerror", (e) => consoleErrors.push(String(e)));
+  page.on("response", (r) => {
+    const url = new URL(r.url());
+    if (url.pathname.startsWith("/api/")) apiRequests.push([url.pathname, r.status()]);
+  });
   await page.goto(`${base}/`);
 });
+
+// Enters `token` in the page's token prompt, as a user would.
+async function enterToken(p, token) {
+  await p.waitForSelector("#token-prompt:not([hidden])", { timeout: 10_000 });
+  await p.fill("#token-prompt-input", token);
+  await p.press("#token-prompt-input", "Enter");
+}
 
 after(async () => {
   await browser?.close();
@@ -113,6 +128,21 @@ const robotPoses = () =>
   page.evaluate(() =>
     Object.fromEntries(Object.values(window.levelmapState.robots).filter((r) => r.pose).map((r) => [r.id, r.pose])),
   );
+
+test("the page asks for the read token before it reads, and refuses a wrong one", async () => {
+  await page.waitForSelector("#token-prompt:not([hidden])", { timeout: 10_000 });
+  assert.equal(await page.evaluate(() => window.levelmapState.auth), "needed");
+  await enterToken(page, "not-the-token");
+  await waitFor("the prompt's refusal", async () => /token refused/.test(await page.textContent("#token-prompt-why")), 5_000);
+  assert.equal(await page.isVisible("#token-prompt"), true);
+  await page.screenshot({ path: path.join(artifacts, "0-token-prompt.png") });
+  // Nothing but the token check was asked so far: no request met a 401.
+  assert.deepEqual([...new Set(apiRequests.map(([p]) => p))], ["/api/v1/auth"]);
+  await enterToken(page, READ_TOKEN);
+  await waitFor("the prompt to close", async () => !(await page.isVisible("#token-prompt")), 5_000);
+  assert.equal(await page.evaluate(() => window.levelmapState.auth), "read");
+  await waitFor("the fleet", () => page.evaluate(() => window.levelmapState.fleet), 30_000);
+});
 
 test("the robots move on the map", async () => {
   await waitFor(
@@ -198,9 +228,10 @@ test("the occupancy grid is drawn where the mapper placed it", async () => {
 });
 
 test("the token is checked before any write, and re-optimize works with it", async () => {
-  // No token stored: the button is off and says why.
-  assert.equal(await page.evaluate(() => window.levelmapState.auth), "none");
+  // The read token: the button is off and says why.
+  assert.equal(await page.evaluate(() => window.levelmapState.auth), "read");
   assert.equal(await page.isDisabled("#optimize"), true);
+  assert.match(await page.textContent("#optimize-status"), /reads only/);
   await page.fill("#token", "wrong");
   await page.dispatchEvent("#token", "change");
   await waitFor("the refused state", () => page.evaluate(() => window.levelmapState.auth === "refused"), 5_000);
@@ -208,11 +239,17 @@ test("the token is checked before any write, and re-optimize works with it", asy
   assert.match(await page.textContent("#optimize-status"), /token refused/);
   assert.equal(await page.evaluate(() => document.body.dataset.auth), "refused");
   await page.screenshot({ path: path.join(artifacts, "5-token-refused.png") });
+  // The refused token is not used: the page still reads with the one it had (the robots'
+  // list is asked for every second).
+  const since = apiRequests.length;
+  await waitFor("a read after the refusal", () => apiRequests.slice(since).some(([p, status]) => p.endsWith("/robots") && status === 200), 10_000);
   await page.fill("#token", TOKEN);
   await page.dispatchEvent("#token", "change");
   await waitFor("the accepted state", () => page.evaluate(() => window.levelmapState.auth === "ok"), 5_000);
   await page.click("#optimize");
   await waitFor("the solve's χ²", async () => /χ² \d/.test(await page.textContent("#optimize-status")), 20_000);
+  // No request of the page was refused for its token.
+  assert.deepEqual(apiRequests.filter(([, status]) => status === 401), []);
 });
 
 test("a tablet: panels under the map, tap to inspect, pinch to zoom", async () => {
@@ -222,6 +259,8 @@ test("a tablet: panels under the map, tap to inspect, pinch to zoom", async () =
   tab.on("pageerror", (e) => consoleErrors.push(`tablet: ${e}`));
   try {
     await tab.goto(`${base}/`);
+    // A new browser profile: it asks for the token too.
+    await enterToken(tab, READ_TOKEN);
     await waitFor("the tablet page", () => tab.evaluate(() => window.levelmapState.ready && window.levelmapState.nodes.length > 3), 30_000);
     const map = await tab.locator("#map").boundingBox();
     const aside = await tab.locator("aside").boundingBox();
@@ -322,5 +361,7 @@ test("the inspector shows the node's segmented 3D cloud, which orbits and zooms"
 });
 
 test("no console errors", () => {
+  const busy = apiRequests.filter(([, status]) => status === 503).length;
+  console.log(`API requests of the page: ${apiRequests.length}, answered 503 (busy): ${busy}`);
   assert.deepEqual(consoleErrors, []);
 });

@@ -75,8 +75,10 @@ impl Default for EdgeConfig {
 }
 
 impl EdgeConfig {
-    /// Reads a TOML file; unknown keys are errors (a typo must not silently become a default).
-    pub fn load(path: &Path) -> anyhow::Result<EdgeConfig> {
+    /// Reads a TOML file (none: the defaults), then the `LEVELMAP_…` environment variables
+    /// (`wire::session::env`); unknown keys are errors (a typo must not silently become a
+    /// default).
+    pub fn load(path: Option<&Path>) -> anyhow::Result<EdgeConfig> {
         wire::session::load_toml(path)
     }
 }
@@ -88,6 +90,35 @@ mod tests {
     #[test]
     fn the_deploy_file_states_the_defaults() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/edge.toml");
-        assert_eq!(EdgeConfig::load(&path).unwrap(), EdgeConfig::default());
+        let file = wire::session::load_toml_with(Some(&path), []).unwrap();
+        assert_eq!(EdgeConfig::default(), file);
+    }
+
+    #[test]
+    fn the_robot_id_and_nested_keys_come_from_the_environment() {
+        let env = [
+            ("LEVELMAP_ROBOT", "007"),
+            ("LEVELMAP_ZENOH__CONNECT", r#"["tcp/10.0.0.1:7447"]"#),
+            ("LEVELMAP_SOURCE__SIM__SEED", "9"),
+            ("LEVELMAP_CLOUD__KEEP", "false"),
+        ]
+        .map(|(k, v)| (k.into(), v.into()));
+        let config: EdgeConfig = wire::session::load_toml_with(None, env).unwrap();
+        // A numeric-looking id stays a string: the key holds one.
+        assert_eq!(config.robot, "007");
+        assert_eq!(config.zenoh.connect, Some(vec!["tcp/10.0.0.1:7447".into()]));
+        assert!(!config.cloud.keep);
+        let SourceConfig::Sim(sim) = &config.source else {
+            panic!("{:?}", config.source)
+        };
+        assert_eq!(sim.seed, 9);
+        assert_eq!(sim.loop_index, SimSourceConfig::default().loop_index);
+    }
+
+    #[test]
+    fn a_mapper_key_is_not_an_edge_key() {
+        let env = [("LEVELMAP_TOKEN".into(), "x".into())];
+        let e = wire::session::load_toml_with::<EdgeConfig>(None, env).unwrap_err();
+        assert!(e.to_string().contains("LEVELMAP_TOKEN"), "{e}");
     }
 }

@@ -93,6 +93,15 @@ pub struct PlanarScan {
 /// Why a scan gave no node.
 #[derive(Debug, thiserror::Error)]
 pub enum NodeError {
+    /// The node fails the wire's checks (the mapper's own, [`wire::node_input`]): it is not
+    /// numbered, and goes to quarantine instead of blocking the nodes after it.
+    #[error("the node fails the wire's checks ({}): {error}", error.reason())]
+    Invalid {
+        /// The node as built.
+        node: Box<v1::Node>,
+        /// What the check found.
+        error: wire::WireError,
+    },
     /// The scan has no columns.
     #[error("scan has no columns")]
     Empty,
@@ -115,6 +124,8 @@ pub struct NodeBuilder {
     params: NodeParams,
     leveler: Leveler,
     next_node_seq: u64,
+    /// `Node.chain_id` of every node.
+    chain_id: u64,
     /// The robot's planar odometry pose at the last node.
     last: Option<Pose2>,
     /// GPS fixes since the last node, oldest first, for the next one.
@@ -140,11 +151,18 @@ impl NodeBuilder {
             params,
             leveler: Leveler::new(segment),
             next_node_seq: first_node_seq,
+            chain_id: 0,
             last: None,
             pending_gps: Vec::new(),
             last_gps_ns: None,
             cloud: None,
         }
+    }
+
+    /// Nodes belong to chain `chain_id` (the outbox's; without this call, 0).
+    pub fn in_chain(mut self, chain_id: u64) -> NodeBuilder {
+        self.chain_id = chain_id;
+        self
     }
 
     /// Nodes of leveled scans carry their segmented cloud, reduced by `params`, when
@@ -180,15 +198,15 @@ impl NodeBuilder {
         });
         let mut node = self.assemble(start_ns, &robot_at_start, scan_frame, wire_scan);
         node.cloud = cloud;
-        Ok(Some(node))
+        self.number(node).map(Some)
     }
 
     /// The node of a scan from a fixed 2D scanner (no leveling: its frame tilts with the
     /// robot), by the same rule as [`Self::offer`]. For comparisons with the paper's baseline.
-    pub fn offer_planar(&mut self, scan: &PlanarScan) -> Option<v1::Node> {
+    pub fn offer_planar(&mut self, scan: &PlanarScan) -> Result<Option<v1::Node>, NodeError> {
         self.take_gps(&scan.gps);
         if !self.moved_enough(&scan.robot_at_start) {
-            return None;
+            return Ok(None);
         }
         let scan_frame = Pose2::from_isometry3(&(scan.robot_at_start * scan.sensor_in_robot));
         let wire_scan = v1::LeveledScan {
@@ -198,7 +216,21 @@ impl NodeBuilder {
             counts: None,
             columns: u32::try_from(scan.bearings_rad.len()).unwrap_or(u32::MAX),
         };
-        Some(self.assemble(scan.stamp_ns, &scan.robot_at_start, scan_frame, wire_scan))
+        let node = self.assemble(scan.stamp_ns, &scan.robot_at_start, scan_frame, wire_scan);
+        self.number(node).map(Some)
+    }
+
+    /// Gives a node its number once it passes the mapper's checks; a node that fails them
+    /// takes none, so the chain has no gap.
+    fn number(&mut self, node: v1::Node) -> Result<v1::Node, NodeError> {
+        if let Err(error) = wire::node_input(&node) {
+            return Err(NodeError::Invalid {
+                node: Box::new(node),
+                error,
+            });
+        }
+        self.next_node_seq += 1;
+        Ok(node)
     }
 
     /// Keeps the fixes newer than the last one taken for the next node.
@@ -247,6 +279,9 @@ impl NodeBuilder {
         let node = v1::Node {
             header: Some(self.header(start_ns)),
             node_seq: self.next_node_seq,
+            chain_id: self.chain_id,
+            // Set at each send, from the outbox.
+            held_from_seq: 0,
             scan: Some(scan),
             odometry: Some(wire::odometry_to_wire(
                 &leveling::TimedPose {
@@ -263,7 +298,6 @@ impl NodeBuilder {
             earlier_gps: fixes,
             cloud: None,
         };
-        self.next_node_seq += 1;
         self.last = Some(robot2);
         node
     }
@@ -341,6 +375,25 @@ mod tests {
     }
 
     #[test]
+    fn a_node_the_mapper_would_refuse_takes_no_number() {
+        let mut builder =
+            NodeBuilder::new("park", "r0", NodeParams::default(), Default::default(), 4)
+                .in_chain(9);
+        let mut absurd = scan(0, Vec::new());
+        absurd.ranges_m[0] = 2000.0;
+        let Err(NodeError::Invalid { node, error }) = builder.offer_planar(&absurd) else {
+            panic!("a 2 km range is not plausible");
+        };
+        assert_eq!((node.node_seq, error.reason()), (4, "implausible_range"));
+        let next = builder.offer_planar(&scan(S, Vec::new())).unwrap().unwrap();
+        assert_eq!(
+            (next.node_seq, next.chain_id),
+            (4, 9),
+            "no gap in the chain"
+        );
+    }
+
+    #[test]
     fn a_node_carries_every_fix_since_the_previous_node() {
         let params = NodeParams {
             node_distance_m: 3.0,
@@ -348,13 +401,17 @@ mod tests {
             ..NodeParams::default()
         };
         let mut builder = NodeBuilder::new("park", "r0", params, SegmentParams::default(), 0);
-        let first = builder.offer_planar(&scan(0, vec![fix(0)])).unwrap();
+        let first = builder
+            .offer_planar(&scan(0, vec![fix(0)]))
+            .unwrap()
+            .unwrap();
         assert_eq!(stamps(&first), [0]);
         // 2 m: no node, its fixes wait; the fix at 2 s comes again and is taken once.
         let waiting = scan(2 * S, vec![fix(S), fix(2 * S)]);
-        assert!(builder.offer_planar(&waiting).is_none());
+        assert!(builder.offer_planar(&waiting).unwrap().is_none());
         let node = builder
             .offer_planar(&scan(4 * S, vec![fix(2 * S), fix(3 * S), fix(4 * S)]))
+            .unwrap()
             .unwrap();
         wire::validate_node(&node).unwrap();
         assert_eq!(stamps(&node), [1, 2, 3, 4]);
@@ -365,9 +422,12 @@ mod tests {
         assert!((offset(node.gps.as_ref().unwrap()) + 0.5).abs() < 1e-12);
         // At most max_gps_fixes, the latest; none: no fix on the node.
         let many = (5..12).map(|t| fix(t * S)).collect();
-        let node = builder.offer_planar(&scan(11 * S, many)).unwrap();
+        let node = builder.offer_planar(&scan(11 * S, many)).unwrap().unwrap();
         assert_eq!(stamps(&node), [7, 8, 9, 10, 11]);
-        let node = builder.offer_planar(&scan(15 * S, Vec::new())).unwrap();
+        let node = builder
+            .offer_planar(&scan(15 * S, Vec::new()))
+            .unwrap()
+            .unwrap();
         assert!(node.gps.is_none() && node.earlier_gps.is_empty());
     }
 

@@ -1,13 +1,17 @@
 //! The on-disk outbox: every node stays in it, committed, from the moment it is made until the
 //! mapper's ack covers it, so neither a radio outage nor a crash of either side loses one.
 
-use redb::{Database, ReadableDatabase, ReadableTableMetadata, TableDefinition};
+use redb::{Database, ReadableDatabase, ReadableTable, ReadableTableMetadata, TableDefinition};
 use std::path::Path;
 
 /// Encoded `v1::Node`s by node_seq.
 const NODES: TableDefinition<u64, &[u8]> = TableDefinition::new("nodes");
-/// `next_node_seq` (the next number to give) and `acked` (highest node_seq acked + 1).
+/// `next_node_seq` (the next number to give), `acked` (highest node_seq acked + 1) and
+/// `chain_id` (drawn when the outbox is made: `Node.chain_id`).
 const META: TableDefinition<&str, u64> = TableDefinition::new("meta");
+/// Nodes the robot made but must not send (they fail the wire's checks), with why, by
+/// arrival; they take no node_seq, so they never block the nodes after them.
+const QUARANTINE: TableDefinition<u64, (&str, &[u8])> = TableDefinition::new("quarantine");
 
 /// A failure of the outbox's file (redb).
 #[derive(Debug, thiserror::Error)]
@@ -42,9 +46,42 @@ impl Outbox {
         let db = Database::create(path)?;
         let txn = db.begin_write()?;
         txn.open_table(NODES)?;
-        txn.open_table(META)?;
+        txn.open_table(QUARANTINE)?;
+        {
+            let mut meta = txn.open_table(META)?;
+            if meta.get("chain_id")?.is_none() {
+                // An outbox from before chains that already numbered nodes keeps chain 0 (the
+                // mapper's legacy chain), so its numbering still fits what the mapper took.
+                let numbered = meta.get("next_node_seq")?.is_some_and(|v| v.value() > 0);
+                let chain_id = if numbered { 0 } else { new_chain_id() };
+                meta.insert("chain_id", chain_id)?;
+            }
+        }
         txn.commit()?;
         Ok(Outbox { db })
+    }
+
+    /// The chain this outbox's nodes belong to (`Node.chain_id`).
+    pub fn chain_id(&self) -> Result<u64, OutboxError> {
+        self.meta("chain_id")
+    }
+
+    /// Keeps a node that must not be sent, with why (it takes no node_seq).
+    pub fn quarantine(&self, reason: &str, encoded: &[u8]) -> Result<(), OutboxError> {
+        let txn = self.db.begin_write()?;
+        {
+            let mut table = txn.open_table(QUARANTINE)?;
+            let next = table.last()?.map_or(0, |(k, _)| k.value() + 1);
+            table.insert(next, (reason, encoded))?;
+        }
+        txn.commit()?;
+        Ok(())
+    }
+
+    /// Nodes in quarantine.
+    pub fn quarantined(&self) -> Result<u64, OutboxError> {
+        let txn = self.db.begin_read()?;
+        Ok(txn.open_table(QUARANTINE)?.len()?)
     }
 
     fn meta(&self, key: &str) -> Result<u64, OutboxError> {
@@ -124,6 +161,17 @@ impl Outbox {
     }
 }
 
+/// A chain id no other outbox of the robot has drawn: std's `RandomState` is seeded from the
+/// OS's random source, mixed with the time and process. 53 bits, so that JSON readers (the
+/// dashboard's JavaScript) keep it exact; never 0 (the legacy chain).
+fn new_chain_id() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    hasher.write_u64(wire::session::now_ns());
+    hasher.write_u32(std::process::id());
+    (hasher.finish() >> 11).max(1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -134,9 +182,13 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("outbox.redb");
         let _ = std::fs::remove_file(&path);
+        let chain_id;
         {
             let outbox = Outbox::open(&path).unwrap();
+            chain_id = outbox.chain_id().unwrap();
+            assert_ne!(chain_id, 0);
             assert_eq!(outbox.next_node_seq().unwrap(), 0);
+            outbox.quarantine("implausible_range", b"bad").unwrap();
             for seq in 0..5 {
                 outbox.push(seq, &[seq as u8; 3]).unwrap();
             }
@@ -145,6 +197,12 @@ mod tests {
             assert_eq!(outbox.ack(0).unwrap(), 0);
         }
         let outbox = Outbox::open(&path).unwrap();
+        assert_eq!(
+            outbox.chain_id().unwrap(),
+            chain_id,
+            "the chain survives a restart"
+        );
+        assert_eq!(outbox.quarantined().unwrap(), 1);
         assert_eq!(outbox.next_node_seq().unwrap(), 5);
         assert_eq!(outbox.acked_below().unwrap(), 2);
         let pending = outbox.pending(0, 10).unwrap();
@@ -154,6 +212,11 @@ mod tests {
         assert_eq!(outbox.pending(3, 1).unwrap()[0].0, 3);
         assert_eq!(outbox.ack(4).unwrap(), 3);
         assert!(outbox.is_empty().unwrap());
+        // A new outbox (a wiped one) is a new chain.
+        drop(outbox);
+        std::fs::remove_file(&path).unwrap();
+        let fresh = Outbox::open(&path).unwrap();
+        assert_ne!(fresh.chain_id().unwrap(), chain_id);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -7,7 +7,7 @@
 //! before the mapper's subscription reached us, a radio outage, a mapper restart).
 
 use crate::config::EdgeConfig;
-use crate::node::NodeBuilder;
+use crate::node::{NodeBuilder, NodeError};
 use crate::outbox::Outbox;
 use crate::source::{Source, SourceEvent};
 use anyhow::{Context, Result};
@@ -42,6 +42,10 @@ pub struct EdgeReport {
     pub outbox_pending: u64,
     /// Scans the leveling could not use (logged).
     pub scan_errors: u64,
+    /// Nodes that failed the wire's checks, kept in the outbox's quarantine and not sent.
+    pub quarantined: u64,
+    /// Acks that named another chain or nodes this robot never made, ignored.
+    pub acks_ignored: u64,
     /// Corrected poses the mapper sent back after its solves, and the latest: this robot's
     /// last node on the map.
     pub map_pose_updates: u64,
@@ -53,6 +57,7 @@ enum Produced {
     Node,
     Odometry(Box<v1::Odometry>),
     ScanError,
+    Quarantined,
     End,
 }
 
@@ -109,17 +114,29 @@ struct Sending {
     header_seq: u64,
     /// The next node_seq not sent yet.
     next_to_send: u64,
-    /// The newest send or ack progress: no progress for `resend_after` re-sends.
+    /// The newest ack progress or re-send while nodes wait: no progress for `resend_after`
+    /// re-sends (new nodes do not count: a gap must not hide behind fresh sends).
     last_progress: Instant,
     resend_after: Duration,
+    /// The last re-send the mapper asked for (`Ack.resend_from`), to answer a burst of such
+    /// acks (one per batch it received after the gap) with one re-send.
+    last_gap_resend: Option<Instant>,
+    /// This outbox's chain: acks of any other are not ours.
+    chain_id: u64,
 }
+
+/// The least time between two re-sends the mapper asked for: the nodes of the first must have
+/// time to arrive before a second is worth making.
+const GAP_RESEND_HOLDOFF: Duration = Duration::from_millis(300);
 
 impl Sending {
     /// A new node is in the outbox: send it (and any before it not sent yet).
     async fn on_node(&mut self, link: &Link) -> Result<()> {
         self.report.nodes += 1;
-        // The ack timer runs from the newest send, not from the last ack.
-        self.last_progress = Instant::now();
+        if self.next_to_send <= self.outbox.acked_below()? {
+            // Nothing was waiting for an ack: the timer starts with this node.
+            self.last_progress = Instant::now();
+        }
         self.send_backlog(link).await
     }
 
@@ -153,20 +170,57 @@ impl Sending {
         }
     }
 
-    /// The mapper took every node up to the ack's: they leave the outbox.
-    fn on_ack(&mut self, robot: &str, payload: &[u8]) -> Result<()> {
-        match wire::decode_ack(payload) {
-            Ok(ack) => {
-                let seq = ack.acked_node_seq;
-                if self.report.acked_node_seq.is_none_or(|a| seq > a) {
-                    self.report.acked_node_seq = Some(seq);
-                    self.last_progress = Instant::now();
-                }
-                self.outbox.ack(seq)?;
-                self.next_to_send = self.next_to_send.max(seq + 1);
+    /// The mapper took every node of our chain up to the ack's: they leave the outbox. An ack
+    /// deletes only what it names: our chain, nodes we made. After a gap, the mapper names
+    /// the node it needs next, and it is re-sent at once.
+    async fn on_ack(&mut self, link: &Link, robot: &str, payload: &[u8]) -> Result<()> {
+        let ack = match wire::decode_ack(payload) {
+            Ok(ack) => ack,
+            Err(e) => {
+                tracing::warn!(robot, "bad ack: {e}");
+                self.report.acks_ignored += 1;
+                return Ok(());
             }
-            Err(e) => tracing::warn!(robot, "bad ack: {e}"),
+        };
+        let made = self.outbox.next_node_seq()?;
+        if ack.chain_id != self.chain_id || ack.acked_node_seq.is_some_and(|a| a >= made) {
+            tracing::warn!(
+                robot,
+                chain = ack.chain_id,
+                acked = ?ack.acked_node_seq,
+                "ack ignored: not of this outbox's chain {} and its {made} nodes",
+                self.chain_id
+            );
+            self.report.acks_ignored += 1;
+            return Ok(());
         }
+        if let Some(seq) = ack.acked_node_seq {
+            if self.report.acked_node_seq.is_none_or(|a| seq > a) {
+                self.report.acked_node_seq = Some(seq);
+                self.last_progress = Instant::now();
+            }
+            self.outbox.ack(seq)?;
+            self.next_to_send = self.next_to_send.max(seq + 1);
+        }
+        let held = self.outbox.acked_below()?;
+        if let Some(from) = ack.resend_from.filter(|&f| f >= held && f < made)
+            && self
+                .last_gap_resend
+                .is_none_or(|t| t.elapsed() >= GAP_RESEND_HOLDOFF)
+        {
+            self.last_gap_resend = Some(Instant::now());
+            self.resend(link, from).await?;
+        }
+        Ok(())
+    }
+
+    /// Re-sends from `from` on (a window), counted as re-sends.
+    async fn resend(&mut self, link: &Link, from: u64) -> Result<()> {
+        let before = self.report.node_sends;
+        let next = self.send_from(link, from).await?;
+        self.next_to_send = next.max(self.next_to_send);
+        self.report.node_resends += self.report.node_sends - before;
+        self.last_progress = Instant::now();
         Ok(())
     }
 
@@ -192,11 +246,7 @@ impl Sending {
         }
         if pending > 0 && self.last_progress.elapsed() >= self.resend_after {
             let from = self.outbox.acked_below()?;
-            let before = self.report.node_sends;
-            let next = self.send_from(link, from).await?;
-            self.next_to_send = next.max(self.next_to_send);
-            self.report.node_resends += self.report.node_sends - before;
-            self.last_progress = Instant::now();
+            self.resend(link, from).await?;
         }
         Ok(false)
     }
@@ -233,6 +283,7 @@ async fn connect(
                     // Live odometry is best effort: nobody to send it to.
                     Some(Produced::Odometry(_)) => {}
                     Some(Produced::ScanError) => sending.report.scan_errors += 1,
+                    Some(Produced::Quarantined) => sending.report.quarantined += 1,
                     Some(Produced::End) | None => {
                         *source_done = true;
                         if !config.linger_for_acks {
@@ -271,9 +322,11 @@ pub async fn run(
         },
         header_seq: 0,
         next_to_send: outbox.acked_below()?,
+        chain_id: outbox.chain_id()?,
         outbox,
         last_progress: Instant::now(),
         resend_after: Duration::from_millis(config.resend_after_ms),
+        last_gap_resend: None,
     };
     let robot = config.robot.as_str();
     let mut source_done = false;
@@ -304,6 +357,7 @@ pub async fn run(
                 Some(Produced::Node) => sending.on_node(&link).await?,
                 Some(Produced::Odometry(odometry)) => sending.on_odometry(&link, odometry).await,
                 Some(Produced::ScanError) => sending.report.scan_errors += 1,
+                Some(Produced::Quarantined) => sending.report.quarantined += 1,
                 Some(Produced::End) | None => {
                     source_done = true;
                     if !config.linger_for_acks { break; }
@@ -311,7 +365,7 @@ pub async fn run(
             },
             sample = link.acks.recv_async() => {
                 let Ok(sample) = sample else { break };
-                sending.on_ack(robot, &sample.payload().to_bytes())?;
+                sending.on_ack(&link, robot, &sample.payload().to_bytes()).await?;
             }
             sample = link.map_poses.recv_async() => {
                 let Ok(sample) = sample else { break };
@@ -343,8 +397,10 @@ async fn send_pending(
     report: &mut EdgeReport,
 ) -> Result<u64> {
     let mut next = from;
+    let held_from = outbox.acked_below()?;
     for (seq, bytes) in outbox.pending(from, RESEND_WINDOW)? {
         let mut node = v1::Node::decode(bytes.as_slice()).context("outbox holds a bad node")?;
+        node.held_from_seq = held_from;
         *header_seq += 1;
         if let Some(h) = node.header.as_mut() {
             h.seq = *header_seq;
@@ -367,7 +423,10 @@ fn produce(
     outbox: Arc<Outbox>,
     tx: mpsc::Sender<Produced>,
 ) {
-    let first_seq = match outbox.next_node_seq() {
+    let numbering = outbox
+        .next_node_seq()
+        .and_then(|seq| Ok((seq, outbox.chain_id()?)));
+    let (first_seq, chain_id) = match numbering {
         Ok(s) => s,
         Err(e) => {
             tracing::error!("{e}");
@@ -382,6 +441,7 @@ fn produce(
         config.leveling,
         first_seq,
     )
+    .in_chain(chain_id)
     .with_cloud(&config.cloud);
     let started = Instant::now();
     let mut first_stamp = None;
@@ -414,6 +474,13 @@ fn produce(
                         break;
                     }
                     Produced::Node
+                }
+                Err(NodeError::Invalid { node, error }) => {
+                    tracing::error!(robot = %config.robot, "node quarantined, not sent: {error}");
+                    if let Err(e) = outbox.quarantine(error.reason(), &node.encode_to_vec()) {
+                        tracing::error!(robot = %config.robot, "quarantine not kept: {e}");
+                    }
+                    Produced::Quarantined
                 }
                 Err(e) => {
                     tracing::warn!(robot = %config.robot, "scan skipped: {e}");

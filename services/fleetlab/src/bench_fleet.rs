@@ -141,6 +141,8 @@ fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<v1::Node>> {
 fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u64) -> v1::Node {
     let mut node = template.clone();
     node.node_seq = k;
+    // One chain per robot, from node 0: chain ids are per robot.
+    node.chain_id = 1;
     // Every header moves by the same time: the fixes keep their own (earlier, increasing)
     // times relative to the scan's start.
     let shift = stamp_ns.saturating_sub(template.header.as_ref().map_or(0, |h| h.stamp_ns));

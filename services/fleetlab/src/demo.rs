@@ -50,6 +50,14 @@ pub struct DemoArgs {
         hide_env_values = true
     )]
     pub token: String,
+    /// Bearer token of the mapper's read routes; none: reading needs no token.
+    #[arg(
+        long,
+        env = "LEVELMAP_READ_TOKEN",
+        default_value = "",
+        hide_env_values = true
+    )]
+    pub read_token: String,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -96,6 +104,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         datum: Some(sim::PARK_DATUM.origin),
         mapping: sim_mapping_params(),
         token: args.token.clone(),
+        read_token: args.read_token.clone(),
         ..MapperConfig::default()
     })
     .await?;

@@ -65,7 +65,7 @@ pub fn map_fixed2d(robots: usize, duration_s: f64, seed: u64) -> Result<(f64, us
                     .map(|f| edge::sim_gps_reading(robot, f, 0))
                     .collect(),
             };
-            let Some(node) = builder.offer_planar(&planar) else {
+            let Some(node) = builder.offer_planar(&planar)? else {
                 continue;
             };
             map.ingest(&wire::node_input(&node)?)?;

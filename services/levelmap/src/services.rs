@@ -8,7 +8,8 @@ use std::path::PathBuf;
 #[cfg(feature = "mapper")]
 #[derive(Args, Debug)]
 pub struct MapperArgs {
-    /// TOML configuration (see deploy/mapper.toml); defaults without one.
+    /// TOML configuration (see deploy/mapper.toml); defaults without one. Environment
+    /// variables set keys too: LEVELMAP_HTTP_LISTEN, LEVELMAP_ZENOH__LISTEN (nested: __).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
 }
@@ -17,7 +18,8 @@ pub struct MapperArgs {
 #[cfg(feature = "edge")]
 #[derive(Args, Debug)]
 pub struct EdgeArgs {
-    /// TOML configuration (see deploy/edge.toml); defaults without one.
+    /// TOML configuration (see deploy/edge.toml); defaults without one. Environment
+    /// variables set keys too: LEVELMAP_ROBOT, LEVELMAP_ZENOH__CONNECT (nested: __).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Print the final report as JSON.
@@ -44,10 +46,7 @@ fn init_logging() {
 #[cfg(feature = "mapper")]
 pub fn run_mapper(args: &MapperArgs) -> Result<()> {
     init_logging();
-    let config = match &args.config {
-        Some(path) => mapper::MapperConfig::load(path)?,
-        None => mapper::MapperConfig::default(),
-    };
+    let config = mapper::MapperConfig::load(args.config.as_deref())?;
     // A bad Zenoh or TLS setting stops the mapper here, before its store is opened.
     let zenoh = config.zenoh.to_zenoh(wire::session::Role::Router)?;
     let listen = zenoh.get_json("listen/endpoints").unwrap_or_default();
@@ -67,10 +66,7 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
 #[cfg(feature = "edge")]
 pub fn run_edge(args: &EdgeArgs) -> Result<()> {
     init_logging();
-    let config = match &args.config {
-        Some(path) => edge::EdgeConfig::load(path)?,
-        None => edge::EdgeConfig::default(),
-    };
+    let config = edge::EdgeConfig::load(args.config.as_deref())?;
     // The link is retried while the mapper is out of reach; a bad Zenoh or TLS setting must
     // stop the service instead.
     config.zenoh.to_zenoh(wire::session::Role::Client)?;

@@ -7,6 +7,20 @@ use wire::session::now_ns;
 use wire::{MapPose, Message, v1};
 use zenoh::Wait;
 
+/// What an ack tells one robot about one of its chains.
+pub struct AckOf<'a> {
+    /// The fleet.
+    pub fleet: &'a str,
+    /// The robot.
+    pub robot: &'a str,
+    /// The chain (`Node.chain_id`).
+    pub chain_id: u64,
+    /// The highest node_seq of the chain stored, if any.
+    pub acked: Option<u64>,
+    /// The node the mapper needs next, after a gap.
+    pub resend_from: Option<u64>,
+}
+
 /// The mapper's side of the bus.
 pub struct Bus {
     session: zenoh::Session,
@@ -18,12 +32,15 @@ impl Bus {
         Bus { session }
     }
 
-    /// Tells a robot the highest node of its sequence that is mapped and stored.
-    pub fn ack(&self, metrics: &Metrics, fleet: &str, robot: &str, acked: u64) {
+    /// Tells a robot the highest node of its chain that is mapped and stored.
+    pub fn ack(&self, metrics: &Metrics, of: &AckOf) {
         let ack = v1::Ack {
-            header: Some(v1::Header::new(fleet, robot, 0, now_ns(), now_ns())),
-            acked_node_seq: acked,
+            header: Some(v1::Header::new(of.fleet, of.robot, 0, now_ns(), now_ns())),
+            acked_node_seq: of.acked,
+            chain_id: of.chain_id,
+            resend_from: of.resend_from,
         };
+        let (fleet, robot) = (of.fleet, of.robot);
         let Ok(key) = wire::ack_key(fleet, robot) else {
             return;
         };

@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 use slam::Mapper2dParams;
 use slam::geodesy::Geodetic;
+use std::num::{NonZeroU64, NonZeroUsize};
 use std::path::{Path, PathBuf};
 use wire::session::SessionConfig;
 
@@ -19,8 +20,14 @@ pub struct MapperConfig {
     pub store_path: PathBuf,
     /// Fleets this mapper serves; nodes of any other fleet are rejected (and counted).
     pub fleets: Vec<String>,
-    /// Bearer token of write and operator routes; empty: those routes are refused.
+    /// Bearer token of write and operator routes; empty: those routes are refused. It also
+    /// reads.
     pub token: String,
+    /// Bearer token of every `/api` route but `/api/v1/auth`; empty: reading needs no token.
+    /// `/healthz`, `/metrics` and the dashboard's files stay open.
+    pub read_token: String,
+    /// What the HTTP API serves at once, and to which other origins.
+    pub http: HttpConfig,
     /// The map's GPS datum (WGS84): the origin of its east-north frame, where the robots'
     /// odometry frames start. Unset: the first fix of each fleet.
     pub datum: Option<Geodetic>,
@@ -41,6 +48,8 @@ impl Default for MapperConfig {
             store_path: PathBuf::from("levelmap-mapper.redb"),
             fleets: vec!["park".into()],
             token: String::new(),
+            read_token: String::new(),
+            http: HttpConfig::default(),
             datum: None,
             max_range_m: 40.0,
             solve_interval_ms: 500,
@@ -60,9 +69,81 @@ impl MapperConfig {
         )
     }
 
-    /// Reads a TOML file; unknown keys are errors.
-    pub fn load(path: &Path) -> anyhow::Result<MapperConfig> {
+    /// Reads a TOML file (none: the defaults), then the `LEVELMAP_…` environment variables
+    /// (`wire::session::env`); unknown keys are errors.
+    pub fn load(path: Option<&Path>) -> anyhow::Result<MapperConfig> {
         wire::session::load_toml(path)
+    }
+}
+
+/// The HTTP API's limits and cross-origin access (`[http]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HttpConfig {
+    /// Heavy requests (the grid, the graph, covariances, a node's detail and cloud, GeoJSON)
+    /// worked on at once; one more is answered 503 with `Retry-After` instead of queuing.
+    pub heavy_requests: NonZeroUsize,
+    /// How long a heavy request is waited for (ms) before it is answered 503. Its work runs
+    /// on and keeps its place among `heavy_requests` until it ends.
+    pub heavy_timeout_ms: NonZeroU64,
+    /// Event streams (`/api/v1/events`) open at once; one more is answered 503.
+    pub event_streams: NonZeroUsize,
+    /// Origins (`https://host[:port]`) whose pages may call the API (CORS); empty: no CORS
+    /// headers, so only pages served by the mapper itself can read its answers.
+    pub cors_origins: Vec<CorsOrigin>,
+}
+
+impl Default for HttpConfig {
+    fn default() -> Self {
+        HttpConfig {
+            heavy_requests: NonZeroUsize::new(4).expect("nonzero"),
+            heavy_timeout_ms: NonZeroU64::new(10_000).expect("nonzero"),
+            event_streams: NonZeroUsize::new(64).expect("nonzero"),
+            cors_origins: Vec::new(),
+        }
+    }
+}
+
+/// A web origin as browsers send it in `Origin`: scheme, host and optional port, no path.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub struct CorsOrigin(String);
+
+impl CorsOrigin {
+    /// The origin as written.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl TryFrom<String> for CorsOrigin {
+    type Error = String;
+
+    fn try_from(origin: String) -> Result<Self, String> {
+        let host = origin
+            .strip_prefix("https://")
+            .or_else(|| origin.strip_prefix("http://"));
+        // Browsers send the origin without a path and in lower case: anything else never
+        // matches, so it is refused here rather than silently ignored.
+        let valid = host.is_some_and(|h| {
+            !h.is_empty()
+                && h.bytes()
+                    .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b"-.:[]".contains(&b))
+        });
+        if valid {
+            Ok(CorsOrigin(origin))
+        } else {
+            Err(format!(
+                "cors_origins: {origin:?} is not an origin: want http[s]://host[:port] in lower \
+                 case, without a path or a trailing /"
+            ))
+        }
+    }
+}
+
+impl From<CorsOrigin> for String {
+    fn from(o: CorsOrigin) -> String {
+        o.0
     }
 }
 
@@ -87,7 +168,98 @@ mod tests {
     #[test]
     fn the_deploy_file_states_the_defaults() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/mapper.toml");
-        assert_eq!(MapperConfig::load(&path).unwrap(), MapperConfig::default());
+        let file = wire::session::load_toml_with(Some(&path), []).unwrap();
+        assert_eq!(MapperConfig::default(), file);
+    }
+
+    fn env(pairs: &[(&str, &str)]) -> Vec<(std::ffi::OsString, std::ffi::OsString)> {
+        pairs.iter().map(|(k, v)| (k.into(), v.into())).collect()
+    }
+
+    #[test]
+    fn every_key_can_come_from_the_environment_without_a_file() {
+        let config: MapperConfig = wire::session::load_toml_with(
+            None,
+            env(&[
+                ("LEVELMAP_HTTP_LISTEN", "0.0.0.0:8080"),
+                ("LEVELMAP_FLEETS", r#"["park", "campus"]"#),
+                ("LEVELMAP_STORE_PATH", "/var/lib/levelmap-mapper/store.redb"),
+                ("LEVELMAP_ZENOH__LISTEN", r#"["tcp/10.0.0.1:7447"]"#),
+                ("LEVELMAP_MAPPING__IDC__MIN_CORRESPONDENCES", "12"),
+                ("LEVELMAP_DATUM__LATITUDE_DEG", "52.39"),
+                ("LEVELMAP_DATUM__LONGITUDE_DEG", "9.71"),
+                ("LEVELMAP_DATUM__HEIGHT_M", "55"),
+                ("LEVELMAP_DATA", "../shared/data"),
+            ]),
+        )
+        .unwrap();
+        let defaults = MapperConfig::default();
+        assert_eq!(config.http_listen, "0.0.0.0:8080");
+        assert_eq!(config.fleets, ["park", "campus"]);
+        assert_eq!(
+            config.store_path,
+            Path::new("/var/lib/levelmap-mapper/store.redb")
+        );
+        assert_eq!(config.zenoh.listen, Some(vec!["tcp/10.0.0.1:7447".into()]));
+        // Still a router: the mapper's session falls back to its role's mode.
+        let zenoh = config.zenoh.to_zenoh(wire::session::Role::Router).unwrap();
+        assert_eq!(zenoh.get_json("mode").unwrap(), r#""router""#);
+        assert_eq!(config.mapping.idc.min_correspondences, 12);
+        // The fleet's mapping defaults, not the library's, around the key that was set.
+        assert_eq!(config.mapping.odometry_sigma_xy_per_m, 0.02);
+        assert_eq!(config.datum.map(|d| d.height_m), Some(55.0));
+        assert_eq!(config.solve_interval_ms, defaults.solve_interval_ms);
+    }
+
+    #[test]
+    fn a_variable_that_names_no_key_is_an_error() {
+        let load = |pairs| wire::session::load_toml_with::<MapperConfig>(None, env(pairs));
+        // A typo among the denied keys, and one among the mapping's (which serde ignores).
+        let e = load(&[("LEVELMAP_HTTP_LISTN", "x")]).unwrap_err();
+        assert!(e.to_string().contains("LEVELMAP_HTTP_LISTN"), "{e}");
+        assert!(e.to_string().contains("http_listn"), "{e}");
+        let e = load(&[("LEVELMAP_MAPPING__ODOMETRY_SIGMA", "0.1")]).unwrap_err();
+        assert!(e.to_string().contains("mapping.odometry_sigma"), "{e}");
+        // A value of the wrong type, as in the file.
+        let e = load(&[("LEVELMAP_SOLVE_INTERVAL_MS", "soon")]).unwrap_err();
+        assert!(e.to_string().contains("LEVELMAP_SOLVE_INTERVAL_MS"), "{e}");
+    }
+
+    #[test]
+    fn the_environment_wins_over_the_file() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/mapper.toml");
+        let config: MapperConfig =
+            wire::session::load_toml_with(Some(&path), env(&[("LEVELMAP_TOKEN", "s3cret")]))
+                .unwrap();
+        assert_eq!(
+            config,
+            MapperConfig {
+                token: "s3cret".into(),
+                ..MapperConfig::default()
+            }
+        );
+    }
+
+    #[test]
+    fn cors_origins_are_checked_when_read() {
+        let ok: MapperConfig =
+            toml::from_str("[http]\ncors_origins = [\"https://ops.example.org:8443\"]").unwrap();
+        assert_eq!(
+            ok.http.cors_origins[0].as_str(),
+            "https://ops.example.org:8443"
+        );
+        for bad in [
+            "https://ops.example.org/",
+            "ops.example.org",
+            "*",
+            "https://Ops.example.org",
+        ] {
+            let text = format!("[http]\ncors_origins = [{bad:?}]");
+            let e = toml::from_str::<MapperConfig>(&text).unwrap_err();
+            assert!(e.to_string().contains("not an origin"), "{bad}: {e}");
+        }
+        let e = toml::from_str::<MapperConfig>("[http]\nheavy_requests = 0").unwrap_err();
+        assert!(e.to_string().contains("heavy_requests"), "{e}");
     }
 
     #[test]

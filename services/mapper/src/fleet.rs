@@ -1,7 +1,10 @@
 //! One fleet's shared map: nodes from the wire into one pose network (pure, no I/O).
 //!
-//! Each robot's nodes must arrive in node_seq order without gaps; a duplicate (a re-send) or
-//! a node after a gap is not taken, and the sender learns the highest node taken from the ack.
+//! A robot sends its nodes in chains (one per edge outbox: `Node.chain_id`). A chain's nodes
+//! must arrive in node_seq order without gaps, from the first the robot holds
+//! (`Node.held_from_seq`) when the map does not know the chain yet; a duplicate (a re-send) or
+//! a node after a gap is not taken, and the sender learns from the ack the highest node taken
+//! and where to re-send from. Each chain is its own odometry chain in the pose network.
 
 use leveling::ClassCounts;
 use serde::Serialize;
@@ -31,7 +34,9 @@ pub enum Sequence {
 pub struct NodeRecord {
     /// Index of its robot in [`FleetMap::robots`].
     pub robot: usize,
-    /// Its number in its robot's sequence.
+    /// Its robot's chain (`Node.chain_id`).
+    pub chain_id: u64,
+    /// Its number in its chain.
     pub node_seq: u64,
     /// The scan's start (ns since the Unix epoch).
     pub stamp_ns: u64,
@@ -67,22 +72,57 @@ impl NodeRecord {
     }
 }
 
+/// Most robots one fleet takes: per-robot state is bounded (a node of one more is rejected,
+/// `too_many_robots`).
+pub const MAX_ROBOTS_PER_FLEET: usize = 1024;
+/// Most chains one robot may start (each a restart with a lost outbox): `too_many_chains`.
+pub const MAX_CHAINS_PER_ROBOT: usize = 256;
+
+/// One chain of a robot's nodes: what one outbox sent.
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct ChainRecord {
+    /// `Node.chain_id` (0: a robot from before chains).
+    pub chain_id: u64,
+    /// The first node_seq taken of it.
+    pub first_node_seq: u64,
+    /// The highest node_seq taken of it.
+    pub last_node_seq: u64,
+    /// Its index among the network's odometry chains (`Mapper2d`'s robot index).
+    #[serde(skip)]
+    network_chain: usize,
+    /// Its last node's index in the map.
+    #[serde(skip)]
+    last_node: usize,
+}
+
 /// A robot of the fleet.
 #[derive(Clone, Debug, Serialize)]
 pub struct RobotRecord {
     /// The robot's id.
     pub id: String,
-    /// Highest node_seq taken.
+    /// Highest node_seq taken of its newest chain.
     pub last_node_seq: u64,
+    /// Its chains, oldest first.
+    pub chains: Vec<ChainRecord>,
     /// Map nodes of this robot, in order.
     pub nodes: Vec<usize>,
 }
 
+impl RobotRecord {
+    fn chain(&self, chain_id: u64) -> Option<&ChainRecord> {
+        self.chains.iter().find(|c| c.chain_id == chain_id)
+    }
+}
+
 /// Where a node went in the map.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Ingested {
     /// The node's index in the map.
     pub node: usize,
+    /// Set when its odometry step from the chain's last node was not plausible
+    /// ([`wire::check_step`]): an odometry reset, so the node starts a new odometry chain of
+    /// the network (it joins the map by GPS or scan matching) instead of being refused.
+    pub odometry_break: Option<wire::WireError>,
 }
 
 /// Why a node was not added.
@@ -97,6 +137,16 @@ pub enum IngestError {
         node_seq: u64,
         /// What is wrong with its number.
         problem: String,
+    },
+    /// A bound of the fleet's state (robots, chains) or of plausibility (a step) refused it.
+    #[error("node {node_seq} of {robot}: {source}")]
+    Refused {
+        /// The robot.
+        robot: String,
+        /// The node's number.
+        node_seq: u64,
+        /// Why, with the reason counted.
+        source: wire::WireError,
     },
     /// The network refused it.
     #[error("the pose network: {0}")]
@@ -113,6 +163,8 @@ pub struct FleetMap {
     robots: Vec<RobotRecord>,
     by_id: HashMap<String, usize>,
     nodes: Vec<Arc<NodeRecord>>,
+    /// Odometry chains in the network, over every robot.
+    network_chains: usize,
 }
 
 impl FleetMap {
@@ -139,6 +191,7 @@ impl FleetMap {
             robots: Vec::new(),
             by_id: HashMap::new(),
             nodes: Vec::new(),
+            network_chains: 0,
         }
     }
 
@@ -192,20 +245,114 @@ impl FleetMap {
         self.mapper.node_scan(node)
     }
 
-    /// Where node `node_seq` of `robot` stands against what the map took.
-    pub fn sequence(&self, robot: &str, node_seq: u64) -> Sequence {
-        match self.by_id.get(robot).map(|&r| self.robots[r].last_node_seq) {
-            None => Sequence::Next,
-            Some(last) if node_seq <= last => Sequence::Duplicate,
-            Some(last) if node_seq == last + 1 => Sequence::Next,
-            Some(last) => Sequence::Gap { expected: last + 1 },
+    /// Where `node` stands against what the map took of its robot's chain.
+    pub fn sequence(&self, node: &NodeInput) -> Sequence {
+        let chain = self
+            .by_id
+            .get(&node.robot)
+            .and_then(|&r| self.robots[r].chain(node.chain_id));
+        let Some(chain) = chain else {
+            // A chain the map does not know starts where its robot says it still holds nodes
+            // (0 for a new outbox): a lost first node is asked for, never skipped. Chain 0 is
+            // a sender from before chains: its first node seen starts it, as it always did.
+            let starts = node.chain_id == 0 || node.node_seq == node.held_from_seq;
+            return match starts {
+                true => Sequence::Next,
+                false => Sequence::Gap {
+                    expected: node.held_from_seq,
+                },
+            };
+        };
+        match node.node_seq {
+            seq if seq <= chain.last_node_seq => Sequence::Duplicate,
+            seq if seq == chain.last_node_seq + 1 => Sequence::Next,
+            _ => Sequence::Gap {
+                expected: chain.last_node_seq + 1,
+            },
         }
+    }
+
+    /// The highest node_seq taken of a robot's chain, if any.
+    pub fn chain_acked(&self, robot: &str, chain_id: u64) -> Option<u64> {
+        let r = *self.by_id.get(robot)?;
+        Some(self.robots[r].chain(chain_id)?.last_node_seq)
+    }
+
+    /// The robot's index and its chain's index in it for `node` (the next of its chain),
+    /// making them if new (bounded by [`MAX_ROBOTS_PER_FLEET`] and [`MAX_CHAINS_PER_ROBOT`]);
+    /// and whether the step from the chain's last node broke odometry ([`wire::check_step`]).
+    fn chain_for(
+        &mut self,
+        node: &NodeInput,
+    ) -> Result<(usize, usize, Option<wire::WireError>), IngestError> {
+        let refused = |source| IngestError::Refused {
+            robot: node.robot.clone(),
+            node_seq: node.node_seq,
+            source,
+        };
+        let too_many = |what: &'static str, count: usize, reason| {
+            refused(wire::WireError::Implausible {
+                field: what,
+                index: None,
+                value: (count + 1) as f64,
+                limit: count as f64,
+                reason,
+            })
+        };
+        let robot = match self.by_id.get(&node.robot) {
+            Some(&r) => r,
+            None if self.robots.len() >= MAX_ROBOTS_PER_FLEET => {
+                return Err(too_many("robots", MAX_ROBOTS_PER_FLEET, "too_many_robots"));
+            }
+            None => {
+                self.robots.push(RobotRecord {
+                    id: node.robot.clone(),
+                    last_node_seq: node.node_seq,
+                    chains: Vec::new(),
+                    nodes: Vec::new(),
+                });
+                self.by_id.insert(node.robot.clone(), self.robots.len() - 1);
+                self.robots.len() - 1
+            }
+        };
+        let record = &self.robots[robot];
+        if let Some(c) = record
+            .chains
+            .iter()
+            .position(|c| c.chain_id == node.chain_id)
+        {
+            let last = &self.nodes[record.chains[c].last_node];
+            let xy = |p: &Pose2| [p.x, p.y];
+            let from = (last.stamp_ns, xy(&last.robot_odometry));
+            let to = (
+                node.stamp_ns,
+                xy(&Pose2::from_isometry3(&node.odometry.pose)),
+            );
+            let odometry_break = wire::check_step(from, to).err();
+            if odometry_break.is_some() {
+                self.robots[robot].chains[c].network_chain = self.network_chains;
+                self.network_chains += 1;
+            }
+            return Ok((robot, c, odometry_break));
+        }
+        if record.chains.len() >= MAX_CHAINS_PER_ROBOT {
+            return Err(too_many("chains", MAX_CHAINS_PER_ROBOT, "too_many_chains"));
+        }
+        self.robots[robot].chains.push(ChainRecord {
+            chain_id: node.chain_id,
+            first_node_seq: node.node_seq,
+            last_node_seq: node.node_seq,
+            network_chain: self.network_chains,
+            last_node: self.nodes.len(),
+        });
+        self.network_chains += 1;
+        Ok((robot, self.robots[robot].chains.len() - 1, None))
     }
 
     /// Adds a node of this fleet.
     pub fn ingest(&mut self, node: &NodeInput) -> Result<Ingested, IngestError> {
         let robot_id = &node.robot;
-        let problem = match self.sequence(robot_id, node.node_seq) {
+        let problem = match self.sequence(node) {
             Sequence::Next => None,
             Sequence::Duplicate => Some("taken already".to_owned()),
             Sequence::Gap { expected } => Some(format!("out of order, expected {expected}")),
@@ -217,6 +364,7 @@ impl FleetMap {
                 problem,
             });
         }
+        let (robot, chain, odometry_break) = self.chain_for(node)?;
         let robot_odometry = Pose2::from_isometry3(&node.odometry.pose);
         let scan_frame = robot_odometry.compose(&node.scan_origin);
         let (bearings_rad, ranges_m) = node.polar();
@@ -236,28 +384,21 @@ impl FleetMap {
                 fix.observation(&datum, &attitude, robot_odometry.theta, &node.scan_origin)
             })
             .collect();
-
-        let robot = match self.by_id.get(robot_id) {
-            Some(&r) => r,
-            None => {
-                self.robots.push(RobotRecord {
-                    id: robot_id.clone(),
-                    last_node_seq: node.node_seq,
-                    nodes: Vec::new(),
-                });
-                self.by_id.insert(robot_id.clone(), self.robots.len() - 1);
-                self.robots.len() - 1
-            }
-        };
-        let placed = self.mapper.add_robot_scan(robot, scan_frame, scan, &gps)?;
+        let network_chain = self.robots[robot].chains[chain].network_chain;
+        let placed = self
+            .mapper
+            .add_robot_scan(network_chain, scan_frame, scan, &gps)?;
         let slam::Placed::Node(index) = placed else {
             unreachable!("node distance 0: every scan is a node")
         };
         let record = &mut self.robots[robot];
         record.last_node_seq = node.node_seq;
+        record.chains[chain].last_node_seq = node.node_seq;
+        record.chains[chain].last_node = index;
         record.nodes.push(index);
         self.nodes.push(Arc::new(NodeRecord {
             robot,
+            chain_id: node.chain_id,
             node_seq: node.node_seq,
             stamp_ns: node.stamp_ns,
             odometry: scan_frame,
@@ -268,7 +409,10 @@ impl FleetMap {
             bearings_rad,
             ranges_m,
         }));
-        Ok(Ingested { node: index })
+        Ok(Ingested {
+            node: index,
+            odometry_break,
+        })
     }
 
     /// Solves the network if the nodes added since the last solve call for it (a loop
@@ -283,3 +427,7 @@ impl FleetMap {
         Ok(self.mapper.optimize_now()?)
     }
 }
+
+#[cfg(test)]
+#[path = "fleet_tests.rs"]
+mod tests;

@@ -35,7 +35,9 @@ pub fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]
     Metrics::bump(&metrics.odometry_received);
     let odometry = Pose2::from_isometry3(&input.pose.pose);
     let stamp_ns = input.pose.stamp_ns;
-    if !remember(shared, &input.fleet, &input.robot, odometry, stamp_ns) {
+    // Bounded like the fleets' robots: odometry of robots beyond that many is not kept.
+    let cap = crate::fleet::MAX_ROBOTS_PER_FLEET * fleets.len();
+    if !remember(shared, cap, &input, odometry) {
         return;
     }
     let map_pose = shared
@@ -52,11 +54,17 @@ pub fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]
     }
 }
 
-/// Keeps the robot's latest odometry; whether its `pose` event is due.
-fn remember(shared: &Shared, fleet: &str, robot: &str, odometry: Pose2, stamp_ns: u64) -> bool {
+/// Keeps the robot's latest odometry, unless `cap` robots are kept already; whether its
+/// `pose` event is due.
+fn remember(shared: &Shared, cap: usize, input: &wire::OdometryInput, odometry: Pose2) -> bool {
     let now = now_ns();
+    let stamp_ns = input.pose.stamp_ns;
     let mut live = shared.live.lock().expect("live lock");
-    let key = (fleet.to_owned(), robot.to_owned());
+    let key = (input.fleet.clone(), input.robot.clone());
+    if !live.contains_key(&key) && live.len() >= cap {
+        shared.metrics.reject("odom", "too_many_robots");
+        return false;
+    }
     let last_event = live.get(&key).map_or(0, |p| p.evented_ns);
     let due = now.saturating_sub(last_event) >= POSE_EVENT_PERIOD_NS;
     live.insert(

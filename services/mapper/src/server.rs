@@ -31,7 +31,7 @@ pub struct Running {
     session: zenoh::Session,
     http: tokio::task::JoinHandle<()>,
     worker: Option<std::thread::JoinHandle<()>>,
-    work: mpsc::Sender<Work>,
+    work: mpsc::SyncSender<Work>,
 }
 
 impl Running {
@@ -84,7 +84,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     let fleets = restore(&config, &store, &shared)?;
 
     let session = config.zenoh.open(wire::session::Role::Router).await?;
-    let (work_tx, work_rx) = mpsc::channel::<Work>();
+    let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
     let subscriptions = subscribe(&session, &config, &shared, work_tx.clone()).await?;
     let worker = {
         let worker = Worker::new(
@@ -107,7 +107,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
-    let app = crate::api::router(shared.clone(), work_tx.clone(), store);
+    let app = crate::api::router(shared.clone(), work_tx.clone(), store, &config);
     let mut stopping = shared.stopping.subscribe();
     let http = tokio::spawn(async move {
         let stopped = async move {
@@ -143,16 +143,22 @@ async fn subscribe(
     session: &zenoh::Session,
     config: &MapperConfig,
     shared: &Arc<Shared>,
-    work: mpsc::Sender<Work>,
+    work: mpsc::SyncSender<Work>,
 ) -> Result<Subscriptions> {
     let node_keys = format!("{}/*/robots/*/{}", wire::KEY_ROOT, Topic::Node);
+    let shed = shared.clone();
     let nodes = session
         .declare_subscriber(node_keys)
         .callback(move |sample| {
-            let _ = work.send(Work::Node {
+            let node = Work::Node {
                 key: sample.key_expr().as_str().to_owned(),
                 payload: sample.payload().to_bytes().into_owned(),
-            });
+            };
+            // Behind by a full queue: the node stays in its robot's outbox and comes again
+            // (the next node's gap asks for it), instead of the mapper's memory growing.
+            if let Err(mpsc::TrySendError::Full(_)) = work.try_send(node) {
+                shed.metrics.reject("node", "queue_full");
+            }
         })
         .await
         .map_err(anyhow::Error::from_boxed)?;
@@ -179,43 +185,62 @@ async fn subscribe(
     Ok((nodes, odometry, queries))
 }
 
-/// Replays the store; checks the edges it rebuilt against the stored ones.
+/// Replays the store, fleet by fleet. A fleet whose rows do not replay is quarantined (its
+/// reason kept in `shared`): the others are restored and served.
 fn restore(
     config: &MapperConfig,
     store: &Store,
     shared: &Shared,
 ) -> Result<HashMap<String, FleetMap>> {
     let mut fleets = HashMap::new();
-    for stored in store.load()? {
-        let started = Instant::now();
-        let mut map = config.new_fleet(&stored.id);
-        let mut solves = stored.solves.iter().peekable();
-        for (arrival, bytes) in stored.nodes.iter().enumerate() {
-            let (node, _) = wire::decode_node_input(bytes)
-                .with_context(|| format!("store: a node of fleet {} is unreadable", stored.id))?;
-            map.ingest(&node)
-                .with_context(|| format!("store: replaying fleet {}", stored.id))?;
-            if solves.next_if_eq(&&(arrival as u64)).is_some() {
-                map.optimize_now()?;
+    for id in store.fleet_ids()? {
+        match replay(config, store, &id) {
+            Ok(map) => {
+                shared.publish_view(FleetView::of(&map, 0.0, now_ns()));
+                fleets.insert(id, map);
+            }
+            Err(e) => {
+                let reason = format!("{e:#}");
+                tracing::error!(fleet = %id, "quarantined: its stored map does not replay: {reason}");
+                shared
+                    .quarantined
+                    .write()
+                    .expect("quarantine lock")
+                    .insert(id, reason);
             }
         }
-        let rebuilt = crate::store::encode_edges(&map.graph().edges);
-        anyhow::ensure!(
-            rebuilt == stored.edges,
-            "store: fleet {} replays to {} edges that differ from the {} stored",
-            stored.id,
-            rebuilt.len(),
-            stored.edges.len()
-        );
-        tracing::info!(
-            fleet = %stored.id,
-            nodes = stored.nodes.len(),
-            edges = stored.edges.len(),
-            "restored in {:.0} ms",
-            started.elapsed().as_secs_f64() * 1e3
-        );
-        shared.publish_view(FleetView::of(&map, 0.0, now_ns()));
-        fleets.insert(stored.id.clone(), map);
     }
     Ok(fleets)
+}
+
+/// One fleet's map rebuilt from its rows; its edges checked against the stored ones.
+fn replay(config: &MapperConfig, store: &Store, id: &str) -> Result<FleetMap> {
+    let started = Instant::now();
+    let stored = store.load_fleet(id)?;
+    let mut map = config.new_fleet(id);
+    let mut solves = stored.solves.iter().peekable();
+    for (arrival, bytes) in stored.nodes.iter().enumerate() {
+        let (node, _) = wire::decode_node_input(bytes)
+            .with_context(|| format!("store: node {arrival} of fleet {id} is unreadable"))?;
+        map.ingest(&node)
+            .with_context(|| format!("store: replaying node {arrival} of fleet {id}"))?;
+        if solves.next_if_eq(&&(arrival as u64)).is_some() {
+            map.optimize_now()?;
+        }
+    }
+    let rebuilt = crate::store::encode_edges(&map.graph().edges);
+    anyhow::ensure!(
+        rebuilt == stored.edges,
+        "store: fleet {id} replays to {} edges that differ from the {} stored",
+        rebuilt.len(),
+        stored.edges.len()
+    );
+    tracing::info!(
+        fleet = %id,
+        nodes = stored.nodes.len(),
+        edges = stored.edges.len(),
+        "restored in {:.0} ms",
+        started.elapsed().as_secs_f64() * 1e3
+    );
+    Ok(map)
 }

@@ -17,8 +17,10 @@ pub struct RobotView {
     pub id: String,
     /// Its nodes in the map.
     pub nodes: usize,
-    /// Highest node_seq taken.
+    /// Highest node_seq taken of its newest chain.
     pub last_node_seq: u64,
+    /// Its chains (one per outbox it sent from), oldest first.
+    pub chains: Vec<crate::fleet::ChainRecord>,
     /// The robot frame's map pose at its last node, and its odometry pose there: live odometry
     /// since then, composed onto the first, gives the live map pose.
     pub map_pose_at_last_node: Pose2,
@@ -75,6 +77,7 @@ impl FleetView {
                     id: r.id.clone(),
                     nodes: r.nodes.len(),
                     last_node_seq: r.last_node_seq,
+                    chains: r.chains.clone(),
                     map_pose_at_last_node: poses[last].compose(&record.scan_origin.inverse()),
                     odometry_at_last_node: record.robot_odometry,
                 }
@@ -173,8 +176,12 @@ pub struct Shared {
     pub token: String,
     /// When the mapper started (ns since the Unix epoch).
     pub started_ns: u64,
-    /// False once the store failed: `/healthz` reports it, so a supervisor restarts us.
-    pub healthy: std::sync::atomic::AtomicBool,
+    /// Why the store cannot commit, while it cannot: nodes are neither taken nor acked, the
+    /// routes that need the store answer 503, and the worker tries again every second.
+    pub store_fault: RwLock<Option<String>>,
+    /// Fleets whose stored map did not replay at start, with the reason: their routes answer
+    /// 503 and their nodes are not taken (the robots keep them); the other fleets run.
+    pub quarantined: RwLock<BTreeMap<String, String>>,
     /// Set when the mapper stops: open event streams end, so HTTP can shut down gracefully.
     pub stopping: tokio::sync::watch::Sender<bool>,
 }
@@ -189,7 +196,8 @@ impl Shared {
             events: broadcast::channel(1024).0,
             token,
             started_ns,
-            healthy: std::sync::atomic::AtomicBool::new(true),
+            store_fault: RwLock::default(),
+            quarantined: RwLock::default(),
             stopping: tokio::sync::watch::Sender::new(false),
         }
     }
@@ -197,6 +205,20 @@ impl Shared {
     /// A fleet's latest view.
     pub fn fleet(&self, id: &str) -> Option<Arc<FleetView>> {
         self.fleets.read().expect("views lock").get(id).cloned()
+    }
+
+    /// Why the store cannot commit, while it cannot.
+    pub fn store_fault(&self) -> Option<String> {
+        self.store_fault.read().expect("fault lock").clone()
+    }
+
+    /// Why a fleet is quarantined, if it is.
+    pub fn quarantine(&self, fleet: &str) -> Option<String> {
+        self.quarantined
+            .read()
+            .expect("quarantine lock")
+            .get(fleet)
+            .cloned()
     }
 
     /// Replaces the fleet's view: readers see the new one from now on.

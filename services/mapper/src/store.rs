@@ -4,9 +4,15 @@
 //! which restores the graph exactly; the stored edges check that it did. Clouds (tens of KB a
 //! node, for viewing only) are kept in a table of their own, in the node's transaction, and
 //! read one at a time on request: a replay never reads them.
+//!
+//! A failed commit (a full disk) closes the file: redb wants a database that met an I/O error
+//! opened again, which the next commit does. Each fleet is read on its own, so a fleet whose
+//! rows are damaged does not keep the others from being restored.
 
-use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
+use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition, TableHandle};
+use std::ops::Bound;
 use std::path::Path;
+use std::sync::RwLock;
 use wire::{Message, v1};
 
 /// (fleet, arrival index) → encoded `v1::Node`, without `Node.cloud`.
@@ -19,16 +25,25 @@ const SOLVES: TableDefinition<(&str, u64), ()> = TableDefinition::new("solves");
 /// (fleet, node index) → the node's encoded `v1::SegmentedCloud` (`Node.cloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
 
-/// A failure of the store (redb): the disk, the file, a transaction.
+/// A failure of the store.
 #[derive(Debug, thiserror::Error)]
-#[error("store: {0}")]
-pub struct StoreError(#[from] redb::Error);
+pub enum StoreError {
+    /// redb's: the disk, the file, a transaction.
+    #[error("store: {0}")]
+    Redb(#[from] redb::Error),
+    /// Closed after a failed commit, until the next commit opens it again.
+    #[error("store: closed after a failed commit; the next commit opens it again")]
+    Closed,
+    /// Rows that do not make a fleet's history (a gap in the indices).
+    #[error("store: {0}")]
+    Damaged(String),
+}
 
 macro_rules! from_redb {
     ($($t:ty),*) => {$(
         impl From<$t> for StoreError {
             fn from(e: $t) -> Self {
-                StoreError(e.into())
+                StoreError::Redb(e.into())
             }
         }
     )*};
@@ -41,9 +56,14 @@ from_redb!(
     redb::CommitError
 );
 
+/// Opens the database (again, after a failed commit).
+type Opener = Box<dyn Fn() -> Result<Database, redb::DatabaseError> + Send + Sync>;
+
 /// The mapper's durable store: one redb file.
 pub struct Store {
-    db: Database,
+    open: Opener,
+    /// `None` after a failed commit, until the next one opens the file again.
+    db: RwLock<Option<Database>>,
 }
 
 /// One fleet as stored.
@@ -96,146 +116,127 @@ pub fn split_cloud(node: &mut v1::Node, payload: Vec<u8>) -> (Vec<u8>, Option<Ve
 impl Store {
     /// Opens the store at `path`, made when missing.
     pub fn open(path: &Path) -> Result<Store, StoreError> {
-        let db = Database::create(path)?;
-        let txn = db.begin_write()?;
-        txn.open_table(NODES)?;
-        txn.open_table(EDGES)?;
-        txn.open_table(SOLVES)?;
-        txn.open_table(CLOUDS)?;
-        txn.commit()?;
-        Ok(Store { db })
+        let path = path.to_owned();
+        Store::with_opener(Box::new(move || Database::create(&path)))
+    }
+
+    fn with_opener(open: Opener) -> Result<Store, StoreError> {
+        let db = RwLock::new(Some(with_tables(open()?)?));
+        Ok(Store { open, db })
     }
 
     /// Commits a batch (nodes, their clouds, the edges they added, the solve after them) in
-    /// one transaction: durable when this returns.
+    /// one transaction: durable when this returns. After a failed commit the file is closed;
+    /// the next commit opens it again (redb repairs it then) and may be the same one again:
+    /// every row is keyed, so writing it twice stores it once.
     pub fn commit(&self, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
-        let txn = self.db.begin_write()?;
-        {
-            let mut nodes = txn.open_table(NODES)?;
-            let mut edges = txn.open_table(EDGES)?;
-            let mut solves = txn.open_table(SOLVES)?;
-            let mut clouds = txn.open_table(CLOUDS)?;
-            for batch in batches {
-                for &(arrival, bytes) in &batch.nodes {
-                    nodes.insert((batch.fleet, arrival), bytes)?;
-                }
-                for &(node, bytes) in &batch.clouds {
-                    clouds.insert((batch.fleet, node), bytes)?;
-                }
-                for (k, edge) in batch.edges.iter().enumerate() {
-                    edges.insert((batch.fleet, batch.first_edge + k as u64), edge.as_slice())?;
-                }
-                if let Some(arrival) = batch.solved_after {
-                    solves.insert((batch.fleet, arrival), ())?;
-                }
-            }
+        if self.db.read().expect("store lock").is_none() {
+            *self.db.write().expect("store lock") = Some(with_tables((self.open)()?)?);
         }
-        txn.commit()?;
-        Ok(())
+        let result = match &*self.db.read().expect("store lock") {
+            Some(db) => write(db, batches),
+            None => Err(StoreError::Closed),
+        };
+        if result.is_err() {
+            // redb fails every later operation after an I/O error until it is reopened.
+            *self.db.write().expect("store lock") = None;
+        }
+        result
     }
 
     /// The encoded cloud of a fleet's node, if it came with one.
     pub fn cloud(&self, fleet: &str, node: u64) -> Result<Option<Vec<u8>>, StoreError> {
-        let txn = self.db.begin_read()?;
+        let db = self.db.read().expect("store lock");
+        let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
         let table = txn.open_table(CLOUDS)?;
         Ok(table.get((fleet, node))?.map(|v| v.value().to_vec()))
     }
 
-    /// Every fleet, its nodes in arrival order (clouds are not read).
-    pub fn load(&self) -> Result<Vec<StoredFleet>, StoreError> {
-        let txn = self.db.begin_read()?;
-        let mut fleets: Vec<StoredFleet> = Vec::new();
-        let fleet_of = |id: &str, fleets: &mut Vec<StoredFleet>| -> usize {
-            match fleets.iter().position(|f| f.id == id) {
-                Some(i) => i,
-                None => {
-                    fleets.push(StoredFleet {
-                        id: id.to_owned(),
-                        ..Default::default()
-                    });
-                    fleets.len() - 1
-                }
-            }
-        };
-        for entry in txn.open_table(NODES)?.iter()? {
-            let (k, v) = entry?;
-            let i = fleet_of(k.value().0, &mut fleets);
-            fleets[i].nodes.push(v.value().to_vec());
+    /// The fleets that have nodes, sorted.
+    pub fn fleet_ids(&self) -> Result<Vec<String>, StoreError> {
+        let db = self.db.read().expect("store lock");
+        let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
+        let table = txn.open_table(NODES)?;
+        let mut ids: Vec<String> = Vec::new();
+        let mut next = table.first()?.map(|(k, _)| k.value().0.to_owned());
+        while let Some(id) = next {
+            // Past this fleet's last possible key: the next fleet's first node.
+            let after = (Bound::Excluded((id.as_str(), u64::MAX)), Bound::Unbounded);
+            next = match table.range::<(&str, u64)>(after)?.next() {
+                Some(entry) => Some(entry?.0.value().0.to_owned()),
+                None => None,
+            };
+            ids.push(id);
         }
-        for entry in txn.open_table(EDGES)?.iter()? {
-            let (k, v) = entry?;
-            let i = fleet_of(k.value().0, &mut fleets);
-            fleets[i].edges.push(v.value().to_vec());
-        }
-        for entry in txn.open_table(SOLVES)?.iter()? {
-            let (k, _) = entry?;
-            let (fleet, arrival) = k.value();
-            let i = fleet_of(fleet, &mut fleets);
-            fleets[i].solves.push(arrival);
-        }
-        Ok(fleets)
+        Ok(ids)
     }
+
+    /// One fleet, its nodes in arrival order (clouds are not read). Indices must run from 0
+    /// without a gap.
+    pub fn load_fleet(&self, id: &str) -> Result<StoredFleet, StoreError> {
+        let db = self.db.read().expect("store lock");
+        let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
+        let fleet = (id, 0u64)..=(id, u64::MAX);
+        let mut stored = StoredFleet {
+            id: id.to_owned(),
+            ..Default::default()
+        };
+        for (table, rows) in [(NODES, &mut stored.nodes), (EDGES, &mut stored.edges)] {
+            for (i, entry) in txn.open_table(table)?.range(fleet.clone())?.enumerate() {
+                let (k, v) = entry?;
+                let index = k.value().1;
+                if index != i as u64 {
+                    return Err(StoreError::Damaged(format!(
+                        "fleet {id}: {} row {index} where {i} was due",
+                        table.name()
+                    )));
+                }
+                rows.push(v.value().to_vec());
+            }
+        }
+        for entry in txn.open_table(SOLVES)?.range(fleet)? {
+            stored.solves.push(entry?.0.value().1);
+        }
+        Ok(stored)
+    }
+}
+
+/// The database, its tables made when missing.
+fn with_tables(db: Database) -> Result<Database, StoreError> {
+    let txn = db.begin_write()?;
+    txn.open_table(NODES)?;
+    txn.open_table(EDGES)?;
+    txn.open_table(SOLVES)?;
+    txn.open_table(CLOUDS)?;
+    txn.commit()?;
+    Ok(db)
+}
+
+fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
+    let txn = db.begin_write()?;
+    {
+        let mut nodes = txn.open_table(NODES)?;
+        let mut edges = txn.open_table(EDGES)?;
+        let mut solves = txn.open_table(SOLVES)?;
+        let mut clouds = txn.open_table(CLOUDS)?;
+        for batch in batches {
+            for &(arrival, bytes) in &batch.nodes {
+                nodes.insert((batch.fleet, arrival), bytes)?;
+            }
+            for &(node, bytes) in &batch.clouds {
+                clouds.insert((batch.fleet, node), bytes)?;
+            }
+            for (k, edge) in batch.edges.iter().enumerate() {
+                edges.insert((batch.fleet, batch.first_edge + k as u64), edge.as_slice())?;
+            }
+            if let Some(arrival) = batch.solved_after {
+                solves.insert((batch.fleet, arrival), ())?;
+            }
+        }
+    }
+    txn.commit()?;
+    Ok(())
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_node_is_stored_without_its_cloud() {
-        let cloud = v1::SegmentedCloud {
-            xyz_cm: vec![100, -200, 30],
-            classes: vec![2],
-            source_points: 10,
-            voxel_m: 0.1,
-            max_points: 6000,
-        };
-        let mut node = v1::Node {
-            node_seq: 7,
-            cloud: Some(cloud.clone()),
-            ..Default::default()
-        };
-        let payload = node.encode_to_vec();
-        let (stored, apart) = split_cloud(&mut node, payload.clone());
-        assert!(node.cloud.is_none());
-        let back = v1::Node::decode(stored.as_slice()).unwrap();
-        assert_eq!((back.node_seq, back.cloud), (7, None));
-        assert!(stored.len() < payload.len());
-        let apart = v1::SegmentedCloud::decode(apart.unwrap().as_slice()).unwrap();
-        assert_eq!(apart, cloud);
-        // Without a cloud: the payload as received.
-        assert_eq!(split_cloud(&mut node, stored.clone()), (stored, None));
-    }
-
-    #[test]
-    fn clouds_are_kept_apart_and_survive_reopening() {
-        let dir = std::env::temp_dir().join(format!("levelmap-store-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("clouds.redb");
-        let _ = std::fs::remove_file(&path);
-        {
-            let store = Store::open(&path).unwrap();
-            store
-                .commit(&[FleetBatch {
-                    fleet: "park",
-                    nodes: vec![(0, b"node0"), (1, b"node1")],
-                    clouds: vec![(1, b"cloud1")],
-                    ..Default::default()
-                }])
-                .unwrap();
-        }
-        let store = Store::open(&path).unwrap();
-        assert_eq!(
-            store.cloud("park", 1).unwrap().as_deref(),
-            Some(&b"cloud1"[..])
-        );
-        assert_eq!(store.cloud("park", 0).unwrap(), None);
-        assert_eq!(store.cloud("campus", 1).unwrap(), None);
-        // The replay reads the nodes alone.
-        let fleets = store.load().unwrap();
-        assert_eq!(fleets.len(), 1);
-        assert_eq!(fleets[0].nodes, [b"node0".to_vec(), b"node1".to_vec()]);
-        drop(store);
-        std::fs::remove_dir_all(&dir).ok();
-    }
-}
+mod tests;

@@ -3,28 +3,37 @@
 //! Each turn: take a batch → check each node → map it → commit the batch → ack → publish
 //! views and events → run the solves that are due → answer operator requests. Under load,
 //! nodes batch up (one commit, one solve per fleet) instead of queueing behind one solve each.
-//! A node is acked only once it is committed: a failed commit stops the mapper taking nodes
-//! (`Worker::store_failed`), and the robots re-send to the restarted one.
+//! A node is acked only once it is committed. A failed commit (a full disk) keeps what the
+//! maps took but the store did not (`Unstored`): no node is taken meanwhile, the commit is
+//! tried again every second, and its nodes are acked once it succeeds; the robots keep
+//! re-sending the rest. Nodes of a quarantined fleet (its store did not replay) are not taken.
 
 use crate::bus::Bus;
 use crate::config::MapperConfig;
 use crate::fleet::{FleetMap, IngestError, Sequence};
 use crate::state::{FleetView, Metrics, Shared};
-use crate::store::{FleetBatch, Store, StoreError};
+use crate::store::{Store, StoreError};
+use commit::Unstored;
 use serde_json::json;
 use std::collections::HashMap;
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use wire::NodeInput;
 use wire::session::now_ns;
 
+mod commit;
+
 /// Most messages taken into one batch (one solve, one store commit).
 const MAX_BATCH: usize = 512;
 
+/// Most messages waiting for the worker: nodes beyond it are shed (not acked, so their robots
+/// send them again), which bounds the mapper's memory when it falls behind (1,024 nodes with
+/// clouds are about 60 MB).
+pub const INGEST_QUEUE: usize = 1024;
+
 /// The answer to an operator's optimize request: the report as JSON, or why not.
-pub type OptimizeReply = tokio::sync::oneshot::Sender<Result<serde_json::Value, String>>;
+pub type OptimizeReply = tokio::sync::oneshot::Sender<Result<serde_json::Value, OptimizeError>>;
 
 /// Work for the mapping worker.
 pub enum Work {
@@ -52,25 +61,31 @@ pub enum OptimizeError {
     /// The worker is gone: the mapper is stopping.
     #[error("the mapping worker stopped")]
     Stopped,
-    /// The worker refused: no such fleet, a network not anchored yet, a failed store or solve.
+    /// The worker's queue is full: try again.
+    #[error("the mapping worker is busy")]
+    Busy,
+    /// The worker refused: no such fleet, a network not anchored yet, a failed solve.
     #[error("{0}")]
     Refused(String),
+    /// The store cannot commit (the solve's point would not be stored): try again later.
+    #[error("{0}")]
+    StoreFailed(String),
 }
 
 impl Work {
     /// Asks the worker behind `work` to re-optimize `fleet` now and waits for its report.
     pub async fn optimize(
-        work: &mpsc::Sender<Work>,
+        work: &mpsc::SyncSender<Work>,
         fleet: &str,
     ) -> Result<serde_json::Value, OptimizeError> {
         let (reply, answer) = tokio::sync::oneshot::channel();
         let fleet = fleet.to_owned();
-        work.send(Work::Optimize { fleet, reply })
-            .map_err(|_| OptimizeError::Stopped)?;
-        answer
-            .await
-            .map_err(|_| OptimizeError::Stopped)?
-            .map_err(OptimizeError::Refused)
+        work.try_send(Work::Optimize { fleet, reply })
+            .map_err(|e| match e {
+                mpsc::TrySendError::Full(_) => OptimizeError::Busy,
+                mpsc::TrySendError::Disconnected(_) => OptimizeError::Stopped,
+            })?;
+        answer.await.map_err(|_| OptimizeError::Stopped)?
     }
 }
 
@@ -87,6 +102,7 @@ struct Checked {
 struct Accepted {
     fleet: String,
     robot: String,
+    chain_id: u64,
     node_seq: u64,
     /// Its index in the fleet's map.
     node: usize,
@@ -96,12 +112,20 @@ struct Accepted {
     cloud: Option<Vec<u8>>,
 }
 
+/// A robot's chain to re-ack (a duplicate or a gap): its highest node taken, and where to
+/// re-send from after a gap.
+struct Reack {
+    fleet: String,
+    robot: String,
+    chain_id: u64,
+    resend_from: Option<u64>,
+}
+
 /// What one batch brought.
 #[derive(Default)]
 struct Batch {
     accepted: Vec<Accepted>,
-    /// Robots to re-ack (a duplicate or a gap): their highest node taken.
-    reacks: Vec<(String, String)>,
+    reacks: Vec<Reack>,
     requests: Vec<(String, OptimizeReply)>,
     /// A stop was asked for: this is the last turn.
     stop: bool,
@@ -117,8 +141,10 @@ pub struct Worker {
     /// Per fleet, how many of its edges are stored.
     edges_stored: HashMap<String, usize>,
     last_solve: HashMap<String, Instant>,
-    /// Set by a failed commit: no node is taken until the mapper restarts.
-    store_failed: bool,
+    /// Set by a failed commit, until it is committed: no node is taken meanwhile.
+    unstored: Option<Unstored>,
+    /// When to try the failed commit again.
+    retry_at: Instant,
 }
 
 impl Worker {
@@ -142,7 +168,8 @@ impl Worker {
             bus,
             edges_stored,
             last_solve: HashMap::new(),
-            store_failed: false,
+            unstored: None,
+            retry_at: Instant::now(),
         }
     }
 
@@ -151,16 +178,27 @@ impl Worker {
         let wake = Duration::from_millis(self.config.solve_interval_ms.max(10));
         while let Some(jobs) = take_batch(&work, wake) {
             let started = Instant::now();
-            let batch = self.check_and_map(jobs);
-            if self.commit(&batch.accepted).is_ok() {
-                self.ack(&batch);
-                self.publish(&batch.accepted, started);
-                self.due_solves();
-            }
-            self.operator_requests(batch.requests);
-            if batch.stop {
+            self.retry_store();
+            let mut batch = self.check_and_map(jobs);
+            let (requests, stop) = (std::mem::take(&mut batch.requests), batch.stop);
+            self.store_and_ack(
+                Unstored {
+                    batch,
+                    ..Unstored::default()
+                },
+                started,
+            );
+            self.operator_requests(requests);
+            if stop {
                 break;
             }
+        }
+        if let Some(unstored) = &self.unstored {
+            let nodes = unstored.batch.accepted.len();
+            tracing::warn!(
+                nodes,
+                "stopped with a batch not stored: its robots keep its nodes"
+            );
         }
     }
 
@@ -169,8 +207,12 @@ impl Worker {
         let mut batch = Batch::default();
         for job in jobs {
             match job {
-                Work::Node { key, .. } if self.store_failed => {
-                    self.reject("store", &key, &"the store failed")
+                // Counted, not logged: robots re-send every second while the store is down.
+                Work::Node { .. } if self.unstored.is_some() => {
+                    self.shared.metrics.reject("node", "store")
+                }
+                Work::Node { key, .. } if self.quarantined(&key) => {
+                    self.shared.metrics.reject("node", "quarantined")
                 }
                 Work::Node { key, payload } => {
                     if let Some(checked) = self.check(&key, payload) {
@@ -221,12 +263,7 @@ impl Worker {
 
     /// Maps a checked node if it is the next of its robot; a duplicate or a node after a gap
     /// is not mapped, and its robot is re-acked (the ack says where to re-send from).
-    fn map(
-        &mut self,
-        key: &str,
-        checked: Checked,
-        reacks: &mut Vec<(String, String)>,
-    ) -> Option<Accepted> {
+    fn map(&mut self, key: &str, checked: Checked, reacks: &mut Vec<Reack>) -> Option<Accepted> {
         let Checked {
             input,
             payload,
@@ -238,35 +275,53 @@ impl Worker {
             .fleets
             .entry(fleet.clone())
             .or_insert_with(|| config.new_fleet(&fleet));
-        match map.sequence(&robot, input.node_seq) {
+        let reack = |resend_from| Reack {
+            fleet: fleet.clone(),
+            robot: robot.clone(),
+            chain_id: input.chain_id,
+            resend_from,
+        };
+        match map.sequence(&input) {
             Sequence::Next => {}
             Sequence::Duplicate => {
                 // Taken already: its ack was lost, so ack again once this batch is durable.
                 Metrics::bump(&self.shared.metrics.nodes_duplicate);
-                reacks.push((fleet, robot));
+                reacks.push(reack(None));
                 return None;
             }
             Sequence::Gap { expected } => {
                 let why = format!("node {} before {expected}", input.node_seq);
                 self.reject("out_of_order", key, &why);
-                reacks.push((fleet, robot));
+                reacks.push(reack(Some(expected)));
                 return None;
             }
         }
         let arrival = map.nodes().len() as u64;
         match map.ingest(&input) {
-            Ok(ingested) => Some(Accepted {
-                fleet,
-                robot,
-                node_seq: input.node_seq,
-                node: ingested.node,
-                arrival,
-                payload,
-                cloud,
-            }),
+            Ok(ingested) => {
+                if let Some(e) = &ingested.odometry_break {
+                    // Taken, but its odometry link is not: counted under the reason.
+                    tracing::warn!(key, "odometry break, a new odometry chain starts: {e}");
+                    self.shared.metrics.reject("odometry_step", e.reason());
+                }
+                Some(Accepted {
+                    fleet,
+                    robot,
+                    chain_id: input.chain_id,
+                    node_seq: input.node_seq,
+                    node: ingested.node,
+                    arrival,
+                    payload,
+                    cloud,
+                })
+            }
             Err(IngestError::Graph(e)) => {
                 tracing::error!(key, "node not mapped: {e}");
                 self.shared.metrics.reject("node", "graph");
+                None
+            }
+            Err(IngestError::Refused { source, .. }) => {
+                self.reject(source.reason(), key, &source);
                 None
             }
             Err(e) => {
@@ -276,77 +331,36 @@ impl Worker {
         }
     }
 
-    /// Commits the batch's nodes, clouds and new edges in one transaction.
-    fn commit(&mut self, accepted: &[Accepted]) -> Result<(), StoreError> {
-        let touched = fleets_of(accepted);
-        if touched.is_empty() {
-            return Ok(());
-        }
-        let batches: Vec<FleetBatch> = touched
-            .iter()
-            .map(|&fleet| {
-                let stored = self.edges_stored.get(fleet).copied().unwrap_or(0);
-                let of_fleet = || accepted.iter().filter(move |a| a.fleet == fleet);
-                FleetBatch {
-                    fleet,
-                    solved_after: None,
-                    nodes: of_fleet()
-                        .map(|a| (a.arrival, a.payload.as_slice()))
-                        .collect(),
-                    clouds: of_fleet()
-                        .filter_map(|a| Some((a.node as u64, a.cloud.as_deref()?)))
-                        .collect(),
-                    first_edge: stored as u64,
-                    edges: crate::store::encode_edges(&self.fleets[fleet].graph().edges[stored..]),
-                }
-            })
-            .collect();
-        let result = self.store.commit(&batches);
-        if result.is_ok() {
-            for b in &batches {
-                *self.edges_stored.entry(b.fleet.to_owned()).or_default() += b.edges.len();
-            }
-        }
-        drop(batches);
-        result.map_err(|e| self.store_failed(e))
+    /// Whether `key` is a node of a quarantined fleet.
+    fn quarantined(&self, key: &str) -> bool {
+        wire::parse_robot_key(key).is_ok_and(|k| self.shared.quarantine(k.fleet).is_some())
     }
 
-    /// Commits that `fleet` was solved after its last node (a replay solves at the same place).
-    fn commit_solve(&mut self, fleet: &str) -> Result<(), StoreError> {
-        let marker = FleetBatch {
-            fleet,
-            solved_after: Some(self.fleets[fleet].nodes().len() as u64 - 1),
-            ..Default::default()
-        };
-        let result = self.store.commit(&[marker]);
-        result.map_err(|e| self.store_failed(e))
-    }
-
-    /// The one way a store failure is handled: not durable, so nothing more is acked; the
-    /// mapper reports unhealthy and stops taking nodes rather than diverge from its store.
-    fn store_failed(&mut self, e: StoreError) -> StoreError {
-        tracing::error!("store commit failed; restart the mapper: {e}");
-        self.store_failed = true;
-        self.shared.healthy.store(false, Ordering::Relaxed);
-        e
-    }
-
-    /// Acks each robot's highest node taken, once per robot.
+    /// Acks each robot chain's highest node taken, once per chain, with where to re-send
+    /// from when the batch showed a gap.
     fn ack(&self, batch: &Batch) {
-        let mut acks: HashMap<(&str, &str), u64> = HashMap::new();
-        for (fleet, robot) in &batch.reacks {
-            let map = &self.fleets[fleet];
-            if let Some(r) = map.robot_index(robot) {
-                acks.insert((fleet, robot), map.robots()[r].last_node_seq);
-            }
+        type Chain<'a> = (&'a str, &'a str, u64);
+        let mut resend: HashMap<Chain, Option<u64>> = HashMap::new();
+        for r in &batch.reacks {
+            let entry = resend.entry((&r.fleet, &r.robot, r.chain_id)).or_default();
+            *entry = (*entry).or(r.resend_from);
         }
         for a in &batch.accepted {
             Metrics::bump(&self.shared.metrics.nodes_accepted);
-            let seq = acks.entry((&a.fleet, &a.robot)).or_default();
-            *seq = (*seq).max(a.node_seq);
+            resend.entry((&a.fleet, &a.robot, a.chain_id)).or_default();
         }
-        for ((fleet, robot), seq) in acks {
-            self.bus.ack(&self.shared.metrics, fleet, robot, seq);
+        for ((fleet, robot, chain_id), resend_from) in resend {
+            let acked = self.fleets[fleet].chain_acked(robot, chain_id);
+            // A gap the batch filled after all needs no re-send.
+            let resend_from = resend_from.filter(|&r| acked.is_none_or(|a| r > a));
+            let ack = crate::bus::AckOf {
+                fleet,
+                robot,
+                chain_id,
+                acked,
+                resend_from,
+            };
+            self.bus.ack(&self.shared.metrics, &ack);
         }
     }
 
@@ -373,6 +387,9 @@ impl Worker {
     /// Solves each fleet whose nodes call for it, at most every solve interval: nodes arriving
     /// meanwhile wait for one solve at most, not for one each. After the batch is visible.
     fn due_solves(&mut self) {
+        if self.unstored.is_some() {
+            return;
+        }
         let interval = Duration::from_millis(self.config.solve_interval_ms);
         let mut ids: Vec<String> = self.fleets.keys().cloned().collect();
         ids.sort_unstable();
@@ -400,17 +417,33 @@ impl Worker {
         }
     }
 
-    /// After a solve: its point committed, the new view, the corrected poses on the bus.
+    /// After a solve: its point committed, then the new view and the corrected poses.
     fn solved(&mut self, fleet: &str, started: Instant) -> Result<(), StoreError> {
         Metrics::bump(&self.shared.metrics.optimizations);
-        self.commit_solve(fleet)?;
+        // A replay solves after the same node, so it finds the same loop closures.
+        let work = Unstored {
+            solves: vec![(
+                fleet.to_owned(),
+                self.fleets[fleet].nodes().len() as u64 - 1,
+            )],
+            ..Unstored::default()
+        };
+        if let Err(e) = self.commit(&work) {
+            self.store_failed(work);
+            return Err(e);
+        }
+        self.publish_solve(fleet, started);
+        Ok(())
+    }
+
+    /// A solve's new view, the corrected poses on the bus, the `optimized` event.
+    fn publish_solve(&self, fleet: &str, started: Instant) {
         let map = &self.fleets[fleet];
         let ms = started.elapsed().as_secs_f64() * 1e3;
         self.shared.publish_view(FleetView::of(map, ms, now_ns()));
         self.bus.publish_poses(map);
         self.shared
             .event(&json!({"type": "optimized", "fleet": map.id()}));
-        Ok(())
     }
 
     /// Operators' optimize requests: solved now, pending or not.
@@ -420,19 +453,21 @@ impl Worker {
         }
     }
 
-    fn optimize_now(&mut self, fleet: &str) -> Result<serde_json::Value, String> {
+    fn optimize_now(&mut self, fleet: &str) -> Result<serde_json::Value, OptimizeError> {
+        // Before solving: a solve whose point is not stored would not be replayed.
+        if let Some(fault) = self.shared.store_fault() {
+            return Err(OptimizeError::StoreFailed(fault));
+        }
+        let refused = |e: String| OptimizeError::Refused(e);
         let map = self
             .fleets
             .get_mut(fleet)
-            .ok_or_else(|| format!("no fleet {fleet}"))?;
-        if !map.optimize_now().map_err(|e| e.to_string())? {
-            return Err("part of the network is not anchored yet".into());
-        }
-        if self.store_failed {
-            return Err("the store failed".into());
+            .ok_or_else(|| refused(format!("no fleet {fleet}")))?;
+        if !map.optimize_now().map_err(|e| refused(e.to_string()))? {
+            return Err(refused("part of the network is not anchored yet".into()));
         }
         self.solved(fleet, Instant::now())
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| OptimizeError::StoreFailed(e.to_string()))?;
         let report = self.fleets[fleet].last_optimization();
         Ok(serde_json::to_value(report).expect("report serializes"))
     }

@@ -48,6 +48,21 @@ pub enum WireError {
         /// What is wrong with it.
         problem: &'static str,
     },
+    /// A number that is valid but not physically plausible for a robot: a position beyond
+    /// [`MAX_POSITION_M`], a range beyond [`MAX_RANGE_M`], a node larger than
+    /// [`MAX_NODE_BYTES`], a step faster than [`MAX_SPEED_M_PER_S`].
+    Implausible {
+        /// The field, as `Message.field`.
+        field: &'static str,
+        /// The element's index in a repeated field, `None` for a singular one.
+        index: Option<usize>,
+        /// The value.
+        value: f64,
+        /// The bound it passed.
+        limit: f64,
+        /// The rejection's reason, for counters (`implausible_position`, …).
+        reason: &'static str,
+    },
     /// A structural inconsistency: lengths that differ, counts that do not add up, ids that
     /// disagree between nested headers, an empty scan.
     Invalid {
@@ -69,6 +84,7 @@ impl WireError {
             WireError::InvalidKey { .. } => "invalid_key",
             WireError::InvalidValue { .. } => "invalid_value",
             WireError::Invalid { .. } => "inconsistent",
+            WireError::Implausible { reason, .. } => reason,
         }
     }
 }
@@ -105,6 +121,19 @@ impl fmt::Display for WireError {
                 write!(f, " = {value} is {problem}")
             }
             WireError::Invalid { field, detail } => write!(f, "{field}: {detail}"),
+            WireError::Implausible {
+                field,
+                index,
+                value,
+                limit,
+                ..
+            } => {
+                write!(f, "{field}")?;
+                if let Some(i) = index {
+                    write!(f, "[{i}]")?;
+                }
+                write!(f, " = {value} is beyond the plausible {limit}")
+            }
         }
     }
 }
@@ -118,30 +147,54 @@ impl std::error::Error for WireError {
     }
 }
 
-/// Checks that `value` is finite.
-/// The largest coordinate a position or range may have on the wire (m): 10,000 km, more than
-/// any site's extent from its robots' odometry origins. Finite but absurd values (1e200 m)
-/// would pass `finite` and break every later solve of the fleet's network.
-pub const MAX_COORDINATE_M: f64 = 1e7;
+/// The farthest a position may be from its frame's origin (m): 1,000 km, more than any
+/// site's extent from its robots' odometry origins or its datum. Finite but absurd values
+/// (1e200 m) would pass `finite` and break every later solve of the fleet's network.
+pub const MAX_POSITION_M: f64 = 1e6;
 
-/// `value` if finite and within ±[`MAX_COORDINATE_M`]; `field` names it in the error.
+/// The farthest return a leveled scan may carry (m): no lidar a robot carries sees 1 km.
+pub const MAX_RANGE_M: f64 = 1e3;
+
+/// The largest encoded node taken (bytes): a 6,000-point cloud and a 2,000-beam scan are
+/// about 60 KB; [`crate::CLOUD_MAX_POINTS`] points at 7 bytes are 7.3 MB. Zenoh's maximum
+/// message size is set from it.
+pub const MAX_NODE_BYTES: usize = 8 << 20;
+
+/// The fastest a robot may move between two nodes of a chain (m/s), by odometry over the
+/// nodes' stamps: a faster step is an odometry reset or a fault, not motion.
+pub const MAX_SPEED_M_PER_S: f64 = 50.0;
+
+/// `value` if finite and within ±[`MAX_POSITION_M`]; `field` names it in the error.
 pub(crate) fn coordinate(
     field: &'static str,
     index: Option<usize>,
     value: f64,
 ) -> Result<f64, WireError> {
+    bounded(field, index, value, MAX_POSITION_M, "implausible_position")
+}
+
+/// `value` if finite and within ±`limit`, else an [`WireError::Implausible`] with `reason`.
+pub(crate) fn bounded(
+    field: &'static str,
+    index: Option<usize>,
+    value: f64,
+    limit: f64,
+    reason: &'static str,
+) -> Result<f64, WireError> {
     let value = finite(field, index, value)?;
-    if value.abs() > MAX_COORDINATE_M {
-        return Err(WireError::InvalidValue {
+    if value.abs() > limit {
+        return Err(WireError::Implausible {
             field,
             index,
             value,
-            problem: "beyond 10,000 km",
+            limit,
+            reason,
         });
     }
     Ok(value)
 }
 
+/// `value` if finite.
 pub(crate) fn finite(
     field: &'static str,
     index: Option<usize>,

@@ -23,7 +23,7 @@ pub mod v1 {
 }
 
 pub use convert::*;
-pub use error::{MAX_COORDINATE_M, WireError};
+pub use error::{MAX_NODE_BYTES, MAX_POSITION_M, MAX_RANGE_M, MAX_SPEED_M_PER_S, WireError};
 pub use keys::{
     KEY_ROOT, RobotKey, Topic, ack_key, all_robots_key_expr, map_key, map_key_expr, node_key,
     odom_key, parse_robot_key, robot_key, validate_id,

@@ -1,5 +1,6 @@
 //! The Zenoh session of a levelmap service: mode, endpoints and TLS from the service's config
-//! file, over an optional Zenoh configuration file (access control and the rest).
+//! file, over an optional Zenoh configuration file (access control and the rest); the config
+//! loader both services share ([`load_toml`], with [`mod@env`] overrides).
 
 use anyhow::{anyhow, bail};
 use rustls_pki_types::pem::{self, PemObject};
@@ -17,13 +18,59 @@ pub fn now_ns() -> u64 {
         .map_or(0, |d| d.as_nanos() as u64)
 }
 
-/// Reads a service's TOML config file; unknown keys are errors when `T` denies them (a typo
-/// must not silently become a default). Errors name the file.
-pub fn load_toml<T: DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+pub mod env;
+
+/// Reads a service's config: its TOML file (none: every key at its default), then the
+/// `LEVELMAP_…` variables of the environment ([`mod@env`]). Unknown keys are errors, in the file
+/// when `T` denies them, in the environment always (a typo must not silently become a
+/// default). Errors name the file or the variable.
+pub fn load_toml<T>(path: Option<&Path>) -> anyhow::Result<T>
+where
+    T: DeserializeOwned + Serialize + Default,
+{
+    load_toml_with(path, std::env::vars_os())
 }
+
+/// [`load_toml`] with the environment given: `vars` as `std::env::vars_os` yields them.
+pub fn load_toml_with<T>(
+    path: Option<&Path>,
+    vars: impl IntoIterator<Item = (std::ffi::OsString, std::ffi::OsString)>,
+) -> anyhow::Result<T>
+where
+    T: DeserializeOwned + Serialize + Default,
+{
+    let overrides = env::env_overrides(vars)?;
+    let mut table = match path {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            // The file alone first: its errors keep their line and column.
+            let alone: T =
+                toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            if overrides.is_empty() {
+                return Ok(alone);
+            }
+            toml::from_str::<toml::Table>(&text)?
+        }
+        None => toml::Table::new(),
+    };
+    let defaults = toml::Table::try_from(T::default())?;
+    env::apply_overrides(&mut table, &defaults, &overrides)?;
+    let vars: Vec<&str> = overrides.iter().map(|o| o.var.as_str()).collect();
+    let origin = match path {
+        Some(path) => format!("{} with {}", path.display(), vars.join(", ")),
+        None => vars.join(", "),
+    };
+    let config: T = toml::Value::Table(table)
+        .try_into()
+        .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
+    env::check_taken(&toml::Table::try_from(&config)?, &overrides)?;
+    Ok(config)
+}
+
+/// The largest Zenoh message a levelmap session takes: twice the largest valid node
+/// ([`crate::MAX_NODE_BYTES`]), so every valid node fits with room for its framing.
+pub const MAX_MESSAGE_BYTES: usize = 2 * crate::MAX_NODE_BYTES;
 
 /// Which service a session belongs to: what it is when neither its TOML nor its
 /// `config_file` sets `mode`.
@@ -55,7 +102,8 @@ pub const DEFAULT_CLIENT_CONNECT: &str = "tcp/127.0.0.1:7447";
 /// `config_file`, else from the default: `mode` from the service's [`Role`], `listen`
 /// [`DEFAULT_ROUTER_LISTEN`] for a router (nothing otherwise), `connect`
 /// [`DEFAULT_CLIENT_CONNECT`] for a client (nothing otherwise), multicast scouting off.
-/// A key the file leaves at Zenoh's own default counts as unset there.
+/// A key the file leaves at Zenoh's own default counts as unset there. Zenoh's
+/// `transport/link/rx/max_message_size` is [`MAX_MESSAGE_BYTES`] unless the file sets it.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SessionConfig {
@@ -174,6 +222,13 @@ impl SessionConfig {
                 "scouting/multicast/enabled",
                 self.multicast_scouting.as_ref().map(json),
                 json(&false),
+            ),
+            // Zenoh's default is 1 GiB: a peer could make us buffer that much per message.
+            // No TOML key: only a config_file that sets it otherwise changes it.
+            (
+                "transport/link/rx/max_message_size",
+                None,
+                json(&MAX_MESSAGE_BYTES),
             ),
         ];
         for (key, ours, default) in layers {
@@ -458,6 +513,10 @@ mod tests {
             serde_json::json!(["tcp/127.0.0.1:7447"])
         );
         assert_eq!(value(&client, "scouting/multicast/enabled"), false);
+        assert_eq!(
+            value(&client, "transport/link/rx/max_message_size"),
+            MAX_MESSAGE_BYTES
+        );
         // No TLS unless asked for.
         assert_eq!(
             value(&client, "transport/link/tls/enable_mtls"),

@@ -1,7 +1,7 @@
 //! Fleets: which have a map, each one's summary, its robots (live), a robot's trajectory,
 //! and the operator's re-optimization.
 
-use super::service::authorized;
+use super::access::authorized;
 use super::{Api, ApiError, Reply};
 use crate::state::{FleetView, RobotView};
 use crate::worker::{OptimizeError, Work};
@@ -94,7 +94,11 @@ pub(super) struct RobotState {
     /// When that odometry arrived (0: none yet).
     last_seen_ns: u64,
     nodes: usize,
+    /// Highest node_seq taken of its newest chain.
     last_node_seq: u64,
+    /// Its chains of nodes, one per outbox it sent from (a robot whose outbox was lost starts
+    /// a new one), oldest first.
+    chains: Vec<crate::fleet::ChainRecord>,
 }
 
 /// The robot's pose on the map now: live odometry since its last node, or the node itself.
@@ -117,6 +121,7 @@ fn robot_state(api: &Api, v: &FleetView, robot: &RobotView) -> RobotState {
         last_seen_ns,
         nodes: robot.nodes,
         last_node_seq: robot.last_node_seq,
+        chains: robot.chains.clone(),
     }
 }
 
@@ -202,9 +207,9 @@ pub(super) async fn trajectory_tum(
     responses(
         (status = 200, description = "The optimizer's report", body = OptimizeReport),
         (status = 401, description = "No valid bearer token", body = String),
-        (status = 403, description = "Write routes are off", body = String),
+        (status = 403, description = "Write routes are off, or the token only reads", body = String),
         (status = 404, description = "No such fleet, or not solvable yet", body = String),
-        (status = 503, description = "The mapper is stopping", body = String),
+        (status = 503, description = "The mapper is stopping or busy", body = String),
     ))]
 pub(super) async fn optimize(
     State(api): State<Api>,
@@ -212,9 +217,12 @@ pub(super) async fn optimize(
     headers: HeaderMap,
 ) -> Reply<Response> {
     authorized(&api, &headers)?;
+    api.available(&fleet)?;
     match Work::optimize(&api.work, &fleet).await {
         Ok(report) => Ok(Json(report).into_response()),
         Err(OptimizeError::Stopped) => Err(ApiError::Unavailable("mapper stopping".into())),
+        Err(OptimizeError::Busy) => Err(ApiError::Unavailable("mapper busy, retry".into())),
         Err(OptimizeError::Refused(why)) => Err(ApiError::NotFound(why)),
+        Err(OptimizeError::StoreFailed(why)) => Err(super::Degraded::store(why)),
     }
 }

@@ -200,6 +200,8 @@ fn graph_rows(v: &FleetView, information: bool) -> GraphRows {
     responses(
         (status = 200, description = "Nodes, edges and GPS residuals", body = Graph),
         (status = 404, description = "No such fleet", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn graph(
     State(api): State<Api>,
@@ -207,11 +209,19 @@ pub(super) async fn graph(
     Query(q): Query<GraphQuery>,
 ) -> Reply {
     let v = api.view(&fleet)?;
-    Ok(if q.columns {
-        Json(graph_columns(&v)).into_response()
-    } else {
-        Json(graph_rows(&v, q.information)).into_response()
-    })
+    // Serialized as heavy work: megabytes of JSON for a big map.
+    let json = api
+        .limits
+        .heavy(move || {
+            let json = if q.columns {
+                serde_json::to_vec(&graph_columns(&v))
+            } else {
+                serde_json::to_vec(&graph_rows(&v, q.information))
+            };
+            json.map_err(ApiError::internal)
+        })
+        .await?;
+    Ok(([(header::CONTENT_TYPE, "application/json")], json).into_response())
 }
 
 /// The network as g2o (`VERTEX_SE2`, `EDGE_SE2`), as g2o and GTSAM read it.
@@ -220,16 +230,23 @@ pub(super) async fn graph(
     responses(
         (status = 200, description = "g2o text", content_type = "text/plain", body = String),
         (status = 404, description = "No such fleet", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn graph_g2o(State(api): State<Api>, Path(fleet): Path<String>) -> Reply {
     let v = api.view(&fleet)?;
-    let graph = slam::PoseGraph {
-        poses: v.poses.clone(),
-        edges: v.edges.clone(),
-        gps: Vec::new(),
-    };
-    let ids: Vec<i64> = (0..v.poses.len() as i64).collect();
-    let text = graphio::posegraph::to_g2o(&graph, &ids);
+    let text = api
+        .limits
+        .heavy(move || {
+            let graph = slam::PoseGraph {
+                poses: v.poses.clone(),
+                edges: v.edges.clone(),
+                gps: Vec::new(),
+            };
+            let ids: Vec<i64> = (0..v.poses.len() as i64).collect();
+            Ok(graphio::posegraph::to_g2o(&graph, &ids))
+        })
+        .await?;
     Ok(([(header::CONTENT_TYPE, "text/plain")], text).into_response())
 }
 
@@ -262,6 +279,8 @@ pub(super) struct Covariances {
         (status = 400, description = "Unreadable or too many node ids", body = String),
         (status = 404, description = "No such fleet or node", body = String),
         (status = 422, description = "The network cannot be factorized", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn covariances(
     State(api): State<Api>,
@@ -293,11 +312,15 @@ pub(super) async fn covariances(
         )));
     }
     let marginals = api.marginals.clone();
-    let (nodes, covs) =
-        tokio::task::spawn_blocking(move || marginals.of(&v, &nodes).map(|c| (nodes, c)))
-            .await
-            .map_err(ApiError::internal)?
-            .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
+    let (nodes, covs) = api
+        .limits
+        .heavy(move || {
+            let covs = marginals
+                .of(&v, &nodes)
+                .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
+            Ok((nodes, covs))
+        })
+        .await?;
     let rows = |m: &Matrix3<f64>| -> [[f64; 3]; 3] {
         std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
     };

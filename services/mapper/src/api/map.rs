@@ -8,7 +8,6 @@ use axum::extract::{Path, Query, State};
 use axum::http::header;
 use axum::response::IntoResponse;
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
 use utoipa::{IntoParams, ToSchema};
 
 #[derive(Deserialize, IntoParams)]
@@ -80,33 +79,40 @@ impl GridPlacement {
     }
 }
 
-/// The occupancy grid of the fleet's leveled scans at their optimized poses (CPU work: off the
-/// async threads).
-async fn grid(v: Arc<FleetView>, q: GridQuery) -> Reply<slam::OccupancyGrid> {
-    let params = q.params()?;
-    tokio::task::spawn_blocking(move || {
-        let scans: Vec<slam::matching::Scan2> = v.nodes.iter().map(|n| n.scan()).collect();
-        slam::OccupancyGrid::from_scans(v.poses.iter().copied().zip(&scans), &params)
-            .map_err(|e| ApiError::Unprocessable(e.to_string()))
-    })
-    .await
-    .map_err(ApiError::internal)?
+/// The occupancy grid of the fleet's leveled scans at their optimized poses.
+fn grid(v: &FleetView, params: &slam::GridParams) -> Reply<slam::OccupancyGrid> {
+    let scans: Vec<slam::matching::Scan2> = v.nodes.iter().map(|n| n.scan()).collect();
+    slam::OccupancyGrid::from_scans(v.poses.iter().copied().zip(&scans), params)
+        .map_err(|e| ApiError::Unprocessable(e.to_string()))
 }
 
+/// How a grid is written out.
+type Encode = fn(&slam::OccupancyGrid) -> Result<Vec<u8>, graphio::EncodeError>;
+
 /// The fleet's grid in one of the formats users' tools read, its placement in the
-/// `Levelmap-Grid` header (for clients that fetch the picture alone: the dashboard).
+/// `Levelmap-Grid` header (for clients that fetch the picture alone: the dashboard). Made and
+/// encoded as heavy work.
 async fn grid_reply(
     api: &Api,
     fleet: &str,
     q: GridQuery,
     content_type: &'static str,
-    encode: impl FnOnce(&slam::OccupancyGrid) -> Result<Vec<u8>, graphio::EncodeError>,
+    encode: Encode,
 ) -> Reply {
     let v = api.view(fleet)?;
-    let nodes = v.poses.len();
-    let g = grid(v, q).await?;
-    let bytes = encode(&g).map_err(ApiError::internal)?;
-    let placement = serde_json::to_string(&GridPlacement::of(&g, nodes)).expect("serializes");
+    let params = q.params()?;
+    let (bytes, placement) = api
+        .limits
+        .heavy(move || {
+            let g = grid(&v, &params)?;
+            let bytes = encode(&g).map_err(ApiError::internal)?;
+            let placement = GridPlacement::of(&g, v.poses.len());
+            Ok((
+                bytes,
+                serde_json::to_string(&placement).expect("serializes"),
+            ))
+        })
+        .await?;
     Ok((
         [
             (header::CONTENT_TYPE, content_type),
@@ -125,6 +131,8 @@ async fn grid_reply(
         (status = 400, description = "A bad bbox", body = String),
         (status = 404, description = "No such fleet", body = String),
         (status = 422, description = "Too many cells (use max_cells)", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn map_png(
     State(api): State<Api>,
@@ -141,13 +149,15 @@ pub(super) async fn map_png(
         (status = 200, description = "PGM (P5)", content_type = "image/x-portable-graymap", body = Vec<u8>),
         (status = 404, description = "No such fleet", body = String),
         (status = 422, description = "Too many cells", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn map_pgm(
     State(api): State<Api>,
     Path(fleet): Path<String>,
     Query(q): Query<GridQuery>,
 ) -> Reply {
-    let pgm = graphio::gridmap::to_pgm;
+    let pgm: Encode = graphio::gridmap::to_pgm;
     grid_reply(&api, &fleet, q, "image/x-portable-graymap", pgm).await
 }
 
@@ -158,14 +168,15 @@ pub(super) async fn map_pgm(
         (status = 200, description = "map_server YAML", content_type = "application/yaml", body = String),
         (status = 404, description = "No such fleet", body = String),
         (status = 422, description = "Too many cells", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn map_yaml(
     State(api): State<Api>,
     Path(fleet): Path<String>,
     Query(q): Query<GridQuery>,
 ) -> Reply {
-    let yaml =
-        |g: &slam::OccupancyGrid| Ok(graphio::gridmap::to_map_yaml(g, "map.pgm").into_bytes());
+    let yaml: Encode = |g| Ok(graphio::gridmap::to_map_yaml(g, "map.pgm").into_bytes());
     grid_reply(&api, &fleet, q, "application/yaml", yaml).await
 }
 
@@ -176,6 +187,8 @@ pub(super) async fn map_yaml(
         (status = 200, description = "Where the grid lies", body = GridPlacement),
         (status = 404, description = "No such fleet", body = String),
         (status = 422, description = "Too many cells", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn map_json(
     State(api): State<Api>,
@@ -183,9 +196,12 @@ pub(super) async fn map_json(
     Query(q): Query<GridQuery>,
 ) -> Reply<Json<GridPlacement>> {
     let v = api.view(&fleet)?;
-    let nodes = v.poses.len();
-    let g = grid(v, q).await?;
-    Ok(Json(GridPlacement::of(&g, nodes)))
+    let params = q.params()?;
+    let placement = api
+        .limits
+        .heavy(move || Ok(GridPlacement::of(&grid(&v, &params)?, v.poses.len())))
+        .await?;
+    Ok(Json(placement))
 }
 
 /// Nodes and per-robot trajectories in WGS84 (needs the map's GPS datum).
@@ -194,6 +210,8 @@ pub(super) async fn map_json(
     responses(
         (status = 200, description = "A GeoJSON FeatureCollection", content_type = "application/geo+json", body = Object),
         (status = 404, description = "No such fleet, or no GPS datum yet", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn map_geojson(State(api): State<Api>, Path(fleet): Path<String>) -> Reply {
     let v = api.view(&fleet)?;
@@ -202,19 +220,26 @@ pub(super) async fn map_geojson(State(api): State<Api>, Path(fleet): Path<String
             "fleet {fleet:?} has no GPS datum yet: no fix, none configured"
         ))
     })?;
-    let nodes: Vec<graphio::geojson::GeoNode> = v
-        .nodes
-        .iter()
-        .zip(&v.poses)
-        .enumerate()
-        .map(|(i, (n, p))| graphio::geojson::GeoNode {
-            robot: &v.robots[n.robot].id,
-            node: i,
-            seq: Some(n.node_seq),
-            pose: *p,
+    let geojson = api
+        .limits
+        .heavy(move || {
+            let nodes: Vec<graphio::geojson::GeoNode> = v
+                .nodes
+                .iter()
+                .zip(&v.poses)
+                .enumerate()
+                .map(|(i, (n, p))| graphio::geojson::GeoNode {
+                    robot: &v.robots[n.robot].id,
+                    node: i,
+                    seq: Some(n.node_seq),
+                    pose: *p,
+                })
+                .collect();
+            let geojson =
+                graphio::geojson::to_geojson(&datum, &nodes).map_err(ApiError::internal)?;
+            Ok(geojson.to_string())
         })
-        .collect();
-    let geojson = graphio::geojson::to_geojson(&datum, &nodes).map_err(ApiError::internal)?;
+        .await?;
     let content_type = [(header::CONTENT_TYPE, "application/geo+json")];
-    Ok((content_type, geojson.to_string()).into_response())
+    Ok((content_type, geojson).into_response())
 }

@@ -1,41 +1,52 @@
 //! The HTTP API (`/api/v1`, JSON), one module per resource: thin handlers over the current
 //! fleet views that call the domain (`slam`, `graphio`) for any work. Every route is
 //! registered through [`utoipa_axum`], so the OpenAPI document served at
-//! `/api/v1/openapi.json` is made from the same list as the router.
+//! `/api/v1/openapi.json` is made from the same lists as the router. Routes are open
+//! (`open_routes`) or guarded by the read token (`guarded_routes`); heavy handlers run their
+//! work through `limits`; `access` holds the tokens and CORS.
 
+mod access;
 mod events;
+mod faults;
 mod fleets;
 mod graph;
+mod limits;
 mod map;
 mod nodes;
 mod service;
 mod web;
 
+use crate::config::MapperConfig;
 use crate::marginals::Marginals;
 use crate::state::{FleetView, Shared};
 use crate::store::Store;
 use crate::worker::Work;
 use axum::Router;
-use axum::http::StatusCode;
+use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use std::sync::{Arc, OnceLock, mpsc};
 use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+pub use faults::Degraded;
 pub use web::WEB_DIR_ENV;
 
 /// What every handler shares.
 #[derive(Clone)]
 struct Api {
     shared: Arc<Shared>,
-    work: mpsc::Sender<Work>,
+    work: mpsc::SyncSender<Work>,
     /// Covariance queries: one optimizer per fleet, its factorization kept.
     marginals: Arc<Marginals>,
     /// Read for the nodes' clouds, which no view holds.
     store: Arc<Store>,
     /// The OpenAPI document, made once from the routes.
     openapi: Arc<OnceLock<String>>,
+    /// The read and write tokens.
+    tokens: Arc<access::Tokens>,
+    /// Heavy requests and event streams at once.
+    limits: Arc<limits::Limits>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -43,9 +54,9 @@ struct Api {
 pub enum ApiError {
     /// 400: a parameter that cannot be read.
     BadRequest(String),
-    /// 401: no valid bearer token.
+    /// 401: no valid bearer token (answered with `WWW-Authenticate: Bearer`).
     Unauthorized(String),
-    /// 403: write routes are off (no token configured).
+    /// 403: write routes are off (no token configured), or the token only reads.
     Forbidden(String),
     /// 404: no such fleet, robot, node or file.
     NotFound(String),
@@ -53,6 +64,10 @@ pub enum ApiError {
     Unprocessable(String),
     /// 503: the mapper is stopping.
     Unavailable(String),
+    /// 503 as JSON: a quarantined fleet, or a store that cannot commit.
+    Degraded(Degraded),
+    /// 503 with `Retry-After: 1`: a limit is reached (heavy requests, their time, streams).
+    Busy(String),
     /// 500: a fault of the server (the store, a task).
     Internal(String),
 }
@@ -69,7 +84,9 @@ impl ApiError {
             ApiError::Forbidden(_) => StatusCode::FORBIDDEN,
             ApiError::NotFound(_) => StatusCode::NOT_FOUND,
             ApiError::Unprocessable(_) => StatusCode::UNPROCESSABLE_ENTITY,
-            ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::Unavailable(_) | ApiError::Degraded(_) | ApiError::Busy(_) => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -82,25 +99,67 @@ impl ApiError {
             | ApiError::NotFound(r)
             | ApiError::Unprocessable(r)
             | ApiError::Unavailable(r)
+            | ApiError::Busy(r)
             | ApiError::Internal(r) => r,
+            ApiError::Degraded(d) => &d.reason,
         }
     }
 }
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        (self.status(), self.reason().to_owned()).into_response()
+        if let ApiError::Degraded(d) = &self {
+            let retry = d
+                .retry_after_s
+                .map(|s| [(axum::http::header::RETRY_AFTER, s)]);
+            return (self.status(), retry, axum::Json(d)).into_response();
+        }
+        let mut response = (self.status(), self.reason().to_owned()).into_response();
+        let extra = match self {
+            ApiError::Unauthorized(_) => {
+                Some((header::WWW_AUTHENTICATE, "Bearer realm=\"levelmap\""))
+            }
+            ApiError::Busy(_) => Some((header::RETRY_AFTER, "1")),
+            _ => None,
+        };
+        if let Some((name, value)) = extra {
+            response
+                .headers_mut()
+                .insert(name, header::HeaderValue::from_static(value));
+        }
+        response
     }
 }
 
 type Reply<T = Response> = Result<T, ApiError>;
 
 impl Api {
-    /// The fleet's current view.
+    /// The fleet's current view; 503 for a quarantined fleet.
     fn view(&self, fleet: &str) -> Reply<Arc<FleetView>> {
+        self.available(fleet)?;
         self.shared.fleet(fleet).ok_or_else(|| {
             ApiError::NotFound(format!("no fleet {fleet:?} (no node received yet?)"))
         })
+    }
+}
+
+impl Api {
+    /// 503 with the reason when the fleet is quarantined.
+    fn available(&self, fleet: &str) -> Reply<()> {
+        match self.shared.quarantine(fleet) {
+            Some(reason) => Err(Degraded::quarantined(fleet, reason)),
+            None => Ok(()),
+        }
+    }
+
+    /// 503 for a store that is closed after a failed commit; 500 for any other failure.
+    fn store_error(&self, e: crate::store::StoreError) -> ApiError {
+        match e {
+            crate::store::StoreError::Closed => {
+                Degraded::store(self.shared.store_fault().unwrap_or_else(|| e.to_string()))
+            }
+            e => ApiError::internal(e),
+        }
     }
 }
 
@@ -134,14 +193,22 @@ impl utoipa::Modify for BearerAuth {
     }
 }
 
-/// Every route with its handler, in one list: the router and the document are both made
-/// from it.
-fn routes() -> OpenApiRouter<Api> {
+/// Routes anyone may call: the probes, the metrics, the document's frame, the token check
+/// and the dashboard's files.
+fn open_routes() -> OpenApiRouter<Api> {
     OpenApiRouter::with_openapi(ApiDoc::openapi())
         .routes(routes!(service::healthz))
         .routes(routes!(service::metrics))
+        .routes(routes!(access::auth))
+        .routes(routes!(web::web_index))
+        .routes(routes!(web::web_file))
+}
+
+/// Every other route: it needs a token when the mapper has a read token. The router and the
+/// document are both made from these two lists.
+fn guarded_routes() -> OpenApiRouter<Api> {
+    OpenApiRouter::new()
         .routes(routes!(service::openapi))
-        .routes(routes!(service::auth))
         .routes(routes!(fleets::fleets))
         .routes(routes!(fleets::summary))
         .routes(routes!(fleets::robots))
@@ -159,58 +226,57 @@ fn routes() -> OpenApiRouter<Api> {
         .routes(routes!(nodes::node_detail))
         .routes(routes!(nodes::node_cloud))
         .routes(routes!(events::events))
-        .routes(routes!(web::web_index))
-        .routes(routes!(web::web_file))
+}
+
+/// The router (guarded routes behind the read check when `api` is given) and its document.
+fn parts(api: Option<&Api>) -> (Router<Api>, utoipa::openapi::OpenApi) {
+    let mut guarded = guarded_routes();
+    let paths: Vec<String> = guarded.get_openapi().paths.paths.keys().cloned().collect();
+    if let Some(api) = api {
+        let check = axum::middleware::from_fn_with_state(api.clone(), access::require_read);
+        guarded = guarded.route_layer(check);
+    }
+    let (router, mut doc) = open_routes().merge(guarded).split_for_parts();
+    access::document_guard(&mut doc, &paths);
+    // The fleets' 503 (quarantine, a failing store).
+    faults::document(&mut doc);
+    (router, doc)
 }
 
 /// The OpenAPI document of every route, as JSON.
 pub fn openapi_json() -> String {
-    let (_, doc) = routes().split_for_parts();
+    let (_, doc) = parts(None);
     doc.to_pretty_json().expect("the document serializes")
 }
 
-/// The HTTP API over the mapper's views, its worker and its store.
-pub fn router(shared: Arc<Shared>, work: mpsc::Sender<Work>, store: Arc<Store>) -> Router {
-    let (router, doc) = routes().split_for_parts();
-    let openapi = Arc::new(OnceLock::new());
-    let _ = openapi.set(doc.to_pretty_json().expect("the document serializes"));
-    router.with_state(Api {
+/// The HTTP API over the mapper's views, its worker and its store, with the tokens, limits
+/// and CORS of `config`.
+pub fn router(
+    shared: Arc<Shared>,
+    work: mpsc::SyncSender<Work>,
+    store: Arc<Store>,
+    config: &MapperConfig,
+) -> Router {
+    let api = Api {
         shared,
         work,
         marginals: Arc::default(),
         store,
-        openapi,
-    })
+        openapi: Arc::new(OnceLock::new()),
+        tokens: Arc::new(access::Tokens::new(&config.token, &config.read_token)),
+        limits: Arc::new(limits::Limits::new(&config.http)),
+    };
+    let (router, doc) = parts(Some(&api));
+    let _ = api
+        .openapi
+        .set(doc.to_pretty_json().expect("the document serializes"));
+    let router = router.with_state(api);
+    // Outermost, so a preflight (which carries no token) is answered before the token check.
+    match access::cors(&config.http.cors_origins) {
+        Some(cors) => router.layer(cors),
+        None => router,
+    }
 }
 
 #[cfg(test)]
-mod tests {
-    /// Every route the router serves is in the document, and nothing else: both come from
-    /// [`super::routes`]; this checks the document's side against the list of handlers.
-    #[test]
-    fn the_document_lists_every_route_with_its_parameters() {
-        let doc: serde_json::Value = serde_json::from_str(&super::openapi_json()).unwrap();
-        let paths = doc["paths"].as_object().unwrap();
-        let mut listed: Vec<&str> = paths.keys().map(String::as_str).collect();
-        listed.sort_unstable();
-        assert_eq!(listed.len(), 23, "{listed:?}");
-        for (path, item) in paths {
-            for (method, op) in item.as_object().unwrap() {
-                // Each {param} of the path is a documented path parameter.
-                for name in path.split('{').skip(1).map(|s| &s[..s.find('}').unwrap()]) {
-                    let declared = op["parameters"].as_array().is_some_and(|ps| {
-                        ps.iter().any(|p| p["name"] == name && p["in"] == "path")
-                    });
-                    assert!(
-                        declared,
-                        "{method} {path}: path parameter {name} undocumented"
-                    );
-                }
-                assert!(
-                    op["responses"]["200"].is_object(),
-                    "{method} {path}: no 200"
-                );
-            }
-        }
-    }
-}
+mod tests;

@@ -88,6 +88,8 @@ fn node(v: &FleetView, node: usize) -> Reply<&Arc<NodeRecord>> {
     responses(
         (status = 200, description = "The node: pose, odometry, GPS, counts, scan, edges", body = NodeDetail),
         (status = 404, description = "No such fleet or node", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn node_detail(
     State(api): State<Api>,
@@ -130,13 +132,17 @@ pub(super) async fn node_detail(
     }))
 }
 
-/// A node's encoded cloud from the store (a blocking read, off the async threads).
+/// A node's encoded cloud from the store (a disk read: heavy work).
 async fn stored_cloud(api: &Api, fleet: &str, node: usize) -> Reply<Option<Vec<u8>>> {
+    // 503 for as long as commits fail, whether or not the file is open between attempts.
+    if let Some(fault) = api.shared.store_fault() {
+        return Err(super::Degraded::store(fault));
+    }
     let (store, fleet) = (api.store.clone(), fleet.to_owned());
-    tokio::task::spawn_blocking(move || store.cloud(&fleet, node as u64))
-        .await
-        .map_err(ApiError::internal)?
-        .map_err(ApiError::internal)
+    api.limits
+        .heavy(move || Ok(store.cloud(&fleet, node as u64)))
+        .await?
+        .map_err(|e| api.store_error(e))
 }
 
 /// Points per class of a cloud.
@@ -191,24 +197,35 @@ pub(super) struct NodeCloud {
     responses(
         (status = 200, description = "The node's cloud", body = NodeCloud),
         (status = 404, description = "No such fleet or node, or the node has no cloud", body = String),
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
+            headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn node_cloud(
     State(api): State<Api>,
     Path((fleet, id)): Path<(String, usize)>,
 ) -> Reply<Json<NodeCloud>> {
     let v = api.view(&fleet)?;
-    let n = node(&v, id)?;
+    node(&v, id)?;
+    // The read is the heavy work (and 503 while the store fails); decoding 6,000 points is not.
+    let bytes = stored_cloud(&api, &fleet, id).await?;
+    Ok(Json(node_cloud_of(&v, id, bytes)?))
+}
+
+/// The node's cloud from its stored bytes (none: 404 with the reason).
+fn node_cloud_of(v: &FleetView, id: usize, bytes: Option<Vec<u8>>) -> Reply<NodeCloud> {
+    let n = node(v, id)?;
     let robot = v.robots[n.robot].id.clone();
-    let bytes = stored_cloud(&api, &fleet, id).await?.ok_or_else(|| {
+    let bytes = bytes.ok_or_else(|| {
         ApiError::NotFound(format!(
-            "node {id} of fleet {fleet:?} has no 3D cloud: robot {robot} sent none (edge config \
+            "node {id} of fleet {:?} has no 3D cloud: robot {robot} sent none (edge config \
              [cloud] keep = false, or a fixed 2D scanner)",
+            v.id
         ))
     })?;
     let cloud = wire::v1::SegmentedCloud::decode(bytes.as_slice()).map_err(ApiError::internal)?;
     // Checked when the node came; checked again, as the store is a file.
     let counts = wire::validate_cloud(&cloud).map_err(ApiError::internal)?;
-    Ok(Json(NodeCloud {
+    Ok(NodeCloud {
         fleet: v.id.clone(),
         id,
         robot,
@@ -223,5 +240,5 @@ pub(super) async fn node_cloud(
         // The f32's shortest decimal (0.1, not 0.10000000149011612).
         voxel_m: cloud.voxel_m.to_string().parse::<f64>().unwrap_or(0.0),
         max_points: cloud.max_points,
-    }))
+    })
 }

@@ -1,32 +1,66 @@
-//! The service itself: health, metrics, the OpenAPI document, the token check.
+//! The service itself: health, metrics, the OpenAPI document.
 
-use super::{Api, ApiError, Reply};
+use super::Api;
 use axum::Json;
 use axum::extract::State;
-use axum::http::{HeaderMap, StatusCode, header};
+use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::sync::atomic::Ordering;
 use utoipa::ToSchema;
 
-/// Liveness: 503 once the store failed (a supervisor should restart the mapper).
-#[utoipa::path(get, path = "/healthz", tag = "service", responses(
-    (status = 200, description = "ok", content_type = "text/plain", body = String),
-    (status = 503, description = "the store failed", content_type = "text/plain", body = String),
-))]
-pub(super) async fn healthz(State(api): State<Api>) -> (StatusCode, &'static str) {
-    if api.shared.healthy.load(Ordering::Relaxed) {
-        (StatusCode::OK, "ok\n")
-    } else {
-        (
-            StatusCode::SERVICE_UNAVAILABLE,
-            "the store failed: restart the mapper\n",
-        )
-    }
+/// The mapper's health: `ok`, or `degraded` with what is wrong.
+#[derive(Serialize, ToSchema)]
+pub(super) struct Health {
+    /// `ok`, or `degraded`: the store cannot commit, or a fleet is quarantined.
+    status: &'static str,
+    /// Why the store cannot commit, while it cannot: nodes are not acked, and the routes
+    /// that need the store answer 503; the mapper resumes by itself once a commit succeeds.
+    store: Option<String>,
+    /// Fleets whose stored map did not replay at start, each with why: their routes answer
+    /// 503 and their nodes are not taken; the other fleets run.
+    quarantined: BTreeMap<String, String>,
 }
 
-/// Prometheus text: accepted, duplicate and rejected messages by reason, map sizes.
+/// Health: 503 (with `Retry-After`) while the store cannot commit, 200 otherwise; a
+/// quarantined fleet makes it `degraded` but not 503, as the other fleets are served and a
+/// restart would not mend it.
+#[utoipa::path(get, path = "/healthz", tag = "service", responses(
+    (status = 200, description = "ok, or degraded by a quarantined fleet", body = Health),
+    (status = 503, description = "the store cannot commit", body = Health),
+))]
+pub(super) async fn healthz(State(api): State<Api>) -> Response {
+    let store = api.shared.store_fault();
+    let quarantined = api
+        .shared
+        .quarantined
+        .read()
+        .expect("quarantine lock")
+        .clone();
+    let (code, retry) = match store {
+        Some(_) => {
+            let retry = [(header::RETRY_AFTER, super::faults::RETRY_AFTER_S)];
+            (StatusCode::SERVICE_UNAVAILABLE, Some(retry))
+        }
+        None => (StatusCode::OK, None),
+    };
+    let status = if code == StatusCode::OK && quarantined.is_empty() {
+        "ok"
+    } else {
+        "degraded"
+    };
+    let health = Health {
+        status,
+        store,
+        quarantined,
+    };
+    (code, retry, Json(health)).into_response()
+}
+
+/// Prometheus text: accepted, duplicate and rejected messages by reason, map sizes, the
+/// HTTP limits' use and refusals.
 #[utoipa::path(get, path = "/metrics", tag = "service", responses(
     (status = 200, description = "Prometheus text format 0.0.4", content_type = "text/plain", body = String),
 ))]
@@ -85,6 +119,7 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
             v.poses.len()
         );
     }
+    http_metrics(&api, &mut out);
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response()
 }
 
@@ -97,47 +132,34 @@ pub(super) async fn openapi(State(api): State<Api>) -> Response {
     ([(header::CONTENT_TYPE, "application/json")], doc).into_response()
 }
 
-/// Whether a bearer token would be taken by the write routes.
-#[derive(Serialize, ToSchema)]
-pub(super) struct AuthState {
-    /// A token is configured: the write routes are on.
-    write_routes: bool,
-    /// The request's token would be taken.
-    authorized: bool,
-    /// Why not, when not.
-    reason: Option<String>,
-}
-
-/// Checks the request's bearer token against the configured one.
-pub(super) fn authorized(api: &Api, headers: &HeaderMap) -> Result<(), ApiError> {
-    let token = &api.shared.token;
-    let given = headers
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
-    if token.is_empty() {
-        return Err(ApiError::Forbidden(
-            "write routes are off: no token in the mapper's config".into(),
-        ));
+/// The HTTP limits: what is in use, and what was refused by cause.
+fn http_metrics(api: &Api, out: &mut String) {
+    let l = &api.limits;
+    let _ = writeln!(
+        out,
+        "# HELP levelmap_http_refused_total Requests answered 503 by a limit: busy (every heavy \
+         slot taken), timeout (heavy work not done in time), streams (every event stream slot \
+         taken).\n# TYPE levelmap_http_refused_total counter"
+    );
+    for (reason, n) in [
+        ("busy", &l.refused_busy),
+        ("timeout", &l.refused_timeout),
+        ("streams", &l.refused_streams),
+    ] {
+        let _ = writeln!(
+            out,
+            "levelmap_http_refused_total{{reason=\"{reason}\"}} {}",
+            n.load(Ordering::Relaxed)
+        );
     }
-    if given != Some(token.as_str()) {
-        return Err(ApiError::Unauthorized(
-            "a valid bearer token is needed".into(),
-        ));
-    }
-    Ok(())
-}
-
-/// Whether the request's bearer token would be taken by the write routes, asked without
-/// writing (a page checks its stored token this way instead of meeting a 401).
-#[utoipa::path(get, path = "/api/v1/auth", tag = "service", security(("bearer" = [])), responses(
-    (status = 200, description = "The token's standing", body = AuthState),
-))]
-pub(super) async fn auth(State(api): State<Api>, headers: HeaderMap) -> Reply<Json<AuthState>> {
-    let verdict = authorized(&api, &headers);
-    Ok(Json(AuthState {
-        write_routes: !api.shared.token.is_empty(),
-        authorized: verdict.is_ok(),
-        reason: verdict.err().map(|e| e.reason().to_owned()),
-    }))
+    let _ = writeln!(
+        out,
+        "# HELP levelmap_http_heavy_running Heavy requests being worked on.\n# TYPE levelmap_http_heavy_running gauge\nlevelmap_http_heavy_running {}",
+        l.heavy_running()
+    );
+    let _ = writeln!(
+        out,
+        "# HELP levelmap_http_event_streams Event streams open.\n# TYPE levelmap_http_event_streams gauge\nlevelmap_http_event_streams {}",
+        l.streams_open()
+    );
 }

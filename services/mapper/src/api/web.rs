@@ -74,6 +74,16 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
         include_str!("../../../../web/input.js"),
     ),
     (
+        "auth.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/auth.js"),
+    ),
+    (
+        "stream.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/stream.js"),
+    ),
+    (
         "style.css",
         "text/css; charset=utf-8",
         include_str!("../../../../web/style.css"),

@@ -52,6 +52,8 @@ pub(crate) fn node() -> v1::Node {
             STAMP_NS + 1,
         )),
         node_seq: 7,
+        chain_id: 0x5eed,
+        held_from_seq: 5,
         scan: Some(leveled_scan_to_wire(&scan(), &counts(), header(9))),
         odometry: Some(odometry_to_wire(
             &TimedPose {

@@ -6,7 +6,7 @@ use super::node::{decode_odometry, validate_node};
 use super::odometry::odometry_from_wire;
 use super::pose::pose2_from_wire;
 use super::scan::{counts_from_wire, leveled_scan_from_wire};
-use crate::{WireError, v1};
+use crate::{MAX_NODE_BYTES, MAX_SPEED_M_PER_S, WireError, v1};
 use leveling::{ClassCounts, LeveledScan, TimedPose};
 use slam::Pose2;
 use slam::gnss::GpsFix;
@@ -19,8 +19,12 @@ pub struct NodeInput {
     pub fleet: String,
     /// The sender's robot.
     pub robot: String,
-    /// The node's number in its robot's sequence.
+    /// The node's number in its chain.
     pub node_seq: u64,
+    /// The robot's chain (`Node.chain_id`; 0 from senders before chains).
+    pub chain_id: u64,
+    /// The lowest node_seq of the chain the robot still held when it sent this one.
+    pub held_from_seq: u64,
     /// The scan's start (ns since the Unix epoch).
     pub stamp_ns: u64,
     /// The leveled scan.
@@ -47,6 +51,35 @@ impl NodeInput {
     }
 }
 
+/// Checks that a node at `next` (stamp in ns, odometry x and y in m) can follow one at
+/// `previous` in one chain: a later stamp, and a step no faster than [`MAX_SPEED_M_PER_S`]
+/// (plus a robot's length, so a node after a long stop is not fast). The edge runs it before
+/// it commits a node (a failing step starts a new chain: an odometry reset), the mapper
+/// before it takes one.
+pub fn check_step(previous: (u64, [f64; 2]), next: (u64, [f64; 2])) -> Result<(), WireError> {
+    let ((t0, [x0, y0]), (t1, [x1, y1])) = (previous, next);
+    if t1 <= t0 {
+        return Err(WireError::InvalidValue {
+            field: "Node.header.stamp_ns",
+            index: None,
+            value: t1 as f64,
+            problem: "not after the previous node's",
+        });
+    }
+    let step_m = (x1 - x0).hypot(y1 - y0);
+    let allowed_m = MAX_SPEED_M_PER_S * (t1 - t0) as f64 * 1e-9 + 1.0;
+    if step_m > allowed_m {
+        return Err(WireError::Implausible {
+            field: "Node.odometry",
+            index: None,
+            value: step_m,
+            limit: allowed_m,
+            reason: "implausible_step",
+        });
+    }
+    Ok(())
+}
+
 /// A node as the mapping takes it; every check of [`validate_node`] applies.
 pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
     validate_node(node)?;
@@ -64,6 +97,8 @@ pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
         fleet: header.fleet_id.clone(),
         robot: header.robot_id.clone(),
         node_seq: node.node_seq,
+        chain_id: node.chain_id,
+        held_from_seq: node.held_from_seq,
         stamp_ns: header.stamp_ns,
         scan: leveled_scan_from_wire(scan)?,
         counts: scan.counts.as_ref().map(counts_from_wire).transpose()?,
@@ -84,6 +119,15 @@ pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
 /// Decodes a node and parses it into its [`NodeInput`] (checked once); the message is
 /// returned too, for what is stored of it.
 pub fn decode_node_input(bytes: &[u8]) -> Result<(NodeInput, v1::Node), WireError> {
+    if bytes.len() > MAX_NODE_BYTES {
+        return Err(WireError::Implausible {
+            field: "Node",
+            index: None,
+            value: bytes.len() as f64,
+            limit: MAX_NODE_BYTES as f64,
+            reason: "too_large",
+        });
+    }
     let node: v1::Node = super::decode("Node", bytes)?;
     Ok((node_input(&node)?, node))
 }

@@ -35,6 +35,15 @@ pub fn validate_node(node: &v1::Node) -> Result<(), WireError> {
         }
     }
     validate_earlier_gps(header, node)?;
+    if node.held_from_seq > node.node_seq {
+        return Err(WireError::Invalid {
+            field: "Node.held_from_seq",
+            detail: format!(
+                "{} is above node_seq {}: a robot holds the node it sends",
+                node.held_from_seq, node.node_seq
+            ),
+        });
+    }
     if let Some(cloud) = &node.cloud {
         let kept = validate_cloud(cloud)?;
         if let Some(counts) = &scan.counts {
@@ -175,9 +184,15 @@ mod tests {
         ));
         let mut ack = v1::Ack {
             header: Some(header(3)),
-            acked_node_seq: 6,
+            acked_node_seq: Some(6),
+            chain_id: 0xfeed,
+            resend_from: None,
         };
-        assert_eq!(decode_ack(&ack.encode_to_vec()).unwrap().acked_node_seq, 6);
+        let decoded = decode_ack(&ack.encode_to_vec()).unwrap();
+        assert_eq!(
+            (decoded.acked_node_seq, decoded.chain_id),
+            (Some(6), 0xfeed)
+        );
         ack.header.as_mut().unwrap().version = 2;
         assert!(decode_ack(&ack.encode_to_vec()).is_err());
     }
@@ -352,12 +367,19 @@ mod tests {
         // 1e200 m is finite: it used to pass and break every later solve of the fleet.
         let far = rejection(|n| n.odometry.as_mut().unwrap().pose.as_mut().unwrap().x_m = 1e200);
         assert!(
-            matches!(far, WireError::InvalidValue { field: "Pose3D.x_m", problem, .. } if problem.contains("10,000 km")),
+            matches!(
+                far,
+                WireError::Implausible {
+                    field: "Pose3D.x_m",
+                    reason: "implausible_position",
+                    ..
+                }
+            ),
             "{far:?}"
         );
         let origin = rejection(|n| {
             n.scan_origin_in_robot = Some(v1::Pose2D {
-                x_m: -2e7,
+                x_m: -2e6,
                 y_m: 0.0,
                 yaw_rad: 0.0,
             })
@@ -365,18 +387,19 @@ mod tests {
         assert!(
             matches!(
                 origin,
-                WireError::InvalidValue {
+                WireError::Implausible {
                     field: "Pose2D.x_m",
                     ..
                 }
             ),
             "{origin:?}"
         );
-        let range = rejection(|n| n.scan.as_mut().unwrap().range_m[0] = 3e7);
+        let range = rejection(|n| n.scan.as_mut().unwrap().range_m[0] = 1001.0);
+        assert_eq!(range.reason(), "implausible_range");
         assert!(
             matches!(
                 range,
-                WireError::InvalidValue {
+                WireError::Implausible {
                     field: "LeveledScan.range_m",
                     index: Some(0),
                     ..
@@ -386,7 +409,33 @@ mod tests {
         );
         // At the bound, a position is still taken.
         let mut edge = node();
-        edge.odometry.as_mut().unwrap().pose.as_mut().unwrap().x_m = MAX_COORDINATE_M;
+        edge.odometry.as_mut().unwrap().pose.as_mut().unwrap().x_m = MAX_POSITION_M;
         validate_node(&edge).unwrap();
+        let big = vec![0u8; MAX_NODE_BYTES + 1];
+        assert_eq!(decode_node_input(&big).unwrap_err().reason(), "too_large");
+    }
+
+    #[test]
+    fn a_node_holds_what_it_sends() {
+        let err = rejection(|n| {
+            n.node_seq = 3;
+            n.held_from_seq = 4;
+        });
+        assert!(err.to_string().contains("held_from_seq"), "{err}");
+        let mut ok = node();
+        ok.node_seq = 3;
+        ok.held_from_seq = 3;
+        validate_node(&ok).unwrap();
+    }
+
+    #[test]
+    fn a_step_faster_than_a_robot_is_implausible() {
+        let t = 1_000_000_000;
+        check_step((t, [0.0, 0.0]), (2 * t, [40.0, 0.0])).unwrap();
+        // A long stop, then a node: 1 m is a robot's length, whatever the time.
+        check_step((t, [0.0, 0.0]), (t + 1, [0.0, 1.0])).unwrap();
+        let fast = check_step((t, [0.0, 0.0]), (2 * t, [0.0, 52.0])).unwrap_err();
+        assert_eq!(fast.reason(), "implausible_step");
+        assert!(check_step((t, [0.0, 0.0]), (t, [0.0, 0.0])).is_err());
     }
 }

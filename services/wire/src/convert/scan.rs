@@ -1,7 +1,7 @@
 //! The leveled scan and its segmentation counts.
 
 use super::check_header;
-use crate::error::{coordinate, finite};
+use crate::error::{MAX_RANGE_M, bounded, finite};
 use crate::{WireError, v1};
 use leveling::{Beam, ClassCounts, LeveledScan};
 
@@ -111,7 +111,13 @@ pub fn leveled_scan_from_wire(msg: &v1::LeveledScan) -> Result<LeveledScan, Wire
         .enumerate()
         .map(|(i, (&bearing_rad, &range_m))| {
             finite("LeveledScan.bearing_rad", Some(i), bearing_rad.into())?;
-            coordinate("LeveledScan.range_m", Some(i), range_m.into())?;
+            bounded(
+                "LeveledScan.range_m",
+                Some(i),
+                range_m.into(),
+                MAX_RANGE_M,
+                "implausible_range",
+            )?;
             if range_m < 0.0 {
                 return Err(WireError::InvalidValue {
                     field: "LeveledScan.range_m",

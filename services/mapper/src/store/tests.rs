@@ -1,0 +1,160 @@
+//! The store: clouds apart, a disk that fills and empties, fleets read one by one.
+
+use super::*;
+
+#[test]
+fn a_node_is_stored_without_its_cloud() {
+    let cloud = v1::SegmentedCloud {
+        xyz_cm: vec![100, -200, 30],
+        classes: vec![2],
+        source_points: 10,
+        voxel_m: 0.1,
+        max_points: 6000,
+    };
+    let mut node = v1::Node {
+        node_seq: 7,
+        cloud: Some(cloud.clone()),
+        ..Default::default()
+    };
+    let payload = node.encode_to_vec();
+    let (stored, apart) = split_cloud(&mut node, payload.clone());
+    assert!(node.cloud.is_none());
+    let back = v1::Node::decode(stored.as_slice()).unwrap();
+    assert_eq!((back.node_seq, back.cloud), (7, None));
+    assert!(stored.len() < payload.len());
+    let apart = v1::SegmentedCloud::decode(apart.unwrap().as_slice()).unwrap();
+    assert_eq!(apart, cloud);
+    // Without a cloud: the payload as received.
+    assert_eq!(split_cloud(&mut node, stored.clone()), (stored, None));
+}
+
+#[test]
+fn clouds_are_kept_apart_and_survive_reopening() {
+    let dir = std::env::temp_dir().join(format!("levelmap-store-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("clouds.redb");
+    let _ = std::fs::remove_file(&path);
+    {
+        let store = Store::open(&path).unwrap();
+        store
+            .commit(&[FleetBatch {
+                fleet: "park",
+                nodes: vec![(0, b"node0"), (1, b"node1")],
+                clouds: vec![(1, b"cloud1")],
+                ..Default::default()
+            }])
+            .unwrap();
+    }
+    let store = Store::open(&path).unwrap();
+    assert_eq!(
+        store.cloud("park", 1).unwrap().as_deref(),
+        Some(&b"cloud1"[..])
+    );
+    assert_eq!(store.cloud("park", 0).unwrap(), None);
+    assert_eq!(store.cloud("campus", 1).unwrap(), None);
+    // The replay reads the nodes alone.
+    assert_eq!(store.fleet_ids().unwrap(), ["park"]);
+    let park = store.load_fleet("park").unwrap();
+    assert_eq!(park.nodes, [b"node0".to_vec(), b"node1".to_vec()]);
+    drop(store);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A disk that can be filled: writes and growth fail with ENOSPC while `full`; what it
+/// holds outlives each database opened on it (as a file does).
+#[derive(Debug, Clone)]
+struct Disk {
+    data: std::sync::Arc<redb::backends::InMemoryBackend>,
+    full: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl Disk {
+    fn space(&self) -> std::io::Result<()> {
+        if self.full.load(std::sync::atomic::Ordering::SeqCst) {
+            return Err(std::io::Error::from_raw_os_error(28)); // ENOSPC
+        }
+        Ok(())
+    }
+}
+
+impl redb::StorageBackend for Disk {
+    fn len(&self) -> std::io::Result<u64> {
+        self.data.len()
+    }
+    fn read(&self, offset: u64, out: &mut [u8]) -> std::io::Result<()> {
+        self.data.read(offset, out)
+    }
+    fn set_len(&self, len: u64) -> std::io::Result<()> {
+        self.space()?;
+        self.data.set_len(len)
+    }
+    fn sync_data(&self) -> std::io::Result<()> {
+        self.data.sync_data()
+    }
+    fn write(&self, offset: u64, data: &[u8]) -> std::io::Result<()> {
+        self.space()?;
+        self.data.write(offset, data)
+    }
+}
+
+fn nodes<'a>(fleet: &'a str, rows: &[(u64, &'a [u8])]) -> FleetBatch<'a> {
+    FleetBatch {
+        fleet,
+        nodes: rows.to_vec(),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn a_failed_commit_closes_the_store_and_a_later_one_stores_its_rows_once() {
+    use redb::StorageBackend as _;
+    let disk = Disk {
+        data: Default::default(),
+        full: Default::default(),
+    };
+    let opened = disk.clone();
+    let store = Store::with_opener(Box::new(move || {
+        Database::builder().create_with_backend(opened.clone())
+    }))
+    .unwrap();
+    store.commit(&[nodes("park", &[(0, b"n0")])]).unwrap();
+    disk.full.store(true, std::sync::atomic::Ordering::SeqCst);
+    let batch = [nodes("park", &[(1, b"n1"), (2, b"n2")])];
+    let e = store.commit(&batch).unwrap_err();
+    assert!(e.to_string().contains("No space left"), "{e}");
+    // Closed until a commit opens it again; while the disk is full that fails too.
+    assert!(matches!(store.cloud("park", 0), Err(StoreError::Closed)));
+    assert!(store.commit(&batch).is_err());
+    disk.full.store(false, std::sync::atomic::Ordering::SeqCst);
+    store.commit(&batch).unwrap();
+    // The same rows again (a commit that reached the disk but reported a failure).
+    store.commit(&batch).unwrap();
+    assert_eq!(store.fleet_ids().unwrap(), ["park"]);
+    let park = store.load_fleet("park").unwrap();
+    assert_eq!(park.nodes, [b"n0".to_vec(), b"n1".to_vec(), b"n2".to_vec()]);
+    assert!(disk.data.len().unwrap() > 0);
+}
+
+#[test]
+fn a_gap_in_one_fleets_rows_leaves_the_others_readable() {
+    let dir = std::env::temp_dir().join(format!("levelmap-gap-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("gap.redb");
+    let _ = std::fs::remove_file(&path);
+    let store = Store::open(&path).unwrap();
+    store
+        .commit(&[
+            nodes("campus", &[(0, b"c0"), (2, b"c2")]),
+            nodes("park", &[(0, b"p0"), (1, b"p1")]),
+        ])
+        .unwrap();
+    assert_eq!(store.fleet_ids().unwrap(), ["campus", "park"]);
+    let e = store.load_fleet("campus").unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "store: fleet campus: nodes row 2 where 1 was due"
+    );
+    assert_eq!(store.load_fleet("park").unwrap().nodes.len(), 2);
+    drop(store);
+    std::fs::remove_dir_all(&dir).ok();
+}

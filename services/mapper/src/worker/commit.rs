@@ -1,0 +1,118 @@
+//! The worker's store step and its failure path: a batch is committed before it is acked; a
+//! batch whose commit failed (a full disk) is kept, as the maps hold it already, and committed
+//! again every second until that succeeds. No node is taken meanwhile.
+
+use super::{Batch, Worker, fleets_of};
+use crate::store::{FleetBatch, StoreError};
+use std::time::{Duration, Instant};
+
+/// How often a commit that failed is tried again.
+const STORE_RETRY: Duration = Duration::from_secs(1);
+
+/// What the maps hold and the store does not: a batch or solve points whose commit failed.
+/// The maps cannot give nodes back, so it is committed again until that succeeds; its nodes
+/// are acked and shown only then.
+#[derive(Default)]
+pub(super) struct Unstored {
+    /// Nodes mapped, and robots to re-ack.
+    pub(super) batch: Batch,
+    /// (fleet, arrival index) of solves whose point is not stored.
+    pub(super) solves: Vec<(String, u64)>,
+}
+
+impl Worker {
+    /// Commits what the maps took, then acks it, shows it and runs the solves that are due.
+    /// On a failure it is kept for [`Self::retry_store`]: nothing of it is acked or shown.
+    pub(super) fn store_and_ack(&mut self, work: Unstored, started: Instant) {
+        if self.commit(&work).is_err() {
+            self.store_failed(work);
+            return;
+        }
+        self.ack(&work.batch);
+        self.publish(&work.batch.accepted, started);
+        for (fleet, _) in &work.solves {
+            self.publish_solve(fleet, started);
+        }
+        self.due_solves();
+    }
+
+    /// Commits what a failed commit left, once [`STORE_RETRY`] has passed since.
+    pub(super) fn retry_store(&mut self) {
+        if Instant::now() < self.retry_at {
+            return;
+        }
+        if let Some(work) = self.unstored.take() {
+            self.store_and_ack(work, Instant::now());
+        }
+    }
+
+    /// Commits the nodes' rows, their clouds, the new edges of their fleets and the solve
+    /// points in one transaction.
+    pub(super) fn commit(&mut self, work: &Unstored) -> Result<(), StoreError> {
+        let accepted = &work.batch.accepted;
+        let touched = fleets_of(accepted);
+        if touched.is_empty() && work.solves.is_empty() {
+            return Ok(());
+        }
+        let mut batches: Vec<FleetBatch> = touched
+            .iter()
+            .map(|&fleet| {
+                let stored = self.edges_stored.get(fleet).copied().unwrap_or(0);
+                let of_fleet = || accepted.iter().filter(move |a| a.fleet == fleet);
+                FleetBatch {
+                    fleet,
+                    solved_after: None,
+                    nodes: of_fleet()
+                        .map(|a| (a.arrival, a.payload.as_slice()))
+                        .collect(),
+                    clouds: of_fleet()
+                        .filter_map(|a| Some((a.node as u64, a.cloud.as_deref()?)))
+                        .collect(),
+                    first_edge: stored as u64,
+                    edges: crate::store::encode_edges(&self.fleets[fleet].graph().edges[stored..]),
+                }
+            })
+            .collect();
+        batches.extend(work.solves.iter().map(|(fleet, arrival)| FleetBatch {
+            fleet,
+            solved_after: Some(*arrival),
+            ..Default::default()
+        }));
+        let result = self.store.commit(&batches);
+        if result.is_ok() {
+            for b in &batches {
+                *self.edges_stored.entry(b.fleet.to_owned()).or_default() += b.edges.len();
+            }
+        }
+        drop(batches);
+        self.note_store(&result, accepted.len());
+        result
+    }
+
+    /// A commit's outcome as `/healthz` shows it; logged when it changes, not every retry.
+    fn note_store(&self, result: &Result<(), StoreError>, nodes: usize) {
+        let mut fault = self.shared.store_fault.write().expect("fault lock");
+        match (result, fault.is_some()) {
+            (Ok(()), false) => {}
+            (Ok(()), true) => {
+                tracing::info!(nodes, "the store commits again: resumed");
+                *fault = None;
+            }
+            (Err(e), was_failing) => {
+                if !was_failing {
+                    tracing::error!("store commit failed; no acks until it succeeds: {e}");
+                }
+                *fault = Some(e.to_string());
+            }
+        }
+    }
+
+    /// Keeps what a failed commit held, to be committed again after [`STORE_RETRY`].
+    pub(super) fn store_failed(&mut self, work: Unstored) {
+        self.retry_at = Instant::now() + STORE_RETRY;
+        let kept = self.unstored.get_or_insert_default();
+        kept.batch.accepted.extend(work.batch.accepted);
+        kept.batch.reacks.extend(work.batch.reacks);
+        kept.solves.extend(work.solves);
+    }
+}
