@@ -171,6 +171,17 @@ impl MapperProcess {
     /// A mapper with more top-level config lines (`fleets = [...]`, a `store_path`, which
     /// comes after the default one and wins).
     pub fn start_with(dir: &Path, zenoh: String, extra: &str) -> MapperProcess {
+        let table = format!("mode = \"router\"\nlisten = [{zenoh:?}]\n");
+        Self::start_configured(dir, zenoh, extra, &table)
+    }
+
+    /// A mapper whose `[zenoh]` table (with any subtables) is `zenoh_toml`, listening for
+    /// robots on `zenoh`.
+    pub fn start_with_zenoh(dir: &Path, zenoh: String, zenoh_toml: &str) -> MapperProcess {
+        Self::start_configured(dir, zenoh, "", zenoh_toml)
+    }
+
+    fn start_configured(dir: &Path, zenoh: String, extra: &str, zenoh_toml: &str) -> MapperProcess {
         let http = format!("127.0.0.1:{}", free_port());
         let config = dir.join("mapper.toml");
         let store = format!("store_path = {:?}\n", dir.join("mapper.redb"));
@@ -181,9 +192,7 @@ impl MapperProcess {
         };
         std::fs::write(
             &config,
-            format!(
-                "http_listen = {http:?}\n{store}{extra}\n[zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\n",
-            ),
+            format!("http_listen = {http:?}\n{store}{extra}\n[zenoh]\n{zenoh_toml}",),
         )
         .expect("mapper config");
         Self::spawn(http, zenoh, config)
@@ -423,7 +432,7 @@ pub async fn in_process_mapper_with(
     .await
     .expect("mapper starts");
     let session = wire::session::SessionConfig::client(&zenoh)
-        .open()
+        .open(wire::session::Role::Client)
         .await
         .expect("client session");
     let http = mapper.http_addr.to_string();

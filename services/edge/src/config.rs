@@ -106,7 +106,7 @@ mod tests {
         let config: EdgeConfig = wire::session::load_toml_with(None, env).unwrap();
         // A numeric-looking id stays a string: the key holds one.
         assert_eq!(config.robot, "007");
-        assert_eq!(config.zenoh.connect, ["tcp/10.0.0.1:7447"]);
+        assert_eq!(config.zenoh.connect, Some(vec!["tcp/10.0.0.1:7447".into()]));
         assert!(!config.cloud.keep);
         let SourceConfig::Sim(sim) = &config.source else {
             panic!("{:?}", config.source)

@@ -74,7 +74,7 @@ struct Link {
 impl Link {
     /// Nodes reliable (blocking under congestion), odometry best effort (dropped).
     async fn open(config: &EdgeConfig) -> Result<Link> {
-        let session = config.zenoh.open().await?;
+        let session = config.zenoh.open(wire::session::Role::Client).await?;
         let node_key = wire::node_key(&config.fleet, &config.robot)?;
         let odom_key = wire::odom_key(&config.fleet, &config.robot)?;
         let ack_key = wire::ack_key(&config.fleet, &config.robot)?;

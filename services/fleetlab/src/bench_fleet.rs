@@ -14,7 +14,7 @@ use std::io::BufRead;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use wire::session::SessionConfig;
+use wire::session::{Role, SessionConfig};
 use wire::{Message, v1};
 
 /// Load-test the mapper: N simulated robots publishing nodes and odometry over Zenoh, with
@@ -221,7 +221,11 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     // Robots on shared client sessions, publishers matched before the clock starts.
     let mut sessions = Vec::new();
     for _ in 0..args.sessions.min(args.robots) {
-        sessions.push(SessionConfig::client(&args.zenoh).open().await?);
+        sessions.push(
+            SessionConfig::client(&args.zenoh)
+                .open(Role::Client)
+                .await?,
+        );
     }
     let mut publishers = Vec::new();
     for r in 0..args.robots {

@@ -47,11 +47,13 @@ fn init_logging() {
 pub fn run_mapper(args: &MapperArgs) -> Result<()> {
     init_logging();
     let config = mapper::MapperConfig::load(args.config.as_deref())?;
+    // A bad Zenoh or TLS setting stops the mapper here, before its store is opened.
+    let zenoh = config.zenoh.to_zenoh(wire::session::Role::Router)?;
+    let listen = zenoh.get_json("listen/endpoints").unwrap_or_default();
     runtime()?.block_on(async {
         let running = mapper::start(config.clone()).await?;
         tracing::info!(
-            "mapper: Zenoh {:?}, HTTP http://{}/api/v1, store {}",
-            config.zenoh.listen,
+            "mapper: Zenoh {listen}, HTTP http://{}/api/v1, store {}",
             running.http_addr,
             config.store_path.display()
         );
@@ -65,6 +67,9 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
 pub fn run_edge(args: &EdgeArgs) -> Result<()> {
     init_logging();
     let config = edge::EdgeConfig::load(args.config.as_deref())?;
+    // The link is retried while the mapper is out of reach; a bad Zenoh or TLS setting must
+    // stop the service instead.
+    config.zenoh.to_zenoh(wire::session::Role::Client)?;
     let report = runtime()?.block_on(async {
         let source = edge::open_source(&config, wire::session::now_ns())?;
         edge::run(config, source, wire::session::shutdown_signal()).await

@@ -43,7 +43,7 @@ pub struct MapperConfig {
 impl Default for MapperConfig {
     fn default() -> Self {
         MapperConfig {
-            zenoh: SessionConfig::router("tcp/0.0.0.0:7447"),
+            zenoh: SessionConfig::default(),
             http_listen: "127.0.0.1:8080".into(),
             store_path: PathBuf::from("levelmap-mapper.redb"),
             fleets: vec!["park".into()],
@@ -200,8 +200,10 @@ mod tests {
             config.store_path,
             Path::new("/var/lib/levelmap-mapper/store.redb")
         );
-        assert_eq!(config.zenoh.listen, ["tcp/10.0.0.1:7447"]);
-        assert_eq!(config.zenoh.mode, defaults.zenoh.mode);
+        assert_eq!(config.zenoh.listen, Some(vec!["tcp/10.0.0.1:7447".into()]));
+        // Still a router: the mapper's session falls back to its role's mode.
+        let zenoh = config.zenoh.to_zenoh(wire::session::Role::Router).unwrap();
+        assert_eq!(zenoh.get_json("mode").unwrap(), r#""router""#);
         assert_eq!(config.mapping.idc.min_correspondences, 12);
         // The fleet's mapping defaults, not the library's, around the key that was set.
         assert_eq!(config.mapping.odometry_sigma_xy_per_m, 0.02);

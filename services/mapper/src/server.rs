@@ -83,7 +83,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     let shared = Arc::new(Shared::new(config.token.clone(), now_ns()));
     let fleets = restore(&config, &store, &shared)?;
 
-    let session = config.zenoh.open().await?;
+    let session = config.zenoh.open(wire::session::Role::Router).await?;
     let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
     let subscriptions = subscribe(&session, &config, &shared, work_tx.clone()).await?;
     let worker = {

@@ -123,8 +123,8 @@ pub fn apply_overrides(
 
 /// Checks that each override reached the config: `config` is the deserialized config
 /// serialized again, so a key its type ignores (one not denied as unknown) is missing there.
-/// (A field that skips itself when serialized, `skip_serializing_if`, would be missing too:
-/// the configs have none.)
+/// (A field that skips itself when serialized while unset, as `[zenoh]`'s optional keys do, is
+/// set by its override, so it is there.)
 pub fn check_taken(config: &Table, overrides: &[EnvOverride]) -> anyhow::Result<()> {
     for o in overrides {
         anyhow::ensure!(
