@@ -18,7 +18,7 @@ pub mod synthetic;
 mod validate;
 
 pub use idc::{IdcParams, Match, idc};
-pub use refine::{Reference, RefineParams, refine, refine_against};
+pub use refine::{Prior, Reference, RefineParams, refine, refine_against};
 pub use scan::Scan2;
 pub use validate::{QualityGate, accept};
 

@@ -2,7 +2,7 @@
 //! point-to-line refinement (against that node's scan, or the last few nodes' scans).
 
 use super::Mapper2d;
-use crate::matching::{Match, Reference, Scan2, accept, idc, refine_against};
+use crate::matching::{Match, Prior, Reference, Scan2, accept, idc, refine_against};
 use crate::se2::Pose2;
 
 impl Mapper2d {
@@ -18,7 +18,13 @@ impl Mapper2d {
             return Some(m);
         }
         let references = self.submap(last);
-        refine_against(&references, scan, &m, &p.idc, &p.refine)
+        // The guess is odometry: with `odometry_prior` it holds the directions the scans
+        // leave open.
+        let prior = p.refine.odometry_prior.then(|| Prior {
+            pose: guess,
+            information: self.odometry_information(&guess),
+        });
+        refine_against(&references, scan, &m, prior.as_ref(), &p.idc, &p.refine)
             .ok()
             .filter(|r| accept(r, &p.gate))
             .or(Some(m))

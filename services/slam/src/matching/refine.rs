@@ -23,6 +23,7 @@ use super::contour::Contour;
 use super::validate::validate;
 use super::{IdcParams, Match, MatchError, Scan2};
 use crate::Pose2;
+use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 use solve::Solver;
 
@@ -33,9 +34,13 @@ pub struct RefineParams {
     /// Refine matches at all (sequential matches and the offsets of scans that hang off a
     /// node). Default true.
     pub enabled: bool,
-    /// Reference scans of the scan-to-submap variant: the last node and this many nodes
-    /// before it (0: scan-to-scan). Default 0.
+    /// In the 2D mapper, the reference scans: the last node and this many nodes before it
+    /// on its chain, at their current estimates (0: scan-to-scan). Default 1 (docs/slam.md
+    /// has the figures for 0, 1 and 2).
     pub submap_extra_nodes: usize,
+    /// In the 2D mapper: odometry as a prior on the refined pose (see [`Prior`]). Default
+    /// false: on ACES it changed nothing locally.
+    pub odometry_prior: bool,
     /// Gauss-Newton iterations at most. Default 10.
     pub max_iterations: u32,
     /// Pairs further apart than this are dropped in the first iteration (m). Default 0.2,
@@ -59,7 +64,8 @@ impl Default for RefineParams {
     fn default() -> RefineParams {
         RefineParams {
             enabled: true,
-            submap_extra_nodes: 0,
+            submap_extra_nodes: 1,
+            odometry_prior: false,
             max_iterations: 10,
             initial_max_distance_m: 0.2,
             outlier_sigmas: 3.0,
@@ -103,6 +109,16 @@ pub struct Reference<'a> {
     pub pose: Pose2,
 }
 
+/// A Gaussian prior on the refined pose (odometry): where the scans leave a direction
+/// unconstrained (a corridor's axis) it holds the pose, elsewhere the points outweigh it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prior {
+    /// The current scan's frame in the common frame (the reference's frame for [`refine`]).
+    pub pose: Pose2,
+    /// Its information (x, y, θ; 1/m², 1/rad²).
+    pub information: Matrix3<f64>,
+}
+
 /// Refines `start` (the current scan's frame in the reference frame, e.g. IDC's match) by
 /// point-to-line Gauss-Newton, then validates the result as IDC does. The iterations run
 /// are added to `start`'s; the match is converged when both are.
@@ -117,16 +133,18 @@ pub fn refine(
         scan: reference,
         pose: Pose2::IDENTITY,
     }];
-    refine_against(&references, current, start, idc_params, params)
+    refine_against(&references, current, start, None, idc_params, params)
 }
 
 /// [`refine`] against several reference scans at once (scan-to-submap), each with its frame
 /// in a common frame; `start` and the result are the current scan's frame in the frame of
-/// `references[0]`, which the result is validated against.
+/// `references[0]`, which the result is validated against. `prior`, if any, is in the common
+/// frame.
 pub fn refine_against(
     references: &[Reference],
     current: &Scan2,
     start: &Match,
+    prior: Option<&Prior>,
     idc_params: &IdcParams,
     params: &RefineParams,
 ) -> Result<Match, MatchError> {
@@ -150,6 +168,8 @@ pub fn refine_against(
         })
         .collect();
     let mut solver = Solver::new(&contours, current, idc_params.min_correspondences);
+    solver.prior = prior.copied();
+    solver.min_sigma_m = idc_params.range_noise_m;
     let settled = |step: &nalgebra::Vector3<f64>| {
         step[0].hypot(step[1]) < idc_params.converged_translation_m
             && step[2].abs() < idc_params.converged_rotation_rad

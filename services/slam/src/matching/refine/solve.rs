@@ -1,6 +1,6 @@
 //! The Gauss-Newton iteration of the point-to-line refinement.
 
-use super::RefineParams;
+use super::{Prior, RefineParams};
 use crate::matching::contour::Contour;
 use crate::matching::idc::motion;
 use crate::matching::{MatchError, Scan2};
@@ -14,6 +14,10 @@ pub(super) struct Solver<'c, 'a> {
     min_pairs: usize,
     /// |residual| of every pair of the last iteration (m), for the outlier distance.
     residuals: Vec<f64>,
+    /// A prior on the pose, weighed against the points by their residual variance.
+    pub(super) prior: Option<Prior>,
+    /// Floor of the residuals' standard deviation (m) when weighing them against the prior.
+    pub(super) min_sigma_m: f64,
 }
 
 /// The normal equations of one iteration.
@@ -45,6 +49,8 @@ impl<'c, 'a> Solver<'c, 'a> {
             current,
             min_pairs,
             residuals: Vec::with_capacity(current.len() * references.len()),
+            prior: None,
+            min_sigma_m: 0.0,
         }
     }
 
@@ -59,9 +65,10 @@ impl<'c, 'a> Solver<'c, 'a> {
     ) -> Result<(Pose2, u32, bool), MatchError> {
         let mut pose = start;
         let mut last_step = Vector3::zeros();
+        let (mut robust_sigma_m, mut sigma_m) = (f64::INFINITY, self.min_sigma_m);
         let mut max_distance_m = params.initial_max_distance_m;
         for iteration in 1..=params.max_iterations {
-            let normal = self.linearize(&pose, max_distance_m);
+            let mut normal = self.linearize(&pose, max_distance_m);
             if self.residuals.len() < self.min_pairs {
                 return Err(MatchError::TooFewCorrespondences {
                     iteration,
@@ -69,6 +76,21 @@ impl<'c, 'a> Solver<'c, 'a> {
                     found: self.residuals.len(),
                     needed: self.min_pairs,
                 });
+            }
+            if iteration == 1 {
+                robust_sigma_m = self.robust_sigma();
+                sigma_m = robust_sigma_m.max(self.min_sigma_m);
+            }
+            if let Some(prior) = &self.prior {
+                // Points in units of their variance, the prior in its own.
+                let w = sigma_m.powi(-2);
+                let e = Vector3::new(
+                    pose.x - prior.pose.x,
+                    pose.y - prior.pose.y,
+                    wrap_angle(pose.theta - prior.pose.theta),
+                );
+                normal.h = normal.h * w + prior.information;
+                normal.g = normal.g * w + prior.information * e;
             }
             let Some(step) = normal.h.cholesky().map(|c| -c.solve(&normal.g)) else {
                 return Ok((pose, iteration, false));
@@ -86,7 +108,7 @@ impl<'c, 'a> Solver<'c, 'a> {
             if iteration == 1 {
                 // Once, from the residuals at the start: an outlier distance that moved with
                 // every iteration would keep flipping pairs in and out.
-                max_distance_m = (params.outlier_sigmas * self.robust_sigma())
+                max_distance_m = (params.outlier_sigmas * robust_sigma_m)
                     .clamp(params.min_max_distance_m, params.initial_max_distance_m);
             }
             last_step = step;

@@ -88,8 +88,8 @@ fn a_submap_of_two_scans_is_at_least_as_precise_as_one() {
                 pose: triple[1].between(&triple[0]),
             },
         ];
-        let two =
-            refine_against(&references, &current, &m, &params, &refine_params).expect("overlap");
+        let two = refine_against(&references, &current, &m, None, &params, &refine_params)
+            .expect("overlap");
         one_sum += error_m(&one.pose, &truth);
         two_sum += error_m(&two.pose, &truth);
     }
