@@ -18,13 +18,14 @@
 //! it discarded the right closures too, and the relation error tripled.)
 
 mod edges;
+mod local;
 mod params;
 mod parts;
 mod solve;
 
 pub use params::Mapper2dParams;
 
-use crate::matching::{Scan2, accept, idc};
+use crate::matching::Scan2;
 use crate::network::{EdgeKind, GraphError, PoseGraph, RelativeEdge};
 use crate::optimize::{OptimizeReport, Optimizer};
 use crate::robust::Robust;
@@ -191,9 +192,9 @@ impl Mapper2d {
         let moved = step.x.hypot(step.y) >= self.params.node_distance_m
             || wrap_angle(step.theta).abs() >= self.params.node_rotation_rad;
         // Match against the last node from the odometry guess.
-        let matched = idc(&self.node_scans[last], &scan, step, &self.params.idc)
-            .ok()
-            .filter(|m| accept(m, &self.params.gate) && self.agrees_with_odometry(m, &step));
+        let matched = self
+            .match_to_node(last, &scan, step)
+            .filter(|m| self.agrees_with_odometry(m, &step));
         if !moved {
             let offset = matched.map_or(step, |m| m.pose);
             return Ok(Placed::Attached { node: last, offset });

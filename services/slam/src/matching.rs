@@ -5,17 +5,20 @@
 //!
 //! Reading order: [`Scan2`] (a scan as a bearing-ordered point set), the reference
 //! contour (`contour`: the two correspondence rules), [`idc`] (the iteration), `validate`
-//! (covariance and quality of the result), [`accept`] (the gate). [`metric`] scores poses
+//! (covariance and quality of the result), [`accept`] (the gate), [`refine`] (a
+//! point-to-line polish of a match, against one scan or several). [`metric`] scores poses
 //! against ground-truth relations (Kümmerle et al. 2009); [`synthetic`] ray casts test scenes.
 
 mod contour;
 mod idc;
 pub mod metric;
+mod refine;
 mod scan;
 pub mod synthetic;
 mod validate;
 
 pub use idc::{IdcParams, Match, idc};
+pub use refine::{Prior, Reference, RefineParams, refine, refine_against};
 pub use scan::Scan2;
 pub use validate::{QualityGate, accept};
 

@@ -1,7 +1,7 @@
 //! [`Mapper2dParams`]: every tunable of the 2D mapper, and the preset for precise dead
 //! reckoning.
 
-use crate::matching::{IdcParams, QualityGate};
+use crate::matching::{IdcParams, QualityGate, RefineParams};
 use crate::optimize::OptimizeParams;
 use crate::robust::Robust;
 use serde::{Deserialize, Serialize};
@@ -55,6 +55,9 @@ pub struct Mapper2dParams {
     pub gps_robust: Robust,
     /// Scan matching (IDC) of successive nodes and loop-closure candidates.
     pub idc: IdcParams,
+    /// The point-to-line refinement of sequential matches and of the offsets of scans that
+    /// hang off a node.
+    pub refine: RefineParams,
     /// The quality gate a match must pass to become an edge.
     pub gate: QualityGate,
     /// The nonlinear optimization of the network.
@@ -83,6 +86,7 @@ impl Default for Mapper2dParams {
             inter_robot_search_radius_m: 3.0,
             gps_robust: Robust::Cauchy { c: 2.0 },
             idc: IdcParams::default(),
+            refine: RefineParams::default(),
             gate: QualityGate::default(),
             optimize: OptimizeParams::default(),
         }
