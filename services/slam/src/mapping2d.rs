@@ -17,11 +17,15 @@
 //! right one that arrives after much drift still pulls the map. (DCS was measured on ACES:
 //! it discarded the right closures too, and the relation error tripled.)
 
+mod closures;
+pub mod consistency;
 mod edges;
 mod params;
 mod solve;
+mod wrong_closures;
 
-pub use params::Mapper2dParams;
+pub use params::{ConsistencyParams, Mapper2dParams};
+pub use wrong_closures::WrongClosures;
 
 use crate::matching::{Scan2, accept, idc};
 use crate::network::{EdgeKind, GraphError, PoseGraph, RelativeEdge};
@@ -58,8 +62,14 @@ pub struct MapperStats {
     pub sequential_rejected: usize,
     /// Loop-closure candidates matched.
     pub loop_candidates: usize,
-    /// Loop closures, within a robot's chain and between robots.
+    /// Loop-closure matches the quality gate accepted (each then checked for consistency).
+    pub loop_matches: usize,
+    /// Closure candidates added from outside the matcher (`add_closure_candidate`).
+    pub external_closures: usize,
+    /// Loop closures (edges), within a robot's chain and between robots.
     pub loop_closures: usize,
+    /// Closure candidates (matches and external ones) the consistency check rejected.
+    pub loop_closures_rejected: usize,
     /// Of `loop_closures`, those between two robots.
     pub inter_robot_closures: usize,
     /// GPS edges added (fixes taken).
@@ -94,6 +104,8 @@ pub struct Mapper2d {
 
     /// Each robot's chain, by robot index.
     chains: Vec<Option<Chain>>,
+    /// Loop-closure candidates and their consistency check.
+    book: closures::ClosureBook,
     optimizer: Optimizer,
     stats: MapperStats,
     last_optimization: Option<OptimizeReport>,
@@ -174,6 +186,7 @@ impl Mapper2d {
         let Some(chain) = self.chains[robot] else {
             // A robot's first node may already see another robot's map.
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
+            self.record_chain_step(robot, node, None);
             let closed = self.close_loops(node) > 0;
             if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored()?;
@@ -222,7 +235,8 @@ impl Mapper2d {
                 robust: Robust::None,
             });
         }
-        let closed = self.close_loops(node) > 0;
+        self.record_chain_step(robot, node, Some(last));
+        let closed = self.expire_closures(false) + self.close_loops(node) > 0;
         if self.add_gps(node, gps) || closed {
             self.optimize_when_anchored()?;
         }
@@ -230,7 +244,9 @@ impl Mapper2d {
     }
 
     /// Optimizes the network one last time; call after the last scan.
+    /// Closures still waiting for support are decided first.
     pub fn finish(&mut self) -> Result<OptimizeReport, GraphError> {
+        self.expire_closures(true);
         self.optimize()
     }
 
