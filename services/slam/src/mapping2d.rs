@@ -66,6 +66,9 @@ pub struct MapperStats {
     pub loop_matches: usize,
     /// Closure candidates added from outside the matcher (`add_closure_candidate`).
     pub external_closures: usize,
+    /// Matches of a waiting closure's neighbouring nodes, tried for its support (also
+    /// checked before they become edges).
+    pub support_matches: usize,
     /// Loop closures (edges), within a robot's chain and between robots.
     pub loop_closures: usize,
     /// Closure candidates (matches and external ones) the consistency check rejected.

@@ -1,11 +1,13 @@
 //! The loop closures' consistency check in the mapper: every closure, the matcher's or one
 //! added from outside, waits as a candidate until it belongs to a maximum set of pairwise
-//! consistent closures nearby (PCM over a bounded window); then it becomes an edge. A closure
-//! no other supports within `window_nodes` nodes is rejected. Right closures after much drift
-//! arrive in runs that agree with each other; a wrong one stands alone or against them.
+//! consistent closures nearby (PCM over a bounded window), or it agrees with the map as it
+//! stands and no larger set contradicts it; then it becomes an edge. A closure that neither
+//! holds within `window_nodes` nodes is rejected. Right closures after much drift arrive in
+//! runs that agree with each other; a wrong one stands alone or against them.
 
 use super::Mapper2d;
 use super::consistency::{ChainPaths, Closure, Uncertain, cycle_chi2, ends_gap, maximum_clique};
+use crate::matching::{accept, idc};
 use crate::network::{EdgeKind, GraphError, RelativeEdge};
 use crate::se2::Pose2;
 use nalgebra::{Matrix3, Vector3};
@@ -105,7 +107,7 @@ impl Mapper2d {
             return Err(GraphError::NotFinite { edge });
         }
         self.stats.external_closures += 1;
-        let added = self.submit_closure(from, to, measurement, information);
+        let added = self.submit_and_verify(from, to, measurement, information);
         if added > 0 {
             self.optimize_when_anchored()?;
         }
@@ -151,6 +153,52 @@ impl Mapper2d {
         self.resolve(index)
     }
 
+    /// Submits a closure; when it waits for support, its older end's neighbours are matched
+    /// against its newer end from the pose it predicts, and those matches join the candidates
+    /// (support from the scans, where the window has none yet). Returns how many edges that
+    /// added.
+    pub(super) fn submit_and_verify(
+        &mut self,
+        from: usize,
+        to: usize,
+        measurement: Pose2,
+        information: Matrix3<f64>,
+    ) -> usize {
+        let mut added = self.submit_closure(from, to, measurement, information);
+        let index = self.book.candidates.len() - 1;
+        let offset = self.params.loop_consistency.support_offset_nodes as isize;
+        let (older, newer) = (from.min(to), from.max(to));
+        // The closure seen from its older end.
+        let seen = if from == older {
+            measurement
+        } else {
+            measurement.inverse()
+        };
+        for step in [-offset, offset] {
+            if offset == 0 || self.book.candidates[index].state != State::Pending {
+                break;
+            }
+            let Some(near) = self.book.paths.neighbour(older, step) else {
+                continue;
+            };
+            let guess = self.graph.poses[near]
+                .between(&self.graph.poses[older])
+                .compose(&seen);
+            let (idc_params, gate) = (&self.params.idc, &self.params.gate);
+            let Ok(m) = idc(&self.node_scans[near], &self.node_scans[newer], guess, idc_params)
+            else {
+                continue;
+            };
+            if !accept(&m, gate) {
+                continue;
+            }
+            self.stats.support_matches += 1;
+            let information = self.match_information(&m.covariance);
+            added += self.submit_closure(near, newer, m.pose, information);
+        }
+        added
+    }
+
     /// Decides the closures waiting longer than the window (all of them with `all`, after the
     /// last scan): accepted if a large enough consistent set holds them now, else rejected.
     /// Returns how many edges that added.
@@ -173,6 +221,12 @@ impl Mapper2d {
             added += self.resolve(index);
             if self.book.candidates[index].state == State::Pending {
                 self.book.candidates[index].state = State::Rejected;
+                if std::env::var_os("PCM_DEBUG").is_some() {
+                    let c = self.book.candidates[index].closure;
+                    let est = self.graph.poses[c.from].between(&self.graph.poses[c.to]);
+                    let d = c.measurement.pose.between(&est);
+                    eprintln!("reject {} -> {} at node {} off ({:.2}, {:.2}, {:.3})", c.from, c.to, self.graph.poses.len(), d.x, d.y, d.theta);
+                }
                 self.stats.loop_closures_rejected += 1;
             }
         }
@@ -212,6 +266,11 @@ impl Mapper2d {
         }
         let clique = maximum_clique(&adjacent, preferred);
         if (clique.count_ones() as usize) < p.min_group.max(1) {
+            // Alone, or with too few: it may still agree with the map as it stands.
+            if clique & 1 != 0 && self.agrees_with_map(index, p.agree_max_chi2) {
+                self.accept(index);
+                return 1;
+            }
             return 0;
         }
         let mut added = 0;
@@ -237,6 +296,17 @@ impl Mapper2d {
         let known = cycle_chi2(ca, cb, &self.book.paths).is_some_and(|chi2| chi2 <= max_chi2);
         self.book.consistent.insert(key, known);
         known
+    }
+
+    /// Whether candidate `index` lies within `max_chi2` of the current estimate.
+    fn agrees_with_map(&self, index: usize, max_chi2: f64) -> bool {
+        let c = &self.book.candidates[index].closure;
+        let estimate = self.graph.poses[c.from].between(&self.graph.poses[c.to]);
+        let error = Uncertain {
+            pose: c.measurement.pose.between(&estimate),
+            covariance: c.measurement.covariance,
+        };
+        error.chi2_from_identity() <= max_chi2
     }
 
     /// Candidate `index` becomes an edge.

@@ -84,6 +84,8 @@ pub struct ChainPlace {
 pub struct ChainPaths {
     /// By node: its chain and place.
     places: Vec<ChainPlace>,
+    /// By chain, by place: the node.
+    nodes: Vec<Vec<usize>>,
     /// By chain, by place: the node's pose composed from the chain's first node.
     poses: Vec<Vec<Pose2>>,
     /// By chain, by place: Σ Ad(P_k) Σ_k Ad(P_k)ᵀ over the steps up to the place.
@@ -97,7 +99,9 @@ impl ChainPaths {
         if self.poses.len() <= chain {
             self.poses.resize(chain + 1, Vec::new());
             self.sums.resize(chain + 1, Vec::new());
+            self.nodes.resize(chain + 1, Vec::new());
         }
+        self.nodes[chain].push(node);
         self.places.push(ChainPlace {
             chain,
             place: self.poses[chain].len(),
@@ -122,12 +126,20 @@ impl ChainPaths {
             place: self.poses[chain].len(),
         });
         self.poses[chain].push(pose);
+        self.nodes[chain].push(node);
         self.sums[chain].push(sum + a * step.covariance * a.transpose());
     }
 
     /// Nodes in chain `chain` so far.
     pub fn chain_len(&self, chain: usize) -> usize {
         self.poses.get(chain).map_or(0, Vec::len)
+    }
+
+    /// The node `offset` places from node `node` along its chain, if there is one.
+    pub fn neighbour(&self, node: usize, offset: isize) -> Option<usize> {
+        let at = self.places[node];
+        let place = at.place.checked_add_signed(offset)?;
+        self.nodes[at.chain].get(place).copied()
     }
 
     /// Where node `node` sits.

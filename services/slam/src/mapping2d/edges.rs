@@ -117,7 +117,7 @@ impl Mapper2d {
             }
             self.stats.loop_matches += 1;
             let information = self.match_information(&m.covariance);
-            added += self.submit_closure(j, node, m.pose, information);
+            added += self.submit_and_verify(j, node, m.pose, information);
         }
         added
     }

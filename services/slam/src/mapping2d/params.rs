@@ -132,6 +132,14 @@ pub struct ConsistencyParams {
     /// A closure becomes an edge once it belongs to a maximum consistent set of at least this
     /// many closures (1: every closure no larger set contradicts).
     pub min_group: usize,
+    /// A closure whose squared Mahalanobis distance from the current estimate (with its
+    /// covariance and the floors below) is at most this needs no support: it hardly moves the
+    /// map. It is still held back while a larger consistent set contradicts it.
+    pub agree_max_chi2: f64,
+    /// A closure that finds no support at once seeks it: the nodes this many places before
+    /// and after its older end are matched against its newer end, from the pose it predicts,
+    /// and those matches join the candidates (0: no such matches).
+    pub support_offset_nodes: usize,
     /// Floors added to each sequential step's standard deviations (m, rad): matches between
     /// successive nodes are more precise in their covariance than in fact.
     pub step_min_sigma_xy_m: f64,
@@ -150,6 +158,8 @@ impl Default for ConsistencyParams {
             max_chi2: 11.34,
             window_nodes: 25,
             min_group: 2,
+            agree_max_chi2: 11.34,
+            support_offset_nodes: 3,
             step_min_sigma_xy_m: 0.02,
             step_min_sigma_theta_rad: 0.5f64.to_radians(),
             closure_min_sigma_xy_m: 0.05,
