@@ -179,12 +179,7 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
     } else {
         println!(
             "{}: {} scans → {} nodes, {} loop closures ({} rejected as inconsistent), {:.0} ms",
-            r.log,
-            r.scans,
-            r.nodes,
-            r.loop_closures,
-            r.stats.loop_closures_rejected,
-            r.elapsed_ms
+            r.log, r.scans, r.nodes, r.loop_closures, r.stats.loop_closures_rejected, r.elapsed_ms
         );
         if let (Some(injected), Some(accepted)) =
             (r.false_closures_injected, r.false_closures_accepted)

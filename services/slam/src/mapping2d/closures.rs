@@ -185,8 +185,12 @@ impl Mapper2d {
                 .between(&self.graph.poses[older])
                 .compose(&seen);
             let (idc_params, gate) = (&self.params.idc, &self.params.gate);
-            let Ok(m) = idc(&self.node_scans[near], &self.node_scans[newer], guess, idc_params)
-            else {
+            let Ok(m) = idc(
+                &self.node_scans[near],
+                &self.node_scans[newer],
+                guess,
+                idc_params,
+            ) else {
                 continue;
             };
             if !accept(&m, gate) {
@@ -221,12 +225,6 @@ impl Mapper2d {
             added += self.resolve(index);
             if self.book.candidates[index].state == State::Pending {
                 self.book.candidates[index].state = State::Rejected;
-                if std::env::var_os("PCM_DEBUG").is_some() {
-                    let c = self.book.candidates[index].closure;
-                    let est = self.graph.poses[c.from].between(&self.graph.poses[c.to]);
-                    let d = c.measurement.pose.between(&est);
-                    eprintln!("reject {} -> {} at node {} off ({:.2}, {:.2}, {:.3})", c.from, c.to, self.graph.poses.len(), d.x, d.y, d.theta);
-                }
                 self.stats.loop_closures_rejected += 1;
             }
         }
@@ -368,8 +366,14 @@ mod tests {
         let edges = mapper.graph().edges.len();
         let between = |a: usize, b: usize| truth[a].between(&truth[b]);
         // A lone closure waits; one that agrees with it lets both through.
-        assert_eq!(mapper.add_closure_candidate(0, 2, between(0, 2), COVARIANCE), Ok(0));
-        assert_eq!(mapper.add_closure_candidate(1, 3, between(1, 3), COVARIANCE), Ok(2));
+        assert_eq!(
+            mapper.add_closure_candidate(0, 2, between(0, 2), COVARIANCE),
+            Ok(0)
+        );
+        assert_eq!(
+            mapper.add_closure_candidate(1, 3, between(1, 3), COVARIANCE),
+            Ok(2)
+        );
         // A wrong one (1 m off) contradicts them and stays out, and is rejected at the end.
         let wrong = between(0, 3).compose(&Pose2::new(1.0, 0.0, 0.1));
         assert_eq!(mapper.add_closure_candidate(0, 3, wrong, COVARIANCE), Ok(0));
@@ -377,7 +381,11 @@ mod tests {
         let stats = mapper.stats();
         assert_eq!(mapper.graph().edges.len(), edges + 2);
         assert_eq!(
-            (stats.external_closures, stats.loop_closures, stats.loop_closures_rejected),
+            (
+                stats.external_closures,
+                stats.loop_closures,
+                stats.loop_closures_rejected
+            ),
             (3, 2, 1)
         );
     }

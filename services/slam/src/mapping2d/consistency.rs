@@ -200,13 +200,7 @@ impl Closure {
 /// How `b` pairs with `a`: `b` itself or reversed, so that the ends are on the same chains,
 /// with the larger of the two chain gaps; the pairing with the smaller one.
 fn pairing(a: &Closure, b: &Closure, paths: &ChainPaths) -> Option<(Closure, usize)> {
-    let gaps = |b: &Closure| {
-        Some(
-            paths
-                .gap(a.to, b.to)?
-                .max(paths.gap(b.from, a.from)?),
-        )
-    };
+    let gaps = |b: &Closure| Some(paths.gap(a.to, b.to)?.max(paths.gap(b.from, a.from)?));
     let direct = gaps(b).map(|g| (*b, g));
     let reversed = gaps(&b.reversed()).map(|g| (b.reversed(), g));
     match (direct, reversed) {
@@ -245,7 +239,14 @@ pub fn maximum_clique(adjacent: &[u64], preferred: u64) -> u64 {
     best.2
 }
 
-fn expand(adjacent: &[u64], preferred: u64, r: u64, mut p: u64, mut x: u64, best: &mut (u32, u32, u64)) {
+fn expand(
+    adjacent: &[u64],
+    preferred: u64,
+    r: u64,
+    mut p: u64,
+    mut x: u64,
+    best: &mut (u32, u32, u64),
+) {
     if p == 0 {
         let score = (r.count_ones(), (r & preferred).count_ones());
         if x == 0 && score > (best.0, best.1) {
@@ -263,7 +264,14 @@ fn expand(adjacent: &[u64], preferred: u64, r: u64, mut p: u64, mut x: u64, best
         let v = todo.trailing_zeros() as usize;
         let bit = 1u64 << v;
         todo &= !bit;
-        expand(adjacent, preferred, r | bit, p & adjacent[v], x & adjacent[v], best);
+        expand(
+            adjacent,
+            preferred,
+            r | bit,
+            p & adjacent[v],
+            x & adjacent[v],
+            best,
+        );
         p &= !bit;
         x |= bit;
     }
@@ -274,14 +282,22 @@ mod tests {
     use super::*;
 
     fn step_covariance() -> Matrix3<f64> {
-        Matrix3::from_diagonal(&Vector3::new(0.02f64.powi(2), 0.02f64.powi(2), 0.01f64.powi(2)))
+        Matrix3::from_diagonal(&Vector3::new(
+            0.02f64.powi(2),
+            0.02f64.powi(2),
+            0.01f64.powi(2),
+        ))
     }
 
     /// Two laps of a 10 m square, a node every metre, the steps measured exactly.
     fn two_laps() -> (Vec<Pose2>, ChainPaths) {
         let mut truth = vec![Pose2::IDENTITY];
         for k in 1..80 {
-            let turn = if k % 10 == 0 { std::f64::consts::FRAC_PI_2 } else { 0.0 };
+            let turn = if k % 10 == 0 {
+                std::f64::consts::FRAC_PI_2
+            } else {
+                0.0
+            };
             let last = truth[k - 1];
             truth.push(last.compose(&Pose2::new(1.0, 0.0, turn)));
         }
@@ -324,7 +340,12 @@ mod tests {
         assert!((path.covariance - composed.covariance).abs().max() < 1e-12);
         assert!(path.pose.between(&composed.pose).x.abs() < 1e-9);
         let back = paths.path(b, a).expect("one chain");
-        assert!((back.covariance - composed.inverse().covariance).abs().max() < 1e-12);
+        assert!(
+            (back.covariance - composed.inverse().covariance)
+                .abs()
+                .max()
+                < 1e-12
+        );
         assert_eq!(paths.gap(b, a), Some(b - a));
     }
 

@@ -87,7 +87,11 @@ impl WrongClosures {
                 sign * self.within(OFF_RAD),
             );
             let [sx, sy, st] = CLAIMED_SIGMA;
-            let covariance = [[sx * sx, 0.0, 0.0], [0.0, sy * sy, 0.0], [0.0, 0.0, st * st]];
+            let covariance = [
+                [sx * sx, 0.0, 0.0],
+                [0.0, sy * sy, 0.0],
+                [0.0, 0.0, st * st],
+            ];
             let measurement = truth.compose(&off);
             added += mapper.add_closure_candidate(from, newest, measurement, covariance)?;
             self.injected.push((from, newest, measurement));
