@@ -12,7 +12,8 @@
 //!
 //! Loop-closure candidates are earlier nodes whose current estimate lies within a search
 //! radius of the new node's, excluding its recent predecessors; a candidate becomes an edge
-//! only when IDC matches it and the gate accepts the match, and then with a soft robust
+//! only when IDC matches it, the gate accepts the match and the pairwise consistency check
+//! (`closures.rs`, `consistency.rs`) lets it through, and then with a soft robust
 //! kernel (Cauchy, c = 10): a closure that slips through wrongly is down-weighted, while a
 //! right one that arrives after much drift still pulls the map. (DCS was measured on ACES:
 //! it discarded the right closures too, and the relation error tripled.)
