@@ -23,6 +23,7 @@ pub mod consistency;
 mod edges;
 mod params;
 mod solve;
+mod support;
 mod wrong_closures;
 
 pub use params::{ConsistencyParams, Mapper2dParams};

@@ -7,7 +7,6 @@
 
 use super::Mapper2d;
 use super::consistency::{ChainPaths, Closure, Uncertain, cycle_chi2, ends_gap, maximum_clique};
-use crate::matching::{accept, idc};
 use crate::network::{EdgeKind, GraphError, RelativeEdge};
 use crate::se2::Pose2;
 use nalgebra::{Matrix3, Vector3};
@@ -153,56 +152,6 @@ impl Mapper2d {
         self.resolve(index)
     }
 
-    /// Submits a closure; when it waits for support, its older end's neighbours are matched
-    /// against its newer end from the pose it predicts, and those matches join the candidates
-    /// (support from the scans, where the window has none yet). Returns how many edges that
-    /// added.
-    pub(super) fn submit_and_verify(
-        &mut self,
-        from: usize,
-        to: usize,
-        measurement: Pose2,
-        information: Matrix3<f64>,
-    ) -> usize {
-        let mut added = self.submit_closure(from, to, measurement, information);
-        let index = self.book.candidates.len() - 1;
-        let offset = self.params.loop_consistency.support_offset_nodes as isize;
-        let (older, newer) = (from.min(to), from.max(to));
-        // The closure seen from its older end.
-        let seen = if from == older {
-            measurement
-        } else {
-            measurement.inverse()
-        };
-        for step in [-offset, offset] {
-            if offset == 0 || self.book.candidates[index].state != State::Pending {
-                break;
-            }
-            let Some(near) = self.book.paths.neighbour(older, step) else {
-                continue;
-            };
-            let guess = self.graph.poses[near]
-                .between(&self.graph.poses[older])
-                .compose(&seen);
-            let (idc_params, gate) = (&self.params.idc, &self.params.gate);
-            let Ok(m) = idc(
-                &self.node_scans[near],
-                &self.node_scans[newer],
-                guess,
-                idc_params,
-            ) else {
-                continue;
-            };
-            if !accept(&m, gate) {
-                continue;
-            }
-            self.stats.support_matches += 1;
-            let information = self.match_information(&m.covariance);
-            added += self.submit_closure(near, newer, m.pose, information);
-        }
-        added
-    }
-
     /// Decides the closures waiting longer than the window (all of them with `all`, after the
     /// last scan): accepted if a large enough consistent set holds them now, else rejected.
     /// Returns how many edges that added.
@@ -305,6 +254,21 @@ impl Mapper2d {
             covariance: c.measurement.covariance,
         };
         error.chi2_from_identity() <= max_chi2
+    }
+
+    /// Whether candidate `index` still waits.
+    pub(super) fn is_pending(&self, index: usize) -> bool {
+        self.book.candidates[index].state == State::Pending
+    }
+
+    /// How many candidates there are.
+    pub(super) fn candidate_count(&self) -> usize {
+        self.book.candidates.len()
+    }
+
+    /// Node `offset` places from `node` along its chain.
+    pub(super) fn chain_neighbour(&self, node: usize, offset: isize) -> Option<usize> {
+        self.book.paths.neighbour(node, offset)
     }
 
     /// Candidate `index` becomes an edge.
