@@ -34,7 +34,7 @@ impl Mapper2d {
             if offset == 0 || !self.is_pending(index) {
                 break;
             }
-            let Some(near) = self.chain_neighbour(older, step) else {
+            let Some(near) = self.chain_neighbour(older, step).filter(|&n| n != newer) else {
                 continue;
             };
             let guess = self.graph.poses[near]
