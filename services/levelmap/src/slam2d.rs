@@ -5,7 +5,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use graphio::{carmen, gridmap};
 use serde::Serialize;
-use slam::{GridParams, Mapper2d, Mapper2dParams, MapperStats, OccupancyGrid};
+use slam::{GridParams, Mapper2d, Mapper2dParams, MapperStats, OccupancyGrid, WrongClosures};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -35,6 +35,14 @@ pub struct Slam2dArgs {
     /// TOML file with a [mapper] table overriding the mapper's parameters (slam::Mapper2dParams).
     #[arg(long, value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
+    /// Inject wrong loop closures to see the consistency check work: this many per
+    /// loop-closure match (0.1: one for every ten), each between the newest node and a random
+    /// earlier one, their estimated relative pose off by 0.5–2 m and 3–15°.
+    #[arg(long, value_name = "FRACTION")]
+    pub inject_false_closures: Option<f64>,
+    /// Seed of the injected wrong closures.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub seed: u64,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -70,6 +78,11 @@ struct Report {
     final_chi2: f64,
     elapsed_ms: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
+    false_closures_injected: Option<usize>,
+    /// Of the injected wrong closures, those that became edges.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    false_closures_accepted: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     relations: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     relation_trans_error_mean: Option<f64>,
@@ -92,8 +105,14 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
     let t0 = Instant::now();
     let mut mapper = Mapper2d::new(load_params(args.config.as_deref())?);
     let mut placed = Vec::with_capacity(log.scans.len());
+    let mut wrong = args
+        .inject_false_closures
+        .map(|fraction| WrongClosures::new(fraction, args.seed));
     for scan in &log.scans {
         placed.push(mapper.add_scan(scan.laser_pose, scan.to_scan2())?);
+        if let Some(wrong) = &mut wrong {
+            wrong.inject(&mut mapper)?;
+        }
     }
     let report = mapper.finish()?;
     let elapsed_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -143,6 +162,8 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         stats,
         final_chi2: report.final_chi2,
         elapsed_ms,
+        false_closures_injected: wrong.as_ref().map(WrongClosures::injected),
+        false_closures_accepted: wrong.as_ref().map(|w| w.accepted(mapper.graph())),
         relations: metric.map(|m| m.0),
         relation_trans_error_mean: metric.map(|m| m.1.translation_mean_m),
         relation_trans_error_std: metric.map(|m| m.1.translation_std_m),
@@ -153,9 +174,14 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
         println!(
-            "{}: {} scans → {} nodes, {} loop closures, {:.0} ms",
-            r.log, r.scans, r.nodes, r.loop_closures, r.elapsed_ms
+            "{}: {} scans → {} nodes, {} loop closures ({} rejected as inconsistent), {:.0} ms",
+            r.log, r.scans, r.nodes, r.loop_closures, r.stats.loop_closures_rejected, r.elapsed_ms
         );
+        if let (Some(injected), Some(accepted)) =
+            (r.false_closures_injected, r.false_closures_accepted)
+        {
+            println!("  wrong closures: {injected} injected, {accepted} became edges");
+        }
         if let (Some(m), Some(s)) = (r.relation_trans_error_mean, r.relation_trans_error_std) {
             println!("  relations: translation error {m:.4} ± {s:.4} m");
         }

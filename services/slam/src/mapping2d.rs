@@ -12,18 +12,24 @@
 //!
 //! Loop-closure candidates are earlier nodes whose current estimate lies within a search
 //! radius of the new node's, excluding its recent predecessors; a candidate becomes an edge
-//! only when IDC matches it and the gate accepts the match, and then with a soft robust
+//! only when IDC matches it, the gate accepts the match and the pairwise consistency check
+//! (`closures.rs`, `consistency.rs`) lets it through, and then with a soft robust
 //! kernel (Cauchy, c = 10): a closure that slips through wrongly is down-weighted, while a
 //! right one that arrives after much drift still pulls the map. (DCS was measured on ACES:
 //! it discarded the right closures too, and the relation error tripled.)
 
+mod closures;
+pub mod consistency;
 mod edges;
 mod local;
 mod params;
 mod parts;
 mod solve;
+mod support;
+mod wrong_closures;
 
-pub use params::Mapper2dParams;
+pub use params::{ConsistencyParams, Mapper2dParams};
+pub use wrong_closures::WrongClosures;
 
 use crate::matching::Scan2;
 use crate::network::{EdgeKind, GraphError, PoseGraph, RelativeEdge};
@@ -60,8 +66,17 @@ pub struct MapperStats {
     pub sequential_rejected: usize,
     /// Loop-closure candidates matched.
     pub loop_candidates: usize,
-    /// Loop closures, within a robot's chain and between robots.
+    /// Loop-closure matches the quality gate accepted (each then checked for consistency).
+    pub loop_matches: usize,
+    /// Closure candidates added from outside the matcher (`add_closure_candidate`).
+    pub external_closures: usize,
+    /// Matches of a waiting closure's neighbouring nodes, tried for its support (also
+    /// checked before they become edges).
+    pub support_matches: usize,
+    /// Loop closures (edges), within a robot's chain and between robots.
     pub loop_closures: usize,
+    /// Closure candidates (matches and external ones) the consistency check rejected.
+    pub loop_closures_rejected: usize,
     /// Of `loop_closures`, those between two robots.
     pub inter_robot_closures: usize,
     /// GPS edges added (fixes taken).
@@ -99,6 +114,8 @@ pub struct Mapper2d {
 
     /// Each robot's chain, by robot index.
     chains: Vec<Option<Chain>>,
+    /// Loop-closure candidates and their consistency check.
+    book: closures::ClosureBook,
     optimizer: Optimizer,
     stats: MapperStats,
     last_optimization: Option<OptimizeReport>,
@@ -181,6 +198,7 @@ impl Mapper2d {
         let Some(chain) = self.chains[robot] else {
             // A robot's first node may already see another robot's map.
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
+            self.record_chain_step(robot, node, None);
             let closed = self.close_loops(node) > 0;
             if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored()?;
@@ -229,7 +247,8 @@ impl Mapper2d {
                 robust: Robust::None,
             });
         }
-        let closed = self.close_loops(node) > 0;
+        self.record_chain_step(robot, node, Some(last));
+        let closed = self.expire_closures(false) + self.close_loops(node) > 0;
         if self.add_gps(node, gps) || closed {
             self.optimize_when_anchored()?;
         }
@@ -237,7 +256,9 @@ impl Mapper2d {
     }
 
     /// Optimizes the network one last time; call after the last scan.
+    /// Closures still waiting for support are decided first.
     pub fn finish(&mut self) -> Result<OptimizeReport, GraphError> {
+        self.expire_closures(true);
         self.optimize()
     }
 

@@ -3,7 +3,7 @@
 
 use super::{GpsObservation, Mapper2d};
 use crate::matching::{Match, accept, idc};
-use crate::network::{EdgeKind, GpsEdge, RelativeEdge, is_information};
+use crate::network::{GpsEdge, is_information};
 use crate::se2::{Pose2, wrap_angle};
 use nalgebra::Matrix3;
 
@@ -69,7 +69,8 @@ impl Mapper2d {
     }
 
     /// Matches `node` against earlier nodes near it, its own robot's and the others';
-    /// returns how many closures were added.
+    /// returns how many edges the consistency check let through (this node's closures or
+    /// earlier ones they support).
     pub(super) fn close_loops(&mut self, node: usize) -> usize {
         let p = self.params.clone();
         let here = self.graph.poses[node];
@@ -114,23 +115,9 @@ impl Mapper2d {
             if !accept(&m, &p.gate) {
                 continue;
             }
-            let inter_robot = self.node_robot[j].0 != robot;
-            self.join_parts(j, node, &m.pose);
-            self.graph.edges.push(RelativeEdge {
-                from: j,
-                to: node,
-                measurement: m.pose,
-                information: self.match_information(&m.covariance),
-                kind: if inter_robot {
-                    EdgeKind::InterRobot
-                } else {
-                    EdgeKind::LoopClosure
-                },
-                robust: p.loop_robust,
-            });
-            self.stats.loop_closures += 1;
-            self.stats.inter_robot_closures += usize::from(inter_robot);
-            added += 1;
+            self.stats.loop_matches += 1;
+            let information = self.match_information(&m.covariance);
+            added += self.submit_and_verify(j, node, m.pose, information);
         }
         added
     }
