@@ -38,6 +38,9 @@ pub struct RefineParams {
     /// on its chain, at their current estimates (0: scan-to-scan). Default 1 (docs/slam.md
     /// has the figures for 0, 1 and 2).
     pub submap_extra_nodes: usize,
+    /// Pair the reference scans' points with the current scan's surfaces too (both ways).
+    /// Default false.
+    pub symmetric: bool,
     /// In the 2D mapper: odometry as a prior on the refined pose (see [`Prior`]). Default
     /// false: on ACES it changed nothing locally.
     pub odometry_prior: bool,
@@ -66,6 +69,7 @@ impl Default for RefineParams {
             enabled: true,
             submap_extra_nodes: 1,
             odometry_prior: false,
+            symmetric: false,
             max_iterations: 10,
             initial_max_distance_m: 0.2,
             outlier_sigmas: 3.0,
@@ -167,7 +171,15 @@ pub fn refine_against(
             (contour, r.pose)
         })
         .collect();
+    let current_contour = params.symmetric.then(|| {
+        Contour::new(
+            current,
+            idc_params.join_distance_m,
+            idc_params.join_distance_per_m,
+        )
+    });
     let mut solver = Solver::new(&contours, current, idc_params.min_correspondences);
+    solver.symmetric = current_contour.as_ref();
     solver.prior = prior.copied();
     solver.min_sigma_m = idc_params.range_noise_m;
     let settled = |step: &nalgebra::Vector3<f64>| {
