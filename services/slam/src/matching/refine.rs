@@ -7,8 +7,8 @@
 //! the reference surface through its closest polyline point (normal from the chord across
 //! about 0.4 m of the surface, where Censi takes the line through the two nearest returns:
 //! with centimetre range noise on returns a few centimetres apart that line tilts by
-//! degrees), with outliers rejected at a few robust standard deviations of the previous
-//! iteration's residuals.
+//! degrees), with outliers rejected at a few robust standard deviations of the residuals at
+//! the start (set once: a distance that moved every iteration kept flipping pairs).
 //!
 //! It may refine against several reference scans at once (each with its pose in a common
 //! frame): the scan-to-submap variant, the new scan against the last few nodes' scans.
@@ -50,7 +50,7 @@ pub struct RefineParams {
     /// IDC's final outlier distance.
     pub initial_max_distance_m: f64,
     /// Later iterations drop pairs beyond this many robust standard deviations (1.4826 ×
-    /// the median absolute residual) of the previous iteration's residuals… Default 3.
+    /// the median absolute residual) of the first iteration's residuals… Default 3.
     pub outlier_sigmas: f64,
     /// …but never closer than this (m). Default 0.03.
     pub min_max_distance_m: f64,
