@@ -7,8 +7,8 @@
 //! the reference surface through its closest polyline point (normal from the chord across
 //! about 0.4 m of the surface, where Censi takes the line through the two nearest returns:
 //! with centimetre range noise on returns a few centimetres apart that line tilts by
-//! degrees), with outliers rejected at a few robust standard deviations of the previous
-//! iteration's residuals.
+//! degrees), with outliers rejected at a few robust standard deviations of the residuals at
+//! the start (set once: a distance that moved every iteration kept flipping pairs).
 //!
 //! It may refine against several reference scans at once (each with its pose in a common
 //! frame): the scan-to-submap variant, the new scan against the last few nodes' scans.
@@ -38,6 +38,9 @@ pub struct RefineParams {
     /// on its chain, at their current estimates (0: scan-to-scan). Default 1 (docs/slam.md
     /// has the figures for 0, 1 and 2).
     pub submap_extra_nodes: usize,
+    /// Pair the reference scans' points with the current scan's surfaces too (both ways).
+    /// Default false.
+    pub symmetric: bool,
     /// In the 2D mapper: odometry as a prior on the refined pose (see [`Prior`]). Default
     /// false: on ACES it changed nothing locally.
     pub odometry_prior: bool,
@@ -47,7 +50,7 @@ pub struct RefineParams {
     /// IDC's final outlier distance.
     pub initial_max_distance_m: f64,
     /// Later iterations drop pairs beyond this many robust standard deviations (1.4826 ×
-    /// the median absolute residual) of the previous iteration's residuals… Default 3.
+    /// the median absolute residual) of the first iteration's residuals… Default 3.
     pub outlier_sigmas: f64,
     /// …but never closer than this (m). Default 0.03.
     pub min_max_distance_m: f64,
@@ -66,6 +69,7 @@ impl Default for RefineParams {
             enabled: true,
             submap_extra_nodes: 1,
             odometry_prior: false,
+            symmetric: false,
             max_iterations: 10,
             initial_max_distance_m: 0.2,
             outlier_sigmas: 3.0,
@@ -167,7 +171,15 @@ pub fn refine_against(
             (contour, r.pose)
         })
         .collect();
+    let current_contour = params.symmetric.then(|| {
+        Contour::new(
+            current,
+            idc_params.join_distance_m,
+            idc_params.join_distance_per_m,
+        )
+    });
     let mut solver = Solver::new(&contours, current, idc_params.min_correspondences);
+    solver.symmetric = current_contour.as_ref();
     solver.prior = prior.copied();
     solver.min_sigma_m = idc_params.range_noise_m;
     let settled = |step: &nalgebra::Vector3<f64>| {

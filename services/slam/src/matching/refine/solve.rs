@@ -18,6 +18,8 @@ pub(super) struct Solver<'c, 'a> {
     pub(super) prior: Option<Prior>,
     /// Floor of the residuals' standard deviation (m) when weighing them against the prior.
     pub(super) min_sigma_m: f64,
+    /// The current scan's contour: the references' points are paired with it too.
+    pub(super) symmetric: Option<&'c Contour<'a>>,
 }
 
 /// The normal equations of one iteration.
@@ -51,6 +53,7 @@ impl<'c, 'a> Solver<'c, 'a> {
             residuals: Vec::with_capacity(current.len() * references.len()),
             prior: None,
             min_sigma_m: 0.0,
+            symmetric: None,
         }
     }
 
@@ -69,6 +72,9 @@ impl<'c, 'a> Solver<'c, 'a> {
         let mut max_distance_m = params.initial_max_distance_m;
         for iteration in 1..=params.max_iterations {
             let mut normal = self.linearize(&pose, max_distance_m);
+            if let Some(current) = self.symmetric {
+                self.add_reverse(current, &pose, max_distance_m, &mut normal);
+            }
             if self.residuals.len() < self.min_pairs {
                 return Err(MatchError::TooFewCorrespondences {
                     iteration,
@@ -159,6 +165,42 @@ impl<'c, 'a> Solver<'c, 'a> {
             }
         }
         normal
+    }
+
+    /// Adds the point-to-line residuals of the references' points against the current
+    /// scan's contour. A pair (reference point r, current surface point c with normal m) is
+    /// the forward pair turned round: residual `n·(P(c) − r)` with `n = R_P m`, and the
+    /// surface point moves with the pose as a current point does.
+    fn add_reverse(
+        &mut self,
+        current: &Contour,
+        pose: &Pose2,
+        max_distance_m: f64,
+        normal: &mut Normal,
+    ) {
+        let to_common = motion(pose);
+        let to_current = motion(&pose.inverse());
+        let (s, c) = pose.theta.sin_cos();
+        for (contour, frame) in self.references {
+            let to_common_from_reference = motion(frame);
+            for &r in contour.points() {
+                let r = to_common_from_reference(r);
+                let Some(query) = current.query(to_current(r)) else {
+                    continue;
+                };
+                let Some(hit) = current.closest(&query, max_distance_m) else {
+                    continue;
+                };
+                let (false, Some(m)) = (hit.open_end, hit.normal) else {
+                    continue;
+                };
+                let n = [c * m[0] - s * m[1], s * m[0] + c * m[1]];
+                let w = to_common(hit.point);
+                let e = n[0] * (w[0] - r[0]) + n[1] * (w[1] - r[1]);
+                normal.add(n, [w[0] - pose.x, w[1] - pose.y], e);
+                self.residuals.push(e.abs());
+            }
+        }
     }
 
     /// 1.4826 × the median absolute residual of the last iteration: the residuals' standard

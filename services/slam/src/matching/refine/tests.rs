@@ -32,9 +32,9 @@ fn path() -> Vec<Pose2> {
         .collect()
 }
 
-#[test]
-fn refined_matches_are_more_precise_than_idc_on_noisy_scans() {
-    let (params, refine_params) = (IdcParams::default(), RefineParams::default());
+/// Mean translation error over the path's steps of IDC and of the refinement with `refine_params`.
+fn path_errors(refine_params: &RefineParams) -> (f64, f64) {
+    let params = IdcParams::default();
     let poses = path();
     let (mut idc_sum, mut refined_sum) = (0.0, 0.0);
     for (k, pair) in poses.windows(2).enumerate() {
@@ -43,13 +43,18 @@ fn refined_matches_are_more_precise_than_idc_on_noisy_scans() {
         let truth = pair[0].between(&pair[1]);
         let guess = truth.compose(&Pose2::new(0.1, -0.08, 2f64.to_radians()));
         let m = idc(&reference, &current, guess, &params).expect("overlap");
-        let r = refine(&reference, &current, &m, &params, &refine_params).expect("overlap");
+        let r = refine(&reference, &current, &m, &params, refine_params).expect("overlap");
         assert!(accept(&r, &QualityGate::default()), "pair {k}: {r:?}");
         idc_sum += error_m(&m.pose, &truth);
         refined_sum += error_m(&r.pose, &truth);
     }
     let pairs = (poses.len() - 1) as f64;
-    let (idc_mean, refined_mean) = (idc_sum / pairs, refined_sum / pairs);
+    (idc_sum / pairs, refined_sum / pairs)
+}
+
+#[test]
+fn refined_matches_are_more_precise_than_idc_on_noisy_scans() {
+    let (idc_mean, refined_mean) = path_errors(&RefineParams::default());
     eprintln!(
         "mean translation error: IDC {:.3} mm, refined {:.3} mm",
         idc_mean * 1e3,
@@ -59,6 +64,25 @@ fn refined_matches_are_more_precise_than_idc_on_noisy_scans() {
     assert!(
         refined_mean < 0.9 * idc_mean,
         "IDC {idc_mean:.5} m, refined {refined_mean:.5} m"
+    );
+}
+
+#[test]
+fn pairing_both_ways_is_more_precise() {
+    let (_, one_way) = path_errors(&RefineParams::default());
+    let (_, both_ways) = path_errors(&RefineParams {
+        symmetric: true,
+        ..RefineParams::default()
+    });
+    eprintln!(
+        "mean translation error: one way {:.3} mm, both ways {:.3} mm",
+        one_way * 1e3,
+        both_ways * 1e3
+    );
+    // 3.2 mm and 2.5 mm when written.
+    assert!(
+        both_ways < 0.9 * one_way,
+        "{one_way:.5} m, {both_ways:.5} m"
     );
 }
 
