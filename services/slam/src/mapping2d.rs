@@ -20,8 +20,12 @@
 mod edges;
 mod params;
 mod solve;
+mod submap_params;
+mod submap_search;
+mod submaps;
 
 pub use params::Mapper2dParams;
+pub use submap_params::SubmapSearchParams;
 
 use crate::matching::{Scan2, accept, idc};
 use crate::network::{EdgeKind, GraphError, PoseGraph, RelativeEdge};
@@ -62,6 +66,10 @@ pub struct MapperStats {
     pub loop_closures: usize,
     /// Of `loop_closures`, those between two robots.
     pub inter_robot_closures: usize,
+    /// Correlative searches of a node in a submap.
+    pub submap_searches: usize,
+    /// Of `loop_closures`, those found by a submap search.
+    pub submap_closures: usize,
     /// GPS edges added (fixes taken).
     pub gps_edges: usize,
     /// Optimizations run.
@@ -98,6 +106,7 @@ pub struct Mapper2d {
     stats: MapperStats,
     last_optimization: Option<OptimizeReport>,
     optimization_pending: bool,
+    submaps: submaps::Submaps,
 }
 
 impl Mapper2d {
@@ -174,7 +183,8 @@ impl Mapper2d {
         let Some(chain) = self.chains[robot] else {
             // A robot's first node may already see another robot's map.
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
-            let closed = self.close_loops(node) > 0;
+            let closed = self.close_loops(node);
+            let closed = closed + self.search_submaps(node, closed) > 0;
             if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored()?;
             }
@@ -222,7 +232,8 @@ impl Mapper2d {
                 robust: Robust::None,
             });
         }
-        let closed = self.close_loops(node) > 0;
+        let closed = self.close_loops(node);
+        let closed = closed + self.search_submaps(node, closed) > 0;
         if self.add_gps(node, gps) || closed {
             self.optimize_when_anchored()?;
         }

@@ -9,6 +9,7 @@
 //! against ground-truth relations (Kümmerle et al. 2009); [`synthetic`] ray casts test scenes.
 
 mod contour;
+pub mod correlative;
 mod idc;
 pub mod metric;
 mod scan;

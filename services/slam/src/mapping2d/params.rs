@@ -59,6 +59,8 @@ pub struct Mapper2dParams {
     pub gate: QualityGate,
     /// The nonlinear optimization of the network.
     pub optimize: OptimizeParams,
+    /// Loop closure by correlative search against submaps.
+    pub submaps: super::SubmapSearchParams,
 }
 
 impl Default for Mapper2dParams {
@@ -85,6 +87,7 @@ impl Default for Mapper2dParams {
             idc: IdcParams::default(),
             gate: QualityGate::default(),
             optimize: OptimizeParams::default(),
+            submaps: super::SubmapSearchParams::default(),
         }
     }
 }
