@@ -37,6 +37,12 @@ pub struct SubmapSearchParams {
     pub global_linear_window_m: f64,
     /// A wide search scores more wrong poses: it must score at least this.
     pub global_min_score: f64,
+    /// Ambiguity: the best pose elsewhere (more than `ambiguity_radius_m` away) must score
+    /// below this share of the best. A corridor or a row of like doors fits shifted poses
+    /// nearly as well, and its best pose is as likely wrong as right.
+    pub max_runner_up_ratio: f64,
+    /// See `max_runner_up_ratio` (m).
+    pub ambiguity_radius_m: f64,
     /// IDC from the correlative pose may move it by at most this (m)…
     pub refine_max_shift_m: f64,
     /// …and turn it by at most this (rad); farther, the two disagree and nothing is added.
@@ -63,6 +69,8 @@ impl Default for SubmapSearchParams {
             global_after_m: 40.0,
             global_linear_window_m: 15.0,
             global_min_score: 0.65,
+            max_runner_up_ratio: 0.8,
+            ambiguity_radius_m: 1.0,
             refine_max_shift_m: 0.5,
             refine_max_turn_rad: 5f64.to_radians(),
         }

@@ -8,7 +8,7 @@
 
 use super::Mapper2d;
 use super::submaps::Submap;
-use crate::matching::correlative::{SearchWindow, search};
+use crate::matching::correlative::{Exclusion, SearchWindow, runner_up, search};
 use crate::matching::{accept, idc};
 use crate::network::{EdgeKind, RelativeEdge};
 use crate::se2::{Pose2, wrap_angle};
@@ -98,6 +98,25 @@ impl Mapper2d {
         };
         let scan = &self.node_scans[node];
         let found = search(&submap.grids, scan, initial, &window, min_score, &p.grid)?;
+        // Ambiguous (a corridor, a row of like doors): as likely wrong as right.
+        let rival_floor = found.score * p.max_runner_up_ratio;
+        let excluded = Exclusion {
+            pose: found.pose,
+            radius_m: p.ambiguity_radius_m,
+        };
+        if runner_up(
+            &submap.grids,
+            scan,
+            initial,
+            &window,
+            &excluded,
+            rival_floor,
+            &p.grid,
+        )
+        .is_some()
+        {
+            return None;
+        }
         // IDC against the submap node nearest to the found pose, from that pose.
         let &(near, near_pose) = submap.nodes.iter().min_by(|a, b| {
             let d = |q: &Pose2| (q.x - found.pose.x).hypot(q.y - found.pose.y);

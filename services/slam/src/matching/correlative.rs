@@ -100,6 +100,36 @@ pub fn search(
     search::Problem::new(grids, &points, initial, window, min_score)?.branch_and_bound()
 }
 
+/// Poses left out of a search: those within `radius_m` of translation of `pose`, whatever
+/// their angle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Exclusion {
+    /// The centre (m; its angle is ignored).
+    pub pose: Pose2,
+    /// The radius (m).
+    pub radius_m: f64,
+}
+
+/// The best pose of the same search outside `excluded` (around the result of [`search`]):
+/// a runner-up that scores nearly as well means the match is
+/// ambiguous (a corridor, repeated doors), whatever its score. `None` when nothing there
+/// scores at least `min_score`.
+pub fn runner_up(
+    grids: &PrecomputedGrids,
+    scan: &Scan2,
+    initial: Pose2,
+    window: &SearchWindow,
+    excluded: &Exclusion,
+    min_score: f64,
+    params: &CorrelativeParams,
+) -> Option<CorrelativeMatch> {
+    let r = grids.grid().resolution_m();
+    let points = search::thin_points(scan.points(), r, params.max_range_m);
+    search::Problem::new(grids, &points, initial, window, min_score)?
+        .excluding(&excluded.pose, excluded.radius_m)
+        .branch_and_bound()
+}
+
 /// The same as [`search`] by scoring every pose of the window: the reference for tests and
 /// benches (it is far slower).
 pub fn exhaustive_search(

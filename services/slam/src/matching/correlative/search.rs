@@ -71,6 +71,8 @@ pub(super) struct Problem<'a> {
     min_sum: u32,
     /// Candidates scored.
     nodes: usize,
+    /// Leaves whose offset lies within this many cells of this offset are skipped.
+    excluded: Option<(i64, i64, i64)>,
 }
 
 impl<'a> Problem<'a> {
@@ -107,7 +109,25 @@ impl<'a> Problem<'a> {
             reach: (window.linear_m / r).ceil().max(0.0) as i64,
             min_sum: (min_score.max(0.0) * full).ceil().min(u32::MAX as f64) as u32,
             nodes: 0,
+            excluded: None,
         })
+    }
+
+    /// Leaves out every pose within `radius_m` of translation of `pose` (a pose of this
+    /// window), whatever its angle: the search then finds the best pose elsewhere.
+    pub(super) fn excluding(mut self, pose: &Pose2, radius_m: f64) -> Problem<'a> {
+        let r = self.grids.grid().resolution_m();
+        self.excluded = Some((
+            ((pose.x - self.initial.x) / r).round() as i64,
+            ((pose.y - self.initial.y) / r).round() as i64,
+            (radius_m / r).ceil() as i64,
+        ));
+        self
+    }
+
+    fn is_excluded(&self, c: &Candidate) -> bool {
+        self.excluded
+            .is_some_and(|(x, y, radius)| (c.dx - x).pow(2) + (c.dy - y).pow(2) <= radius * radius)
     }
 
     fn score(&mut self, level: u32, angle: usize, dx: i64, dy: i64) -> Candidate {
@@ -156,13 +176,16 @@ impl<'a> Problem<'a> {
         level: u32,
         mut best: Option<Candidate>,
     ) -> Option<Candidate> {
-        candidates.sort_by(|a, b| b.sum.cmp(&a.sum));
+        candidates.sort_by_key(|c| std::cmp::Reverse(c.sum));
         for c in candidates {
             let needed = best.map_or(self.min_sum, |b| b.sum.saturating_add(1));
             if c.sum < needed {
                 break; // sorted: no later candidate can do better
             }
             if level == 0 {
+                if self.is_excluded(&c) {
+                    continue;
+                }
                 best = Some(c);
                 break;
             }
@@ -186,7 +209,9 @@ impl<'a> Problem<'a> {
             for dx in -self.reach..=self.reach {
                 for dy in -self.reach..=self.reach {
                     let c = self.score(0, angle, dx, dy);
-                    if c.sum >= best.map_or(self.min_sum, |b| b.sum.saturating_add(1)) {
+                    if !self.is_excluded(&c)
+                        && c.sum >= best.map_or(self.min_sum, |b| b.sum.saturating_add(1))
+                    {
                         best = Some(c);
                     }
                 }

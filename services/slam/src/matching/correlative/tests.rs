@@ -145,3 +145,56 @@ fn nothing_to_match_gives_none() {
         None
     );
 }
+
+fn around(best: &CorrelativeMatch) -> Exclusion {
+    Exclusion {
+        pose: best.pose,
+        radius_m: 1.0,
+    }
+}
+
+#[test]
+fn a_corridor_has_a_runner_up_and_a_corner_has_none() {
+    let params = coarse();
+    let window = SearchWindow {
+        linear_m: 3.0,
+        angular_rad: 10f64.to_radians(),
+    };
+    let submap = |scene: &Scene| {
+        let scan = scan_at(scene, &Pose2::IDENTITY, 3);
+        precompute([(Pose2::IDENTITY, &scan)], &params).expect("grid")
+    };
+    // Along a corridor every shift fits about as well.
+    let corridor = Scene::corridor(2.0, 60.0);
+    let grids = submap(&corridor);
+    let scan = scan_at(&corridor, &Pose2::new(0.5, 0.0, 0.0), 4);
+    let initial = Pose2::new(0.3, 0.2, 0.05);
+    let best = search(&grids, &scan, initial, &window, 0.5, &params).expect("best");
+    let second = runner_up(
+        &grids,
+        &scan,
+        initial,
+        &window,
+        &around(&best),
+        0.0,
+        &params,
+    )
+    .expect("runner-up");
+    assert!(second.score > 0.8 * best.score, "{best:?} {second:?}");
+    assert!((second.pose.x - best.pose.x).hypot(second.pose.y - best.pose.y) > 1.0);
+    // The park pins the pose: the best elsewhere scores far lower.
+    let (scene, grids) = park_submap(&params);
+    let scan = scan_at(&scene, &Pose2::new(1.0, 0.2, 0.1), 5);
+    let best = search(&grids, &scan, initial, &window, 0.5, &params).expect("best");
+    let second = runner_up(
+        &grids,
+        &scan,
+        initial,
+        &window,
+        &around(&best),
+        0.0,
+        &params,
+    )
+    .expect("runner-up");
+    assert!(second.score < 0.7 * best.score, "{best:?} {second:?}");
+}
