@@ -5,8 +5,10 @@
 //!
 //! Reading order: [`Scan2`] (a scan as a bearing-ordered point set), the reference
 //! contour (`contour`: the two correspondence rules), [`idc`] (the iteration), `validate`
-//! (covariance and quality of the result), [`accept`] (the gate). [`metric`] scores poses
-//! against ground-truth relations (Kümmerle et al. 2009); [`synthetic`] ray casts test scenes.
+//! (covariance and quality of the result), [`accept`] (the gate). [`correlative`] finds a
+//! scan in a submap without a good guess (branch and bound over a window, for loop
+//! closure). [`metric`] scores poses against ground-truth relations (Kümmerle et al. 2009);
+//! [`synthetic`] ray casts test scenes.
 
 mod contour;
 pub mod correlative;

@@ -17,6 +17,10 @@ pub struct SubmapSearchParams {
     pub submap_path_m: f64,
     /// Rasterization and search (cell size, hit blur, range used).
     pub grid: CorrelativeParams,
+    /// A closure counts as one (it resets the search's clock) when its two nodes are at least
+    /// this much path apart (m): closures to nodes a few metres back, as IDC finds all along
+    /// at small node spacings, say nothing about the drift of a loop.
+    pub closure_min_path_m: f64,
     /// Search when the robot has travelled this far since its last closure (m)…
     pub search_after_m: f64,
     /// …then again after each further stretch of this much path (m).
@@ -60,6 +64,7 @@ impl Default for SubmapSearchParams {
                 max_range_m: 20.0,
                 ..CorrelativeParams::default()
             },
+            closure_min_path_m: 20.0,
             search_after_m: 5.0,
             search_every_m: 1.0,
             max_submaps: 2,

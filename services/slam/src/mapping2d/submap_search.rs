@@ -25,8 +25,13 @@ impl Mapper2d {
         self.track_submaps(node);
         let (robot, place) = self.node_robot[node];
         let path = self.node_path_m[node];
+        // The IDC closures just added are the last `closed` edges.
+        let edges = &self.graph.edges[self.graph.edges.len() - closed..];
+        let looped = edges
+            .iter()
+            .any(|e| path - self.node_path_m[e.from] >= p.closure_min_path_m);
         let state = &mut self.submaps.robots[robot];
-        if closed > 0 {
+        if looped {
             state.last_closure_m = Some(path);
             return 0;
         }
