@@ -10,7 +10,7 @@ pub(super) const FULL: u32 = 255;
 
 /// A probability grid in some frame (a submap's): cell (i, j) covers
 /// `[x0 + i·r, x0 + (i+1)·r) × [y0 + j·r, y0 + (j+1)·r)`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct ProbabilityGrid {
     origin: [f64; 2],
     resolution_m: f64,
@@ -125,9 +125,21 @@ impl ProbabilityGrid {
     }
 }
 
+// Its size, not its cells (a submap's are megabytes).
+impl std::fmt::Debug for ProbabilityGrid {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ProbabilityGrid")
+            .field("origin", &self.origin)
+            .field("resolution_m", &self.resolution_m)
+            .field("width", &self.width)
+            .field("height", &self.height)
+            .finish_non_exhaustive()
+    }
+}
+
 /// One max-pooled level: the max over 2ʰ × 2ʰ cells, for cells from −(2ʰ − 1) on (padded so
 /// that a window reaching into the grid from below still sees it).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 struct Level {
     pad: i64,
     width: usize,
@@ -146,10 +158,19 @@ impl Level {
 }
 
 /// A grid with its max-pooled levels 0..=depth (level 0 is the grid itself).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct PrecomputedGrids {
     grid: ProbabilityGrid,
     levels: Vec<Level>,
+}
+
+impl std::fmt::Debug for PrecomputedGrids {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PrecomputedGrids")
+            .field("grid", &self.grid)
+            .field("depth", &self.depth())
+            .finish_non_exhaustive()
+    }
 }
 
 impl PrecomputedGrids {
