@@ -25,10 +25,14 @@ mod local;
 mod params;
 mod parts;
 mod solve;
+mod submap_params;
+mod submap_search;
+mod submaps;
 mod support;
 mod wrong_closures;
 
 pub use params::{ConsistencyParams, Mapper2dParams};
+pub use submap_params::SubmapSearchParams;
 pub use wrong_closures::WrongClosures;
 
 use crate::matching::Scan2;
@@ -79,6 +83,10 @@ pub struct MapperStats {
     pub loop_closures_rejected: usize,
     /// Of `loop_closures`, those between two robots.
     pub inter_robot_closures: usize,
+    /// Correlative searches of a node in a submap.
+    pub submap_searches: usize,
+    /// Of `loop_closures`, those found by a submap search.
+    pub submap_closures: usize,
     /// GPS edges added (fixes taken).
     pub gps_edges: usize,
     /// Optimizations run.
@@ -120,6 +128,7 @@ pub struct Mapper2d {
     stats: MapperStats,
     last_optimization: Option<OptimizeReport>,
     optimization_pending: bool,
+    submaps: submaps::Submaps,
 }
 
 impl Mapper2d {
@@ -199,7 +208,8 @@ impl Mapper2d {
             // A robot's first node may already see another robot's map.
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
             self.record_chain_step(robot, node, None);
-            let closed = self.close_loops(node) > 0;
+            let closed = self.close_loops(node);
+            let closed = closed + self.search_submaps(node, closed) > 0;
             if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored()?;
             }
@@ -248,7 +258,9 @@ impl Mapper2d {
             });
         }
         self.record_chain_step(robot, node, Some(last));
-        let closed = self.expire_closures(false) + self.close_loops(node) > 0;
+        let expired = self.expire_closures(false);
+        let closed = self.close_loops(node);
+        let closed = expired + closed + self.search_submaps(node, closed) > 0;
         if self.add_gps(node, gps) || closed {
             self.optimize_when_anchored()?;
         }

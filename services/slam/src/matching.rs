@@ -6,10 +6,13 @@
 //! Reading order: [`Scan2`] (a scan as a bearing-ordered point set), the reference
 //! contour (`contour`: the two correspondence rules), [`idc`] (the iteration), `validate`
 //! (covariance and quality of the result), [`accept`] (the gate), [`refine`] (a
-//! point-to-line polish of a match, against one scan or several). [`metric`] scores poses
-//! against ground-truth relations (Kümmerle et al. 2009); [`synthetic`] ray casts test scenes.
+//! point-to-line polish of a match, against one scan or several). [`correlative`] finds a
+//! scan in a submap without a good guess (branch and bound over a window, for loop
+//! closure). [`metric`] scores poses against ground-truth relations (Kümmerle et al. 2009);
+//! [`synthetic`] ray casts test scenes.
 
 mod contour;
+pub mod correlative;
 mod idc;
 pub mod metric;
 mod refine;

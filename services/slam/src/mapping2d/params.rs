@@ -64,6 +64,8 @@ pub struct Mapper2dParams {
     pub gate: QualityGate,
     /// The nonlinear optimization of the network.
     pub optimize: OptimizeParams,
+    /// Loop closure by correlative search against submaps.
+    pub submaps: super::SubmapSearchParams,
 }
 
 impl Default for Mapper2dParams {
@@ -92,6 +94,7 @@ impl Default for Mapper2dParams {
             refine: RefineParams::default(),
             gate: QualityGate::default(),
             optimize: OptimizeParams::default(),
+            submaps: super::SubmapSearchParams::default(),
         }
     }
 }

@@ -1,0 +1,149 @@
+//! Loop closure by correlative search against submaps, for when IDC from the current
+//! estimate finds nothing: after much drift the right closure is metres and degrees from the
+//! guess, beyond IDC's basin. The window is sized from the uncertainty (the path since the
+//! submap, as IDC's candidate radius), and widens to every heading after a long stretch
+//! without any closure. The correlative pose is refined by IDC against the submap's nearest
+//! node and must pass the quality gate; the edge gets IDC's covariance and the loop-closure
+//! kernel.
+
+use super::Mapper2d;
+use super::submaps::Submap;
+use crate::matching::correlative::{Exclusion, SearchWindow, runner_up, search};
+use crate::matching::{accept, idc};
+use crate::network::{EdgeKind, RelativeEdge};
+use crate::se2::{Pose2, wrap_angle};
+
+impl Mapper2d {
+    /// Tracks `node` in the submaps and, when its robot has had no closure for a while
+    /// (`closed` counts the ones IDC just added), searches nearby submaps; returns how many
+    /// closures it added.
+    pub(super) fn search_submaps(&mut self, node: usize, closed: usize) -> usize {
+        let p = self.params.submaps.clone();
+        if !p.enabled {
+            return 0;
+        }
+        self.track_submaps(node);
+        let (robot, place) = self.node_robot[node];
+        let path = self.node_path_m[node];
+        // The IDC closures just added are the last `closed` edges.
+        let edges = &self.graph.edges[self.graph.edges.len() - closed..];
+        let looped = edges
+            .iter()
+            .any(|e| path - self.node_path_m[e.from] >= p.closure_min_path_m);
+        let state = &mut self.submaps.robots[robot];
+        if looped {
+            state.last_closure_m = Some(path);
+            return 0;
+        }
+        let since = path - state.last_closure_m.unwrap_or(path);
+        if since < p.search_after_m || path - state.last_search_m < p.search_every_m {
+            return 0;
+        }
+        state.last_search_m = path;
+        let global = since >= p.global_after_m;
+        let here = self.graph.poses[node];
+        let mut candidates: Vec<(f64, usize)> = self
+            .submaps
+            .done
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| {
+                s.robot == robot && s.last_place + self.params.loop_min_node_gap <= place
+            })
+            .filter_map(|(k, s)| {
+                let at = self.graph.poses[s.anchor].between(&here);
+                let radius = self.search_radius(s, path);
+                (s.distance_to([at.x, at.y]) <= radius).then(|| {
+                    let (c, _) = s.centre_and_reach();
+                    ((at.x - c[0]).hypot(at.y - c[1]), k)
+                })
+            })
+            .collect();
+        candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut added = 0;
+        for &(_, k) in candidates.iter().take(p.max_submaps) {
+            self.stats.submap_searches += 1;
+            if let Some(edge) = self.match_submap(k, node, global) {
+                self.graph.edges.push(edge);
+                self.stats.loop_closures += 1;
+                self.stats.submap_closures += 1;
+                added += 1;
+            }
+        }
+        if added > 0 {
+            self.submaps.robots[robot].last_closure_m = Some(path);
+        }
+        added
+    }
+
+    /// How far from its estimate a node may be in a submap: IDC's candidate radius.
+    fn search_radius(&self, submap: &Submap, path_m: f64) -> f64 {
+        self.params.loop_search_radius_m
+            + self.params.loop_search_growth * (path_m - submap.last_path_m).max(0.0)
+    }
+
+    /// Searches `node`'s scan in submap `k`; the closure edge, refined by IDC, if it holds.
+    fn match_submap(&self, k: usize, node: usize, global: bool) -> Option<RelativeEdge> {
+        let p = &self.params.submaps;
+        let submap = &self.submaps.done[k];
+        let initial = self.graph.poses[submap.anchor].between(&self.graph.poses[node]);
+        let radius = self.search_radius(submap, self.node_path_m[node]);
+        let (window, min_score) = if global {
+            let window = SearchWindow {
+                linear_m: radius.min(p.global_linear_window_m),
+                angular_rad: std::f64::consts::PI,
+            };
+            (window, p.global_min_score)
+        } else {
+            let window = SearchWindow {
+                linear_m: radius.min(p.max_linear_window_m),
+                angular_rad: p.angular_window_rad,
+            };
+            (window, p.min_score)
+        };
+        let scan = &self.node_scans[node];
+        let found = search(&submap.grids, scan, initial, &window, min_score, &p.grid)?;
+        // Ambiguous (a corridor, a row of like doors): as likely wrong as right.
+        let rival_floor = found.score * p.max_runner_up_ratio;
+        let excluded = Exclusion {
+            pose: found.pose,
+            radius_m: p.ambiguity_radius_m,
+        };
+        if runner_up(
+            &submap.grids,
+            scan,
+            initial,
+            &window,
+            &excluded,
+            rival_floor,
+            &p.grid,
+        )
+        .is_some()
+        {
+            return None;
+        }
+        // IDC against the submap node nearest to the found pose, from that pose.
+        let &(near, near_pose) = submap.nodes.iter().min_by(|a, b| {
+            let d = |q: &Pose2| (q.x - found.pose.x).hypot(q.y - found.pose.y);
+            d(&a.1).total_cmp(&d(&b.1))
+        })?;
+        let guess = near_pose.between(&found.pose);
+        let m = idc(&self.node_scans[near], scan, guess, &self.params.idc).ok()?;
+        let shift = (m.pose.x - guess.x).hypot(m.pose.y - guess.y);
+        let turn = wrap_angle(m.pose.theta - guess.theta).abs();
+        if !accept(&m, &self.params.gate)
+            || shift > p.refine_max_shift_m
+            || turn > p.refine_max_turn_rad
+        {
+            return None;
+        }
+        Some(RelativeEdge {
+            from: near,
+            to: node,
+            measurement: m.pose,
+            information: self.match_information(&m.covariance),
+            kind: EdgeKind::LoopClosure,
+            robust: self.params.loop_robust,
+        })
+    }
+}

@@ -1,0 +1,101 @@
+//! Submaps: each robot's consecutive nodes over `submap_path_m` of path, rasterized in the
+//! frame of their first node (the anchor) once the robot has moved on, and pooled for the
+//! correlative search.
+
+use super::Mapper2d;
+use crate::Pose2;
+use crate::matching::correlative::{PrecomputedGrids, precompute};
+
+/// A finished submap.
+#[derive(Debug)]
+pub(super) struct Submap {
+    pub robot: usize,
+    /// The first node: the grid is in its frame.
+    pub anchor: usize,
+    /// Each node and its pose in the anchor's frame when the grid was built.
+    pub nodes: Vec<(usize, Pose2)>,
+    /// Place in the robot's chain, and path (m), of the last node.
+    pub last_place: usize,
+    pub last_path_m: f64,
+    pub grids: PrecomputedGrids,
+}
+
+impl Submap {
+    /// Distance (m) from a point of the anchor's frame to the grid's extent (0 inside).
+    pub fn distance_to(&self, p: [f64; 2]) -> f64 {
+        let (lo, hi) = self.grids.grid().bounds();
+        let dx = (lo[0] - p[0]).max(p[0] - hi[0]).max(0.0);
+        let dy = (lo[1] - p[1]).max(p[1] - hi[1]).max(0.0);
+        dx.hypot(dy)
+    }
+
+    /// The grid's centre in the anchor's frame, and half its larger side (m).
+    pub fn centre_and_reach(&self) -> ([f64; 2], f64) {
+        let (lo, hi) = self.grids.grid().bounds();
+        let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+        (centre, (hi[0] - lo[0]).max(hi[1] - lo[1]) / 2.0)
+    }
+}
+
+/// Every robot's submaps, and how long each robot has gone without a closure.
+#[derive(Debug, Default)]
+pub(super) struct Submaps {
+    pub done: Vec<Submap>,
+    /// By robot.
+    pub robots: Vec<RobotSubmaps>,
+}
+
+/// One robot's growing submap, and its path (m) at its last closure and last search.
+#[derive(Clone, Debug, Default)]
+pub(super) struct RobotSubmaps {
+    open: Vec<usize>,
+    pub last_closure_m: Option<f64>,
+    pub last_search_m: f64,
+}
+
+impl Mapper2d {
+    /// Puts `node` in its robot's growing submap; finishes the submap first when it spans
+    /// `submap_path_m`.
+    pub(super) fn track_submaps(&mut self, node: usize) {
+        let robot = self.node_robot[node].0;
+        let robots = &mut self.submaps.robots;
+        if robots.len() <= robot {
+            robots.resize(robot + 1, RobotSubmaps::default());
+        }
+        let span = self.params.submaps.submap_path_m;
+        let path = self.node_path_m[node];
+        let state = &mut robots[robot];
+        if let Some(&first) = state.open.first()
+            && path - self.node_path_m[first] >= span
+        {
+            let nodes = std::mem::take(&mut state.open);
+            self.finish_submap(robot, nodes);
+        }
+        let state = &mut self.submaps.robots[robot];
+        state.open.push(node);
+        state.last_closure_m.get_or_insert(path);
+    }
+
+    fn finish_submap(&mut self, robot: usize, nodes: Vec<usize>) {
+        let (Some(&anchor), Some(&last)) = (nodes.first(), nodes.last()) else {
+            return;
+        };
+        let origin = self.graph.poses[anchor];
+        let placed: Vec<(usize, Pose2)> = nodes
+            .iter()
+            .map(|&n| (n, origin.between(&self.graph.poses[n])))
+            .collect();
+        let scans = placed.iter().map(|&(n, pose)| (pose, &self.node_scans[n]));
+        let Some(grids) = precompute(scans, &self.params.submaps.grid) else {
+            return;
+        };
+        self.submaps.done.push(Submap {
+            robot,
+            anchor,
+            nodes: placed,
+            last_place: self.node_robot[last].1,
+            last_path_m: self.node_path_m[last],
+            grids,
+        });
+    }
+}

@@ -1,0 +1,262 @@
+//! The probability grid a scan is scored against, and its max-pooled stack (Hess et al. 2016,
+//! section V.C): level h holds, at each cell, the largest value of the 2ʰ × 2ʰ cells from it
+//! towards +x and +y, so one lookup bounds every translation a branch of the search covers.
+
+use super::CorrelativeParams;
+use crate::Pose2;
+
+/// Cell values: a probability in [0, 1] scaled to 0–255 (a byte keeps a submap's stack small).
+pub(super) const FULL: u32 = 255;
+
+/// A probability grid in some frame (a submap's): cell (i, j) covers
+/// `[x0 + i·r, x0 + (i+1)·r) × [y0 + j·r, y0 + (j+1)·r)`.
+#[derive(Clone, PartialEq)]
+pub struct ProbabilityGrid {
+    origin: [f64; 2],
+    resolution_m: f64,
+    width: usize,
+    height: usize,
+    cells: Vec<u8>,
+}
+
+impl ProbabilityGrid {
+    /// Rasterizes scans given with their poses in the grid's frame: each return marks the
+    /// cells around it with a Gaussian of σ = `params.hit_sigma_m` (the largest value wins);
+    /// returns beyond `params.max_range_m` are left out. `None` when there is no return, or
+    /// when the grid would exceed `params.max_cells`.
+    pub fn from_scans<'a>(
+        scans: impl IntoIterator<Item = (Pose2, &'a [[f64; 2]])>,
+        params: &CorrelativeParams,
+    ) -> Option<ProbabilityGrid> {
+        let max_range2 = params.max_range_m * params.max_range_m;
+        let points: Vec<[f64; 2]> = scans
+            .into_iter()
+            .flat_map(|(pose, points)| {
+                points
+                    .iter()
+                    .filter(move |p| p[0] * p[0] + p[1] * p[1] <= max_range2)
+                    .map(move |&p| pose.transform_point(p))
+            })
+            .collect();
+        let r = params.resolution_m;
+        let reach = (3.0 * params.hit_sigma_m / r).ceil() as i64;
+        let margin = (reach + 1) as f64 * r;
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in &points {
+            for d in 0..2 {
+                lo[d] = lo[d].min(p[d]);
+                hi[d] = hi[d].max(p[d]);
+            }
+        }
+        if points.is_empty() {
+            return None;
+        }
+        let origin = [lo[0] - margin, lo[1] - margin];
+        let width = ((hi[0] + margin - origin[0]) / r).ceil() as usize + 1;
+        let height = ((hi[1] + margin - origin[1]) / r).ceil() as usize + 1;
+        if width.saturating_mul(height) > params.max_cells {
+            return None;
+        }
+        let mut grid = ProbabilityGrid {
+            origin,
+            resolution_m: r,
+            width,
+            height,
+            cells: vec![0; width * height],
+        };
+        // The kernel by cell offset, from the hit's cell centre.
+        let inv2s2 = 1.0 / (2.0 * params.hit_sigma_m * params.hit_sigma_m);
+        for p in &points {
+            let (ci, cj) = grid.cell_of(*p);
+            for dj in -reach..=reach {
+                for di in -reach..=reach {
+                    let (i, j) = (ci + di, cj + dj);
+                    if i < 0 || j < 0 || i >= width as i64 || j >= height as i64 {
+                        continue;
+                    }
+                    let centre = grid.centre(i, j);
+                    let d2 = (centre[0] - p[0]).powi(2) + (centre[1] - p[1]).powi(2);
+                    let v = ((-d2 * inv2s2).exp() * FULL as f64).round() as u8;
+                    let cell = &mut grid.cells[j as usize * width + i as usize];
+                    *cell = (*cell).max(v);
+                }
+            }
+        }
+        Some(grid)
+    }
+
+    /// The cell holding point `p` (may lie outside the grid).
+    pub(super) fn cell_of(&self, p: [f64; 2]) -> (i64, i64) {
+        (
+            ((p[0] - self.origin[0]) / self.resolution_m).floor() as i64,
+            ((p[1] - self.origin[1]) / self.resolution_m).floor() as i64,
+        )
+    }
+
+    fn centre(&self, i: i64, j: i64) -> [f64; 2] {
+        [
+            self.origin[0] + (i as f64 + 0.5) * self.resolution_m,
+            self.origin[1] + (j as f64 + 0.5) * self.resolution_m,
+        ]
+    }
+
+    /// Cell size (m).
+    pub fn resolution_m(&self) -> f64 {
+        self.resolution_m
+    }
+
+    /// The grid's extent in its frame: lower-left and upper-right corners (m).
+    pub fn bounds(&self) -> ([f64; 2], [f64; 2]) {
+        let r = self.resolution_m;
+        let hi = [
+            self.origin[0] + self.width as f64 * r,
+            self.origin[1] + self.height as f64 * r,
+        ];
+        (self.origin, hi)
+    }
+
+    /// The value of cell (i, j), 0 outside the grid.
+    #[cfg(test)]
+    pub(super) fn get(&self, i: i64, j: i64) -> u8 {
+        if i < 0 || j < 0 || i >= self.width as i64 || j >= self.height as i64 {
+            return 0;
+        }
+        self.cells[j as usize * self.width + i as usize]
+    }
+}
+
+// Its size, not its cells (a submap's are megabytes).
+impl std::fmt::Debug for ProbabilityGrid {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ProbabilityGrid")
+            .field("origin", &self.origin)
+            .field("resolution_m", &self.resolution_m)
+            .field("width", &self.width)
+            .field("height", &self.height)
+            .finish_non_exhaustive()
+    }
+}
+
+/// One max-pooled level: the max over 2ʰ × 2ʰ cells, for cells from −(2ʰ − 1) on (padded so
+/// that a window reaching into the grid from below still sees it).
+#[derive(Clone, PartialEq)]
+struct Level {
+    pad: i64,
+    width: usize,
+    height: usize,
+    cells: Vec<u8>,
+}
+
+impl Level {
+    fn get(&self, i: i64, j: i64) -> u8 {
+        let (i, j) = (i + self.pad, j + self.pad);
+        if i < 0 || j < 0 || i >= self.width as i64 || j >= self.height as i64 {
+            return 0;
+        }
+        self.cells[j as usize * self.width + i as usize]
+    }
+}
+
+/// A grid with its max-pooled levels 0..=depth (level 0 is the grid itself).
+#[derive(Clone, PartialEq)]
+pub struct PrecomputedGrids {
+    grid: ProbabilityGrid,
+    levels: Vec<Level>,
+}
+
+impl std::fmt::Debug for PrecomputedGrids {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PrecomputedGrids")
+            .field("grid", &self.grid)
+            .field("depth", &self.depth())
+            .finish_non_exhaustive()
+    }
+}
+
+impl PrecomputedGrids {
+    /// Pools `grid` up to level `depth` (windows of 2^depth cells). Each level comes from the
+    /// one below by a max over 4 shifted copies, so the stack costs O(cells · depth).
+    pub fn new(grid: ProbabilityGrid, depth: u32) -> PrecomputedGrids {
+        let base = Level {
+            pad: 0,
+            width: grid.width,
+            height: grid.height,
+            cells: grid.cells.clone(),
+        };
+        let mut levels = vec![base];
+        for h in 1..=depth {
+            let below = &levels[h as usize - 1];
+            let half = 1i64 << (h - 1);
+            let pad = (1i64 << h) - 1;
+            let (width, height) = (grid.width + pad as usize, grid.height + pad as usize);
+            let mut cells = vec![0u8; width * height];
+            for j in 0..height {
+                for i in 0..width {
+                    let (gi, gj) = (i as i64 - pad, j as i64 - pad);
+                    cells[j * width + i] = below
+                        .get(gi, gj)
+                        .max(below.get(gi + half, gj))
+                        .max(below.get(gi, gj + half))
+                        .max(below.get(gi + half, gj + half));
+                }
+            }
+            levels.push(Level {
+                pad,
+                width,
+                height,
+                cells,
+            });
+        }
+        PrecomputedGrids { grid, levels }
+    }
+
+    /// The grid at level 0.
+    pub fn grid(&self) -> &ProbabilityGrid {
+        &self.grid
+    }
+
+    /// The deepest level (windows of 2^depth cells).
+    pub fn depth(&self) -> u32 {
+        self.levels.len() as u32 - 1
+    }
+
+    /// The largest value of cells (i..i+2ʰ, j..j+2ʰ); 0 beyond the grid.
+    pub(super) fn get(&self, level: u32, i: i64, j: i64) -> u8 {
+        self.levels[level as usize].get(i, j)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_level_is_the_max_over_its_window() {
+        let params = CorrelativeParams {
+            resolution_m: 0.1,
+            hit_sigma_m: 0.1,
+            ..CorrelativeParams::default()
+        };
+        let points = [[0.0, 0.0], [0.73, 0.21], [1.4, -0.5], [0.2, 0.9]];
+        let grid =
+            ProbabilityGrid::from_scans([(Pose2::IDENTITY, &points[..])], &params).expect("points");
+        let stack = PrecomputedGrids::new(grid.clone(), 3);
+        for h in 0..=3u32 {
+            let w = 1i64 << h;
+            for j in -w..grid.height as i64 + 1 {
+                for i in -w..grid.width as i64 + 1 {
+                    let expected = (0..w)
+                        .flat_map(|b| (0..w).map(move |a| (a, b)))
+                        .map(|(a, b)| grid.get(i + a, j + b))
+                        .max()
+                        .unwrap_or(0);
+                    assert_eq!(stack.get(h, i, j), expected, "level {h} at ({i}, {j})");
+                }
+            }
+        }
+        // A hit's own cell is near full; far cells are empty.
+        let (i, j) = grid.cell_of([0.73, 0.21]);
+        assert!(grid.get(i, j) > 200);
+        assert_eq!(grid.get(i + 8, j), 0);
+    }
+}
