@@ -77,6 +77,18 @@ fn a_fleet_whose_rows_do_not_replay_is_quarantined_and_the_others_run() {
     assert!(reason.contains("node 1 of fleet campus"), "{reason}");
     assert!(health["quarantined"].get("park").is_none(), "{body}");
 
+    // The fleet list names it apart, with the reason.
+    let (status, body) = http_get(&http, "/api/v1/fleets").expect("fleets");
+    assert_eq!(status, 200, "{body}");
+    let list: serde_json::Value = serde_json::from_str(&body).expect("JSON");
+    assert_eq!(list["fleets"], serde_json::json!(["park"]), "{body}");
+    assert_eq!(list["quarantined"][0]["fleet"], "campus", "{body}");
+    assert_eq!(
+        list["quarantined"][0]["reason"].as_str(),
+        Some(reason),
+        "{body}"
+    );
+
     // The quarantined fleet's routes: 503, the reason as JSON.
     for path in [
         "summary",

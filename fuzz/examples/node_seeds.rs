@@ -98,6 +98,8 @@ fn full_node(beams: usize) -> v1::Node {
     v1::Node {
         header: Some(header(9, STAMP_NS)),
         node_seq: 7,
+        chain_id: 0x5eed,
+        held_from_seq: 5,
         scan: Some(wire::leveled_scan_to_wire(
             &scan(beams),
             &counts(),
@@ -130,7 +132,9 @@ fn main() {
     default_sigma.earlier_gps.clear();
     let ack = v1::Ack {
         header: Some(header(3, STAMP_NS)),
-        acked_node_seq: 6,
+        acked_node_seq: Some(6),
+        chain_id: 0x5eed,
+        resend_from: Some(7),
     };
     let poses = wire::map_poses_to_wire(
         "campus",

@@ -69,7 +69,8 @@ fn mapped(input: &NodeInput) {
         .unzip();
     Scan2::from_polar(&b, &r, f32::MAX).expect("returns come in pairs");
 
-    // As `FleetMap::new` sets them: every node sent is a node, solves when asked.
+    // `FleetMap::new`'s settings (every node sent is a node, solves when asked) over the
+    // default parameters; the mapper's configuration tunes others, in the same code.
     let mut mapper = Mapper2d::new(Mapper2dParams {
         node_distance_m: 0.0,
         node_rotation_rad: 0.0,

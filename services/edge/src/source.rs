@@ -47,6 +47,12 @@ pub struct SimSourceConfig {
     pub seed: u64,
     /// How long the robot drives (s).
     pub duration_s: f64,
+    /// Start at a random place along the loop (from `seed`), with odometry from the
+    /// identity, so the mapper does not know where the robot is; otherwise at the loop's
+    /// start with odometry in the park's frame.
+    pub scattered_start: bool,
+    /// Send the simulated GPS receiver's fixes.
+    pub gps: bool,
 }
 
 impl Default for SimSourceConfig {
@@ -55,6 +61,8 @@ impl Default for SimSourceConfig {
             loop_index: 0,
             seed: 7,
             duration_s: 120.0,
+            scattered_start: false,
+            gps: true,
         }
     }
 }

@@ -116,6 +116,7 @@ fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<v1::Node>> {
                 loop_index,
                 seed: 7,
                 duration_s: per_loop as f64 * 4.0,
+                ..SimSourceConfig::default()
             };
             let mut source = SimSource::new(&config, 0, 10.0).expect("park loop");
             let mut builder =

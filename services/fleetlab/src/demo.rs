@@ -9,7 +9,7 @@ use clap::Args;
 use edge::{EdgeConfig, SimSourceConfig, SourceConfig};
 use mapper::MapperConfig;
 use serde::Serialize;
-use sim::FleetRobot;
+use sim::{FleetRobot, FleetStart};
 use slam::Pose2;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -36,9 +36,18 @@ pub struct DemoArgs {
     /// Folder for the mapper's store and the robots' outboxes (emptied at start).
     #[arg(long, value_name = "DIR", default_value = "levelmap-demo")]
     pub dir: PathBuf,
-    /// Seed of the sensors' noise.
+    /// Seed of the sensors' noise (and of the scattered starts).
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
+    /// The robots send no GPS fixes.
+    #[arg(long)]
+    pub no_gps: bool,
+    /// Each robot starts at a random place along its loop with odometry from the identity:
+    /// the mapper knows neither where nor how the robots start, and must find them in one
+    /// another's maps. With `--no-gps`, the map has a frame of its own: the ATE is taken
+    /// after the rigid motion that fits it best to the ground truth.
+    #[arg(long)]
+    pub scatter_starts: bool,
     /// Keep serving the map after the robots finish, until Ctrl-C.
     #[arg(long)]
     pub serve: bool,
@@ -74,9 +83,14 @@ struct DemoReport {
     inter_robot_closures: usize,
     /// RMSE of node positions against ground truth (m).
     ate_rmse_m: f64,
-    /// The same run mapped from the fixed 2D scanners instead (m).
-    ate_rmse_fixed2d_m: f64,
-    fixed2d_loop_closures: usize,
+    /// Whether `ate_rmse_m` was taken after fitting the map to the ground truth (SE(2)).
+    ate_aligned: bool,
+    /// Connected parts of the pose network (1: every robot in one map).
+    components: usize,
+    /// The same run mapped from the fixed 2D scanners instead (m); only for the docked
+    /// start with GPS, the baseline's setting.
+    ate_rmse_fixed2d_m: Option<f64>,
+    fixed2d_loop_closures: Option<usize>,
     node_sends: u64,
     node_resends: u64,
     /// Nodes left unacked in the outboxes (0 when every node reached the map).
@@ -150,22 +164,43 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         .fleet(FLEET)
         .context("no node reached the mapper")?;
     let duration_ns = (args.duration * 1e9) as u64;
+    let start = if args.scatter_starts {
+        FleetStart::Scattered
+    } else {
+        FleetStart::Dock
+    };
     let truth: Vec<FleetRobot> = (0..usize::from(args.robots))
-        .map(|i| FleetRobot::new(edge::park(), i, duration_ns, args.seed).expect("park loop"))
+        .map(|i| {
+            FleetRobot::starting(edge::park(), i, duration_ns, args.seed, start).expect("park loop")
+        })
         .collect();
     let leveled_truth = |robot: usize, stamp_ns: u64| {
         let t = &truth[robot];
         let pose = t.truth_at(stamp_ns - epoch_ns);
         Pose2::from_isometry3(&leveling::leveled_frame(&pose, &t.scanner().mount).inverse())
     };
-    let ate = slam::position_rmse(view.nodes.iter().zip(&view.poses).map(|(n, p)| {
+    let pairs = view.nodes.iter().zip(&view.poses).map(|(n, p)| {
         let robot: usize = view.robots[n.robot].id["robot".len()..]
             .parse()
             .expect("robotN");
         (*p, leveled_truth(robot, n.stamp_ns))
-    }));
-    let (ate_fixed, fixed_closures) =
-        crate::fixed2d::map_fixed2d(usize::from(args.robots), args.duration, args.seed)?;
+    });
+    // Without GPS and a known start the map's frame is its own.
+    let ate_aligned = args.no_gps && args.scatter_starts;
+    let ate = if ate_aligned {
+        slam::aligned_position_rmse(pairs)
+    } else {
+        slam::position_rmse(pairs)
+    };
+    let baseline = if args.no_gps || args.scatter_starts {
+        None
+    } else {
+        Some(crate::fixed2d::map_fixed2d(
+            usize::from(args.robots),
+            args.duration,
+            args.seed,
+        )?)
+    };
     let report = DemoReport {
         api: api.clone(),
         robots: view.robots.len(),
@@ -175,8 +210,15 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         loop_closures: view.stats.loop_closures,
         inter_robot_closures: view.stats.inter_robot_closures,
         ate_rmse_m: ate,
-        ate_rmse_fixed2d_m: ate_fixed,
-        fixed2d_loop_closures: fixed_closures,
+        ate_aligned,
+        components: slam::PoseGraph {
+            poses: view.poses.clone(),
+            edges: view.edges.clone(),
+            gps: Vec::new(),
+        }
+        .component_count(),
+        ate_rmse_fixed2d_m: baseline.map(|b| b.0),
+        fixed2d_loop_closures: baseline.map(|b| b.1),
         node_sends: sends.0,
         node_resends: sends.1,
         outbox_pending: sends.2,
@@ -186,20 +228,27 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         println!(
-            "map: {} robots, {} nodes, {} edges ({} GPS), {} loop closures ({} between robots)",
+            "map: {} robots, {} nodes, {} edges ({} GPS), {} loop closures ({} between robots), {} connected part(s)",
             report.robots,
             report.nodes,
             report.edges,
             report.gps_edges,
             report.loop_closures,
-            report.inter_robot_closures
+            report.inter_robot_closures,
+            report.components
         );
-        println!(
-            "ATE: leveled scans {:.3} m, fixed 2D scanner {:.3} m ({:.1}x worse)",
-            ate,
-            ate_fixed,
-            ate_fixed / ate
-        );
+        let aligned = if ate_aligned {
+            " (map fitted to the truth)"
+        } else {
+            ""
+        };
+        match baseline {
+            Some((ate_fixed, _)) => println!(
+                "ATE: leveled scans {ate:.3} m, fixed 2D scanner {ate_fixed:.3} m ({:.1}x worse)",
+                ate_fixed / ate
+            ),
+            None => println!("ATE: leveled scans {ate:.3} m{aligned}"),
+        }
     }
     if args.serve {
         if !args.json {
@@ -223,6 +272,8 @@ fn robot_config(args: &DemoArgs, i: usize) -> EdgeConfig {
             loop_index: i,
             seed: args.seed,
             duration_s: args.duration,
+            scattered_start: args.scatter_starts,
+            gps: !args.no_gps,
         }),
         ..EdgeConfig::default()
     }

@@ -2,8 +2,9 @@
 //! one manually verified relative pose per line,
 //! `timestamp1 timestamp2 x y z roll pitch yaw` — the pose of the robot at `timestamp2` in the
 //! frame of the robot at `timestamp1` (m, rad). The timestamps are the FLASER
-//! `ipc_timestamp`s of the matching CARMEN log. Score a trajectory with
-//! [`slam::matching::metric::relation_metric`].
+//! `ipc_timestamp`s of the matching CARMEN log, as published: some files round them to five
+//! decimals where the log has six, so [`score`] takes the scan nearest to each, within
+//! [`STAMP_TOLERANCE_S`].
 //!
 //! The files are 2D: z, roll and pitch must be 0; a relation that is not planar is an error,
 //! not silently flattened. Blank lines and `#` comments are skipped.
@@ -13,9 +14,13 @@ use crate::carmen::LaserScan;
 use crate::carmen::{for_each_line, open_decompressed};
 use slam::Pose2;
 use slam::matching::metric::{MetricError, RelationMetric, relation_metric};
-use std::collections::HashMap;
 use std::io::BufRead;
 use std::path::Path;
+
+/// How far a relation's timestamp may be from its scan's: half the last digit of a file
+/// rounded to four decimals, ten times a five-decimal rounding's error, and far below the
+/// logs' scan interval (13 ms or more).
+pub const STAMP_TOLERANCE_S: f64 = 1e-4;
 
 /// The fields of a line, in order.
 const NAMES: [&str; 8] = [
@@ -38,6 +43,8 @@ pub struct Relation {
     pub t2_s: f64,
     /// `x₁⁻¹ ⊕ x₂` as measured (m, rad).
     pub delta: Pose2,
+    /// The file's 1-based line, for errors.
+    pub line: usize,
 }
 
 /// Reads a relations file (plain, `.gz` or `.bz2`). Errors name the file and line.
@@ -45,23 +52,61 @@ pub fn read(path: &Path) -> Result<Vec<Relation>, FileError> {
     parse(open_decompressed(path)?, path)
 }
 
+/// A relation that cannot be scored.
+#[derive(Debug, thiserror::Error)]
+pub enum ScoreError {
+    /// A timestamp has no scan within [`STAMP_TOLERANCE_S`].
+    #[error(
+        "line {line}: no scan within {STAMP_TOLERANCE_S} s of timestamp {stamp_s} (nearest: {nearest})"
+    )]
+    NoScan {
+        /// The relation's line.
+        line: usize,
+        /// Its timestamp (s).
+        stamp_s: f64,
+        /// The nearest scan's timestamp, or "none" in a log without scans.
+        nearest: String,
+    },
+    /// The metric failed (a pose not finite).
+    #[error(transparent)]
+    Metric(#[from] MetricError),
+}
+
 /// Scores the poses of a log's scans against relations: each relation's timestamps are
-/// looked up among the scans' `stamp_s` exactly (they are the FLASER `ipc_timestamp`s), and
+/// matched to the scan with the nearest `stamp_s` (within [`STAMP_TOLERANCE_S`]), and
 /// `pose_of_scan(k)` gives the pose of scan `k`. A relation without its scans is an error.
 pub fn score(
     relations: &[Relation],
     scans: &[LaserScan],
     pose_of_scan: impl Fn(usize) -> Pose2,
-) -> Result<RelationMetric, MetricError> {
-    let by_stamp: HashMap<u64, usize> = scans
+) -> Result<RelationMetric, ScoreError> {
+    let mut by_stamp: Vec<(f64, usize)> = scans
         .iter()
         .enumerate()
-        .map(|(k, s)| (s.stamp_s.to_bits(), k))
+        .map(|(k, s)| (s.stamp_s, k))
         .collect();
-    relation_metric(
-        relations.iter().map(|r| (r.t1_s, r.t2_s, r.delta)),
-        |t: &f64| by_stamp.get(&t.to_bits()).map(|&k| pose_of_scan(k)),
-    )
+    by_stamp.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let scan_at = |stamp_s: f64, line: usize| {
+        let after = by_stamp.partition_point(|&(t, _)| t < stamp_s);
+        let nearest = [after.checked_sub(1), Some(after)]
+            .into_iter()
+            .flatten()
+            .filter_map(|i| by_stamp.get(i))
+            .min_by(|a, b| (a.0 - stamp_s).abs().total_cmp(&(b.0 - stamp_s).abs()));
+        match nearest {
+            Some(&(t, k)) if (t - stamp_s).abs() <= STAMP_TOLERANCE_S => Ok(k),
+            _ => Err(ScoreError::NoScan {
+                line,
+                stamp_s,
+                nearest: nearest.map_or("none".into(), |(t, _)| t.to_string()),
+            }),
+        }
+    };
+    let mut pairs = Vec::with_capacity(relations.len());
+    for r in relations {
+        pairs.push((scan_at(r.t1_s, r.line)?, scan_at(r.t2_s, r.line)?, r.delta));
+    }
+    Ok(relation_metric(pairs, |&k: &usize| Some(pose_of_scan(k)))?)
 }
 
 /// Parses relations from `reader`; `path` names it in errors.
@@ -100,6 +145,7 @@ pub fn parse(reader: impl BufRead, path: &Path) -> Result<Vec<Relation>, FileErr
             t1_s: v[0],
             t2_s: v[1],
             delta: Pose2::new(v[2], v[3], v[7]),
+            line,
         });
         Ok(())
     })?;
@@ -124,7 +170,8 @@ mod tests {
             vec![Relation {
                 t1_s: 90.239599,
                 t2_s: 90.719599,
-                delta: Pose2::new(0.42233, -0.00075, 0.01726)
+                delta: Pose2::new(0.42233, -0.00075, 0.01726),
+                line: 2,
             }]
         );
     }
@@ -144,5 +191,43 @@ mod tests {
                 "{err}"
             );
         }
+    }
+
+    fn scan_at(stamp_s: f64, x: f64) -> LaserScan {
+        LaserScan {
+            stamp_s,
+            logger_stamp_s: stamp_s,
+            first_bearing_rad: 0.0,
+            bearing_step_rad: 0.0,
+            ranges_m: Vec::new(),
+            max_range_m: 0.0,
+            laser_pose: Pose2::new(x, 0.0, 0.0),
+            odom_pose: Pose2::new(x, 0.0, 0.0),
+        }
+    }
+
+    #[test]
+    fn rounded_timestamps_find_their_scans() {
+        let scans = [scan_at(10.123456, 0.0), scan_at(10.456789, 1.0)];
+        // Rounded to five decimals, as some published files are; the delta is exact.
+        let rel = parse_str("10.12346 10.45679 1 0 0 0 0 0\n").expect("valid");
+        let m = score(&rel, &scans, |k| scans[k].laser_pose).expect("scored");
+        assert!(m.translation_max_m < 1e-12, "{m:?}");
+    }
+
+    #[test]
+    fn a_timestamp_without_its_scan_names_the_line() {
+        let scans = [scan_at(10.123456, 0.0), scan_at(10.456789, 1.0)];
+        let rel = parse_str("# header\n10.123456 10.4570 1 0 0 0 0 0\n").expect("valid");
+        let err = score(&rel, &scans, |k| scans[k].laser_pose)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with("line 2: no scan within 0.0001 s of timestamp 10.457")
+                && err.contains("nearest: 10.456789"),
+            "{err}"
+        );
+        let err = score(&rel, &[], |_| Pose2::IDENTITY).unwrap_err();
+        assert!(err.to_string().contains("nearest: none"), "{err}");
     }
 }

@@ -105,11 +105,7 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
             let relations = graphio::relations::read(path)?;
             let metric =
                 graphio::relations::score(&relations, &log.scans, pose_of_scan).map_err(|e| {
-                    anyhow::anyhow!(
-                        "{}: {e} (no scan with that timestamp in {})",
-                        path.display(),
-                        args.log.display()
-                    )
+                    anyhow::anyhow!("{}: {e} (scans of {})", path.display(), args.log.display())
                 })?;
             Some((relations.len(), metric))
         }

@@ -13,8 +13,8 @@ pub struct Marginals {
 }
 
 impl Marginals {
-    /// The (x, y, θ) covariance of each of `nodes` at the view's poses; `None` for the node
-    /// that fixes the gauge. CPU work: call it off the async threads.
+    /// The (x, y, θ) covariance of each of `nodes` at the view's poses; `None` for a node
+    /// that fixes a gauge (the first node of a part GPS does not anchor). CPU work: call it off the async threads.
     pub fn of(
         &self,
         view: &FleetView,
@@ -26,7 +26,10 @@ impl Marginals {
             gps: view.gps.clone(),
         };
         let mut optimizers = self.optimizers.lock().expect("marginals lock");
-        let optimizer = optimizers.entry(view.id.clone()).or_default();
+        // The mapper's parts float until they meet: each has its own gauge.
+        let optimizer = optimizers
+            .entry(view.id.clone())
+            .or_insert_with(slam::Optimizer::for_parts);
         optimizer.marginal_covariances(&graph, nodes)
     }
 }

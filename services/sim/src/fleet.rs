@@ -32,6 +32,17 @@ pub struct FleetScan {
     pub fixed2d: Vec<Beam2d>,
 }
 
+/// Where a fleet robot starts, and so what its odometry frame is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FleetStart {
+    /// At its loop's start, with odometry in the world frame, as from a known dock.
+    #[default]
+    Dock,
+    /// At a random place along its loop (drawn from the seed), with odometry starting at
+    /// the identity: the mapper does not know where the robot is.
+    Scattered,
+}
+
 /// A robot of the simulated fleet, yielding its scans in time order.
 pub struct FleetRobot<'w> {
     index: usize,
@@ -53,17 +64,46 @@ impl<'w> FleetRobot<'w> {
     /// Robot `index` (0, 1 or 2: the park's loops) driving for `duration_ns` from time 0,
     /// with its own random draws from `seed`. `None` for an index without a loop.
     pub fn new(world: &'w World, index: usize, duration_ns: u64, seed: u64) -> Option<Self> {
-        let route = Route::park_loop(index)?;
+        FleetRobot::starting(world, index, duration_ns, seed, FleetStart::Dock)
+    }
+
+    /// As [`FleetRobot::new`], starting as `start` says.
+    pub fn starting(
+        world: &'w World,
+        index: usize,
+        duration_ns: u64,
+        seed: u64,
+        start: FleetStart,
+    ) -> Option<Self> {
+        let mut route = Route::park_loop(index)?;
         let scanner = YawingScanner::default();
         let mut rng = Rng::new(seed ^ (0x9e37_79b9_7f4a_7c15u64.wrapping_mul(index as u64 + 1)));
+        if start == FleetStart::Scattered {
+            // Its own draw, so the sensors' noise is the same as from the dock.
+            let mut draw = Rng::new(seed ^ 0x5ca7_7e25 ^ index as u64);
+            let start_m = draw.uniform() * route.length_m();
+            route = route.starting_at(start_m);
+        }
         // Sensors cover a whole scan beyond the end, so the last scan is complete.
         let horizon = duration_ns + scanner.end_stamp_ns(0) + 1_000_000_000;
         let gps = Gps::default();
-        let (odometry, fixes) = {
+        let (mut odometry, fixes) = {
             let truth = route.truth(world);
             let odometry = DeadReckoning::default().track(&truth, 0, horizon, &mut rng);
             (odometry, gps.fixes(&truth, 0, horizon, &mut rng))
         };
+        if start == FleetStart::Scattered {
+            // The odometry frame: the start's horizontal position and heading (level, so
+            // roll and pitch stay the ground's).
+            let (p, yaw) = route.planar_at(0);
+            let frame = Isometry3::new(
+                nalgebra::Vector3::new(p.x, p.y, 0.0),
+                nalgebra::Vector3::z() * yaw,
+            );
+            for sample in &mut odometry {
+                sample.pose = frame.inverse() * sample.pose;
+            }
+        }
         Some(FleetRobot {
             index,
             world,

@@ -74,7 +74,7 @@ pub mod shape;
 pub mod terrain;
 pub mod world;
 
-pub use fleet::{FleetRobot, FleetScan};
+pub use fleet::{FleetRobot, FleetScan, FleetStart};
 pub use geodesy::{GeoDatum, Geodetic, PARK_DATUM};
 pub use rng::Rng;
 pub use robot::{RobotBody, Route};

@@ -120,6 +120,8 @@ pub struct Route {
     /// Arc length at the start of each piece (m).
     starts: Vec<f64>,
     length_m: f64,
+    /// Where the robot is at time 0 (arc length, m).
+    start_m: f64,
 }
 
 /// Default driving speed (m/s): walking pace.
@@ -159,8 +161,16 @@ impl Route {
 
     /// The same route with another corner radius (m), if the corners still fit.
     pub fn with_corner_radius(self, corner_radius_m: f64) -> Option<Route> {
+        let start_m = self.start_m;
         Route::build(self.waypoints, self.closed, self.speed_mps, corner_radius_m)
-            .map(|r| r.with_body(self.body))
+            .map(|r| r.with_body(self.body).starting_at(start_m))
+    }
+
+    /// The same route with the robot `start_m` along it at time 0 (wrapped on a loop,
+    /// clamped on an open route, as [`Route::point_at`]).
+    pub fn starting_at(mut self, start_m: f64) -> Route {
+        self.start_m = start_m;
+        self
     }
 
     fn build(
@@ -257,6 +267,7 @@ impl Route {
             pieces,
             starts,
             length_m,
+            start_m: 0.0,
         })
     }
 
@@ -308,7 +319,7 @@ impl Route {
 
     /// Horizontal position and heading (rad) at time `t_ns` since the route's start.
     pub fn planar_at(&self, t_ns: u64) -> (Point2<f64>, f64) {
-        self.point_at(self.speed_mps * t_ns as f64 * 1e-9)
+        self.point_at(self.start_m + self.speed_mps * t_ns as f64 * 1e-9)
     }
 
     /// The robot's true pose (robot frame in the world frame) at `t_ns`.

@@ -87,35 +87,10 @@ fn align_to_gps(graph: &mut PoseGraph) {
             )
         })
         .collect();
-    if pairs.len() < 2 {
+    // None: under two fixes, or all at one place (no orientation to take).
+    let Some(motion) = crate::se2::rigid_fit(&pairs) else {
         return;
-    }
-    let n = pairs.len() as f64;
-    let mean = |points: &mut dyn Iterator<Item = [f64; 2]>| {
-        let s = points.fold([0.0, 0.0], |a, p| [a[0] + p[0], a[1] + p[1]]);
-        [s[0] / n, s[1] / n]
     };
-    let (ma, mb) = (
-        mean(&mut pairs.iter().map(|p| p.0)),
-        mean(&mut pairs.iter().map(|p| p.1)),
-    );
-    // Rotation angle maximizing Σ (b − mb)·R(a − ma).
-    let (mut sin_sum, mut cos_sum) = (0.0, 0.0);
-    for (a, b) in &pairs {
-        let (ax, ay, bx, by) = (a[0] - ma[0], a[1] - ma[1], b[0] - mb[0], b[1] - mb[1]);
-        cos_sum += ax * bx + ay * by;
-        sin_sum += ax * by - ay * bx;
-    }
-    if sin_sum == 0.0 && cos_sum == 0.0 {
-        return; // all fixes at one place: no orientation to take
-    }
-    let angle = sin_sum.atan2(cos_sum);
-    let (s, c) = angle.sin_cos();
-    let motion = Pose2::new(
-        mb[0] - (c * ma[0] - s * ma[1]),
-        mb[1] - (s * ma[0] + c * ma[1]),
-        angle,
-    );
     for pose in &mut graph.poses {
         *pose = motion.compose(pose);
     }

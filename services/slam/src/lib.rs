@@ -22,7 +22,7 @@ pub use grid::{CellState, GridError, GridParams, OccupancyGrid};
 pub use nalgebra;
 pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
 pub use robust::Robust;
-pub use se2::{Pose2, position_rmse, wrap_angle};
+pub use se2::{Pose2, aligned_position_rmse, position_rmse, rigid_fit, wrap_angle};
 
 // The solver: faer's sparse Cholesky and everything built on it.
 #[cfg(feature = "solver")]

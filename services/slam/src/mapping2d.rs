@@ -19,6 +19,7 @@
 
 mod edges;
 mod params;
+mod parts;
 mod solve;
 mod submap_params;
 mod submap_search;
@@ -76,6 +77,9 @@ pub struct MapperStats {
     pub optimizations: usize,
     /// Optimizations put off because a part of the network was not anchored yet.
     pub deferred_optimizations: usize,
+    /// Parts of the network (robots that had not met, without GPS) moved onto the map by
+    /// their first closure with it.
+    pub parts_joined: usize,
 }
 
 pub use crate::gnss::GpsObservation;
@@ -110,10 +114,12 @@ pub struct Mapper2d {
 }
 
 impl Mapper2d {
-    /// A mapper with no scan yet.
+    /// A mapper with no scan yet. Parts of its network that nothing links yet (a robot
+    /// that has met no other, without GPS) are optimized each in its own frame.
     pub fn new(params: Mapper2dParams) -> Mapper2d {
         Mapper2d {
             params,
+            optimizer: Optimizer::for_parts(),
             ..Default::default()
         }
     }
@@ -337,13 +343,13 @@ mod tests {
                 .expect("robot 0");
         }
         // Robot 1 starts 4 m apart (beyond the inter-robot search radius), linked to robot 0
-        // by nothing but GPS. Its first fix alone cannot anchor it: the optimization waits
-        // instead of failing.
+        // by nothing but GPS. Its first fix alone cannot anchor it: until a second does, its
+        // part is solved in its own frame (its first node fixed), and robot 0's map still is.
         let mut bad_nan = fix_at(&Pose2::IDENTITY);
         bad_nan.position_m.x = f64::NAN;
         let mut bad_covariance = fix_at(&Pose2::IDENTITY);
         bad_covariance.covariance_m2 = Matrix2::new(1.0, 2.0, 2.0, 1.0);
-        let mut deferred_at_start = 0;
+        let mut solved_at_start = None;
         for (k, pose) in poses(-4.0).enumerate() {
             let fixes = match k {
                 1 => vec![bad_nan],
@@ -354,11 +360,20 @@ mod tests {
                 .add_robot_scan(1, pose, scan_at(&pose, 10 + k as u64), &fixes)
                 .expect("robot 1");
             if k == 0 {
-                deferred_at_start = mapper.stats().deferred_optimizations;
+                let stats = mapper.stats();
+                solved_at_start = Some((stats.optimizations, stats.deferred_optimizations));
+                assert_eq!(
+                    mapper.graph().poses[4],
+                    pose,
+                    "its own gauge, where it started"
+                );
             }
         }
         let stats = mapper.stats();
-        assert!(deferred_at_start > 0, "{stats:?}");
+        assert!(
+            solved_at_start.is_some_and(|(solved, deferred)| solved > 0 && deferred == 0),
+            "{stats:?}"
+        );
         assert_eq!(stats.gps_edges, 4 + 3, "{stats:?}");
         assert_eq!(mapper.node_robot(4), (1, 0));
         mapper.finish().expect("anchored by then");

@@ -171,6 +171,13 @@ pub fn is_information<const D: usize>(m: &nalgebra::SMatrix<f64, D, D>) -> bool 
 impl PoseGraph {
     /// Checks node references, finiteness, information matrices and connectivity.
     pub fn validate(&self) -> Result<(), GraphError> {
+        self.validate_parts()?;
+        self.check_connected()
+    }
+
+    /// [`PoseGraph::validate`] without the connectivity check: for a network whose parts
+    /// may float, each with its own gauge ([`PoseGraph::unanchored_part_roots`]).
+    pub fn validate_parts(&self) -> Result<(), GraphError> {
         let n = self.poses.len();
         if let Some(node) = self.poses.iter().position(|p| !p.is_finite()) {
             return Err(GraphError::BadPose { node });
@@ -216,7 +223,7 @@ impl PoseGraph {
                 return Err(GraphError::NotPositiveDefinite { edge });
             }
         }
-        self.check_connected()
+        Ok(())
     }
 
     /// Every node must be linked to node 0 by relative edges, unless GPS fixes anchor the map
@@ -267,6 +274,30 @@ impl PoseGraph {
             parent[a.max(b)] = a.min(b);
         }
         (0..n).map(|i| find(&mut parent, i)).collect()
+    }
+
+    /// The first node of every connected part that GPS fixes at two or more distinct nodes
+    /// do not anchor, in order: where each such part's gauge is fixed when parts may float.
+    pub fn unanchored_part_roots(&self) -> Vec<usize> {
+        let components = self.components();
+        let mut fixed_nodes =
+            std::collections::HashMap::<usize, std::collections::BTreeSet<usize>>::new();
+        for g in &self.gps {
+            fixed_nodes
+                .entry(components[g.node])
+                .or_default()
+                .insert(g.node);
+        }
+        (0..self.poses.len())
+            .filter(|&i| components[i] == i)
+            .filter(|root| fixed_nodes.get(root).is_none_or(|s| s.len() < 2))
+            .collect()
+    }
+
+    /// How many connected parts the relative edges make (GPS edges link nothing).
+    pub fn component_count(&self) -> usize {
+        let labels = self.components();
+        labels.iter().enumerate().filter(|&(i, &c)| i == c).count()
     }
 
     /// Σ eᵀΩe over all edges, without robust kernels (g2o's convention for relative edges).

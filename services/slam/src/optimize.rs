@@ -97,6 +97,7 @@ pub struct OptimizeReport {
 #[derive(Debug, Default)]
 pub struct Optimizer {
     structure: Option<Structure>,
+    floating_parts: bool,
 }
 
 #[derive(Debug)]
@@ -111,14 +112,21 @@ struct Structure {
 type Block = SMatrix<f64, 3, 3>;
 
 impl Structure {
-    fn build(graph: &PoseGraph) -> Structure {
+    fn build(graph: &PoseGraph, floating_parts: bool) -> Structure {
         let n = graph.poses.len();
-        // Without GPS the network floats: fix node 0 (the gauge).
-        let fixed = if graph.gps.is_empty() { Some(0) } else { None };
+        // Without GPS the network floats: fix node 0 (the gauge); with floating parts, the
+        // first node of each part that GPS does not anchor.
+        let fixed = if floating_parts {
+            graph.unanchored_part_roots()
+        } else if graph.gps.is_empty() {
+            vec![0]
+        } else {
+            Vec::new()
+        };
         let mut var_of = vec![None; n];
         let mut next = 0;
         for (i, v) in var_of.iter_mut().enumerate() {
-            if Some(i) != fixed {
+            if fixed.binary_search(&i).is_err() {
                 *v = Some(next);
                 next += 3;
             }
@@ -214,17 +222,35 @@ impl Optimizer {
         Optimizer::default()
     }
 
+    /// An optimizer for a network whose parts may not be linked yet (a robot that has met
+    /// no other and has no GPS): each part that GPS does not anchor keeps its first node
+    /// where it is (its own gauge), instead of the network being refused as disconnected.
+    pub fn for_parts() -> Optimizer {
+        Optimizer {
+            floating_parts: true,
+            ..Optimizer::default()
+        }
+    }
+
+    fn validate(&self, graph: &PoseGraph) -> Result<(), GraphError> {
+        if self.floating_parts {
+            graph.validate_parts()
+        } else {
+            graph.validate()
+        }
+    }
+
     /// Minimizes the network's robust cost in place, starting from `graph.poses`.
     pub fn optimize(
         &mut self,
         graph: &mut PoseGraph,
         params: &OptimizeParams,
     ) -> Result<OptimizeReport, GraphError> {
-        graph.validate()?;
+        self.validate(graph)?;
         let key = structure_key(graph);
         let reused_symbolic = self.structure.as_ref().is_some_and(|s| s.key == key);
         if !reused_symbolic {
-            self.structure = Some(Structure::build(graph));
+            self.structure = Some(Structure::build(graph, self.floating_parts));
         }
         let structure = self.structure.as_mut().expect("built above");
         let (mut lin, mut candidate) = (Linearization::default(), Linearization::default());
@@ -365,13 +391,13 @@ impl Optimizer {
         graph: &PoseGraph,
         nodes: &[usize],
     ) -> Result<Vec<Option<Matrix3<f64>>>, GraphError> {
-        graph.validate()?;
+        self.validate(graph)?;
         if self
             .structure
             .as_ref()
             .is_none_or(|s| s.key != structure_key(graph))
         {
-            self.structure = Some(Structure::build(graph));
+            self.structure = Some(Structure::build(graph, self.floating_parts));
         }
         let structure = self.structure.as_mut().expect("built above");
         let vars: Vec<Option<usize>> = nodes.iter().map(|&n| structure.var_of[n]).collect();

@@ -27,6 +27,50 @@ pub fn position_rmse(pairs: impl IntoIterator<Item = (Pose2, Pose2)>) -> f64 {
     if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
 }
 
+/// The rigid motion that best maps the points `a` onto the points `b` of each pair (2D
+/// Procrustes, least squares); `None` with fewer than two pairs or all `a` at one place.
+pub fn rigid_fit(pairs: &[([f64; 2], [f64; 2])]) -> Option<Pose2> {
+    if pairs.len() < 2 {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let (mut ma, mut mb) = ([0.0; 2], [0.0; 2]);
+    for (a, b) in pairs {
+        (ma[0], ma[1], mb[0], mb[1]) = (ma[0] + a[0], ma[1] + a[1], mb[0] + b[0], mb[1] + b[1]);
+    }
+    let (ma, mb) = ([ma[0] / n, ma[1] / n], [mb[0] / n, mb[1] / n]);
+    // Rotation angle maximizing Σ (b − mb)·R(a − ma).
+    let (mut sin_sum, mut cos_sum) = (0.0, 0.0);
+    for (a, b) in pairs {
+        let (ax, ay, bx, by) = (a[0] - ma[0], a[1] - ma[1], b[0] - mb[0], b[1] - mb[1]);
+        cos_sum += ax * bx + ay * by;
+        sin_sum += ax * by - ay * bx;
+    }
+    if sin_sum == 0.0 && cos_sum == 0.0 {
+        return None;
+    }
+    let angle = f64::atan2(sin_sum, cos_sum);
+    let (s, c) = angle.sin_cos();
+    Some(Pose2::new(
+        mb[0] - (c * ma[0] - s * ma[1]),
+        mb[1] - (s * ma[0] + c * ma[1]),
+        angle,
+    ))
+}
+
+/// [`position_rmse`] after moving the estimates by the rigid motion that fits them best to
+/// their truths ([`rigid_fit`]): the error of a map whose frame is its own (no GPS, no
+/// common start).
+pub fn aligned_position_rmse(pairs: impl IntoIterator<Item = (Pose2, Pose2)>) -> f64 {
+    let pairs: Vec<(Pose2, Pose2)> = pairs.into_iter().collect();
+    let points: Vec<([f64; 2], [f64; 2])> = pairs
+        .iter()
+        .map(|(p, t)| ([p.x, p.y], [t.x, t.y]))
+        .collect();
+    let motion = rigid_fit(&points).unwrap_or(Pose2::IDENTITY);
+    position_rmse(pairs.iter().map(|(p, t)| (motion.compose(p), *t)))
+}
+
 /// An angle brought into (−π, π].
 pub fn wrap_angle(a: f64) -> f64 {
     let b = (a + PI).rem_euclid(2.0 * PI) - PI;
@@ -99,6 +143,28 @@ mod tests {
         let pairs = [(p(3.0, 4.0), p(0.0, 0.0)), (p(1.0, 1.0), p(1.0, 1.0))];
         assert!((super::position_rmse(pairs) - (25.0f64 / 2.0).sqrt()).abs() < 1e-12);
         assert_eq!(super::position_rmse([]), 0.0);
+    }
+
+    #[test]
+    fn a_moved_map_aligns_back() {
+        let motion = super::Pose2::new(12.0, -7.5, 2.2);
+        let truth: Vec<super::Pose2> = (0..20)
+            .map(|i| super::Pose2::new(f64::from(i).sin() * 9.0, f64::from(i) * 0.7, 0.1))
+            .collect();
+        let moved = truth.iter().map(|t| motion.inverse().compose(t));
+        let pairs: Vec<_> = moved.zip(truth.iter().copied()).collect();
+        assert!(super::position_rmse(pairs.clone()) > 5.0);
+        assert!(super::aligned_position_rmse(pairs.clone()) < 1e-9);
+        let points: Vec<_> = pairs
+            .iter()
+            .map(|(a, b)| ([a.x, a.y], [b.x, b.y]))
+            .collect();
+        let fit = super::rigid_fit(&points).expect("a fit");
+        assert!(
+            (fit.x - 12.0).abs() < 1e-9 && (fit.theta - 2.2).abs() < 1e-9,
+            "{fit:?}"
+        );
+        assert_eq!(super::rigid_fit(&points[..1]), None);
     }
 
     use super::*;

@@ -4,7 +4,7 @@
 use super::{SimSourceConfig, Source, SourceEvent};
 use crate::node::{GpsReading, SensorScan};
 use leveling::{PoseTrack, TimedPose};
-use sim::{FleetRobot, PARK_DATUM, World};
+use sim::{FleetRobot, FleetStart, PARK_DATUM, World};
 use std::sync::OnceLock;
 
 /// A simulated fix as a receiver reports it, with the dead reckoning at its time; stamps
@@ -42,6 +42,7 @@ pub struct SimSource {
     /// Events of the current scan period, in time order, popped from the back.
     queue: Vec<SourceEvent>,
     next_odometry_ns: u64,
+    gps: bool,
 }
 
 impl SimSource {
@@ -49,12 +50,24 @@ impl SimSource {
     /// `odometry_rate_hz`; `None` when the park has no loop for it.
     pub fn new(config: &SimSourceConfig, epoch_ns: u64, odometry_rate_hz: f64) -> Option<Self> {
         let duration_ns = (config.duration_s.max(0.0) * 1e9) as u64;
+        let start = if config.scattered_start {
+            FleetStart::Scattered
+        } else {
+            FleetStart::Dock
+        };
         Some(SimSource {
-            robot: FleetRobot::new(park(), config.loop_index, duration_ns, config.seed)?,
+            robot: FleetRobot::starting(
+                park(),
+                config.loop_index,
+                duration_ns,
+                config.seed,
+                start,
+            )?,
             epoch_ns,
             odometry_period_ns: (1e9 / odometry_rate_hz.max(0.1)) as u64,
             queue: Vec::new(),
             next_odometry_ns: 0,
+            gps: config.gps,
         })
     }
 
@@ -89,6 +102,7 @@ impl Source for SimSource {
         let gps = fleet_scan
             .gps_since_previous
             .iter()
+            .filter(|_| self.gps)
             .map(|fix| sim_gps_reading(&self.robot, fix, self.epoch_ns))
             .collect();
         let scan = SensorScan {

@@ -15,14 +15,25 @@ use slam::{MapperStats, OptimizeReport, Pose2};
 use utoipa::ToSchema;
 use wire::session::now_ns;
 
-/// Fleets with a map.
+/// Fleets with a map, and those whose stored map did not replay.
 #[derive(Serialize, ToSchema)]
 pub(super) struct FleetList {
+    /// Fleets with a map, sorted.
     fleets: Vec<String>,
+    /// Fleets quarantined at start (their routes answer 503), sorted, with the reason.
+    quarantined: Vec<QuarantinedFleet>,
+}
+
+/// A fleet whose stored map did not replay.
+#[derive(Serialize, ToSchema)]
+pub(super) struct QuarantinedFleet {
+    fleet: String,
+    /// Why its rows did not replay.
+    reason: String,
 }
 
 #[utoipa::path(get, path = "/api/v1/fleets", tag = "fleets", responses(
-    (status = 200, description = "Fleets with a map, sorted", body = FleetList),
+    (status = 200, description = "Fleets with a map, and quarantined fleets, sorted", body = FleetList),
 ))]
 pub(super) async fn fleets(State(api): State<Api>) -> Json<FleetList> {
     let mut fleets: Vec<String> = api
@@ -34,7 +45,21 @@ pub(super) async fn fleets(State(api): State<Api>) -> Json<FleetList> {
         .cloned()
         .collect();
     fleets.sort();
-    Json(FleetList { fleets })
+    let quarantined = api
+        .shared
+        .quarantined
+        .read()
+        .expect("quarantine lock")
+        .iter()
+        .map(|(fleet, reason)| QuarantinedFleet {
+            fleet: fleet.clone(),
+            reason: reason.clone(),
+        })
+        .collect();
+    Json(FleetList {
+        fleets,
+        quarantined,
+    })
 }
 
 /// A fleet's map in numbers.

@@ -115,6 +115,7 @@ impl Mapper2d {
                 continue;
             }
             let inter_robot = self.node_robot[j].0 != robot;
+            self.join_parts(j, node, &m.pose);
             self.graph.edges.push(RelativeEdge {
                 from: j,
                 to: node,
