@@ -37,6 +37,8 @@ pub mod optimize;
 #[cfg(feature = "solver")]
 pub use init::{Init, InitError, initialize};
 #[cfg(feature = "solver")]
-pub use mapping2d::{Mapper2d, Mapper2dParams, MapperStats, Placed, SubmapSearchParams};
+pub use mapping2d::{
+    FirstContactParams, Mapper2d, Mapper2dParams, MapperStats, Placed, SubmapSearchParams,
+};
 #[cfg(feature = "solver")]
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

@@ -18,6 +18,7 @@
 //! it discarded the right closures too, and the relation error tripled.)
 
 mod edges;
+mod first_contact;
 mod params;
 mod parts;
 mod solve;
@@ -25,6 +26,7 @@ mod submap_params;
 mod submap_search;
 mod submaps;
 
+pub use first_contact::FirstContactParams;
 pub use params::Mapper2dParams;
 pub use submap_params::SubmapSearchParams;
 
@@ -71,6 +73,10 @@ pub struct MapperStats {
     pub submap_searches: usize,
     /// Of `loop_closures`, those found by a submap search.
     pub submap_closures: usize,
+    /// Searches of a lone robot's node in another robot's submap (whole, every heading).
+    pub contact_searches: usize,
+    /// Of `inter_robot_closures`, the first contacts those searches found.
+    pub first_contacts: usize,
     /// GPS edges added (fixes taken).
     pub gps_edges: usize,
     /// Optimizations run.
@@ -111,6 +117,7 @@ pub struct Mapper2d {
     last_optimization: Option<OptimizeReport>,
     optimization_pending: bool,
     submaps: submaps::Submaps,
+    contact: Vec<first_contact::ContactSearch>,
 }
 
 impl Mapper2d {
@@ -190,7 +197,8 @@ impl Mapper2d {
             // A robot's first node may already see another robot's map.
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
             let closed = self.close_loops(node);
-            let closed = closed + self.search_submaps(node, closed) > 0;
+            let closed =
+                closed + self.search_submaps(node, closed) + self.seek_first_contact(node) > 0;
             if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored()?;
             }
@@ -239,7 +247,7 @@ impl Mapper2d {
             });
         }
         let closed = self.close_loops(node);
-        let closed = closed + self.search_submaps(node, closed) > 0;
+        let closed = closed + self.search_submaps(node, closed) + self.seek_first_contact(node) > 0;
         if self.add_gps(node, gps) || closed {
             self.optimize_when_anchored()?;
         }
