@@ -6,7 +6,7 @@
 
 use leveling::nalgebra::Isometry3;
 use leveling::{Leveler, SegmentParams};
-use sim::{FleetRobot, FleetScan, World};
+use sim::{FleetRobot, FleetScan, FleetStart, World};
 use slam::matching::Scan2;
 use slam::nalgebra::{Matrix2, Vector2};
 use slam::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, Pose2, gnss};
@@ -24,8 +24,10 @@ struct NodeInput {
 }
 
 /// Runs the fleet and maps it with one scan kind; returns the mapper's stats and the ATE
-/// (RMSE of node positions against the truth, m).
-fn map_fleet(inputs: Vec<NodeInput>) -> (MapperStats, f64) {
+/// (RMSE of node positions against the truth, m; after fitting the map to the truth when
+/// `aligned`), and the network's connected parts with, for each, its nodes' ATE after
+/// fitting that part alone to the truth.
+fn map_fleet(inputs: Vec<NodeInput>, aligned: bool) -> (MapperStats, f64, Vec<(usize, f64)>) {
     // The simulator's dead reckoning is precise (see the constructor's doc).
     let mut mapper = Mapper2d::new(Mapper2dParams {
         node_distance_m: 1.0,
@@ -42,8 +44,23 @@ fn map_fleet(inputs: Vec<NodeInput>) -> (MapperStats, f64) {
         }
     }
     mapper.finish().expect("optimize");
-    let poses = mapper.graph().poses.iter().copied();
-    (mapper.stats(), slam::position_rmse(poses.zip(truth)))
+    let graph = mapper.graph();
+    let pairs = graph.poses.iter().copied().zip(truth.iter().copied());
+    let ate = if aligned {
+        slam::aligned_position_rmse(pairs)
+    } else {
+        slam::position_rmse(pairs)
+    };
+    let labels = graph.components();
+    let parts = (0..labels.len())
+        .filter(|&i| labels[i] == i)
+        .map(|root| {
+            let members = (0..labels.len()).filter(|&i| labels[i] == root);
+            let pairs: Vec<(Pose2, Pose2)> = members.map(|i| (graph.poses[i], truth[i])).collect();
+            (pairs.len(), slam::aligned_position_rmse(pairs))
+        })
+        .collect();
+    (mapper.stats(), ate, parts)
 }
 
 /// The GPS fixes as the mapper takes them, for a node frame `frame_in_robot` (m, robot
@@ -87,9 +104,60 @@ fn gps_for(scan: &FleetScan, robot: &FleetRobot, frame_in_robot: [f64; 2]) -> Ve
 #[test]
 fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
     let world = World::park();
+    let (leveled, fixed) = fleet_inputs(&world, FleetStart::Dock, true);
+    let (stats, ate, _) = map_fleet(leveled, false);
+    let (stats_fixed, ate_fixed, _) = map_fleet(fixed, false);
+    eprintln!("leveled: ATE {ate:.3} m, {stats:?}");
+    eprintln!("fixed 2D: ATE {ate_fixed:.3} m, {stats_fixed:?}");
+    assert!(stats.inter_robot_closures >= 1, "{stats:?}");
+    assert!(ate <= 0.085, "leveled ATE {ate:.3} m");
+    assert!(
+        ate_fixed >= 3.0 * ate,
+        "fixed {ate_fixed:.3} m, leveled {ate:.3} m"
+    );
+}
+
+/// The robots start at random places along their loops with odometry from the identity,
+/// and without GPS: nothing tells the mapper where they are relative to one another. They
+/// must find one another in their maps (first contact: correlative search of a lone robot
+/// in the others' submaps, confirmed by a second match). Measured (120 s, seed 7): one
+/// contact, two of the three robots in one part (62 nodes, 0.120 m from the truth once
+/// fitted; the lone third 0.068 m); the third robot is not found: issue 12's aim, one part, is not met. What this
+/// guards: contacts are made, and none is wrong (a wrong one bends its part by metres).
+#[test]
+fn lone_robots_are_found_and_never_joined_wrongly() {
+    let world = World::park();
+    let (leveled, _) = fleet_inputs(&world, FleetStart::Scattered, false);
+    let (stats, ate, parts) = map_fleet(leveled, true);
+    eprintln!(
+        "scattered, no GPS: ATE {ate:.3} m (fitted), parts (nodes, fitted ATE) {parts:?}, {stats:?}"
+    );
+    assert!(stats.first_contacts >= 1, "{stats:?}");
+    assert!(parts.len() < 3, "a contact joins two robots: {parts:?}");
+    for (nodes, part_ate) in &parts {
+        assert!(
+            *part_ate <= 0.15,
+            "a part of {nodes} nodes is {part_ate:.3} m off: {parts:?}"
+        );
+    }
+}
+
+/// The fleet's nodes, leveled and from the fixed 2D scanner, in time order.
+fn fleet_inputs(
+    world: &World,
+    start: FleetStart,
+    with_gps: bool,
+) -> (Vec<NodeInput>, Vec<NodeInput>) {
     let mut robots: Vec<FleetRobot> = (0..ROBOTS)
-        .map(|i| FleetRobot::new(&world, i, DURATION_NS, 7).expect("park loop"))
+        .map(|i| FleetRobot::starting(world, i, DURATION_NS, 7, start).expect("park loop"))
         .collect();
+    let gps_for = |scan: &FleetScan, robot: &FleetRobot, frame: [f64; 2]| {
+        if with_gps {
+            gps_for(scan, robot, frame)
+        } else {
+            Vec::new()
+        }
+    };
     let mut leveler = Leveler::new(SegmentParams::default());
     let (mut leveled, mut fixed) = (Vec::new(), Vec::new());
     // Round robin: the robots scan at the same pace, so this is time order.
@@ -142,14 +210,5 @@ fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
             break;
         }
     }
-    let (stats, ate) = map_fleet(leveled);
-    let (stats_fixed, ate_fixed) = map_fleet(fixed);
-    eprintln!("leveled: ATE {ate:.3} m, {stats:?}");
-    eprintln!("fixed 2D: ATE {ate_fixed:.3} m, {stats_fixed:?}");
-    assert!(stats.inter_robot_closures >= 1, "{stats:?}");
-    assert!(ate <= 0.085, "leveled ATE {ate:.3} m");
-    assert!(
-        ate_fixed >= 3.0 * ate,
-        "fixed {ate_fixed:.3} m, leveled {ate:.3} m"
-    );
+    (leveled, fixed)
 }

@@ -38,8 +38,8 @@ pub mod optimize;
 pub use init::{Init, InitError, initialize};
 #[cfg(feature = "solver")]
 pub use mapping2d::{
-    ConsistencyParams, Mapper2d, Mapper2dParams, MapperStats, Placed, SubmapSearchParams,
-    WrongClosures,
+    ConsistencyParams, FirstContactParams, Mapper2d, Mapper2dParams, MapperStats, Placed,
+    SubmapSearchParams, WrongClosures,
 };
 #[cfg(feature = "solver")]
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

@@ -21,6 +21,7 @@
 mod closures;
 pub mod consistency;
 mod edges;
+mod first_contact;
 mod local;
 mod params;
 mod parts;
@@ -31,6 +32,7 @@ mod submaps;
 mod support;
 mod wrong_closures;
 
+pub use first_contact::FirstContactParams;
 pub use params::{ConsistencyParams, Mapper2dParams};
 pub use submap_params::SubmapSearchParams;
 pub use wrong_closures::WrongClosures;
@@ -87,6 +89,10 @@ pub struct MapperStats {
     pub submap_searches: usize,
     /// Of `loop_closures`, those found by a submap search.
     pub submap_closures: usize,
+    /// Searches of a lone robot's node in another robot's submap (whole, every heading).
+    pub contact_searches: usize,
+    /// Of `inter_robot_closures`, the first contacts those searches found.
+    pub first_contacts: usize,
     /// GPS edges added (fixes taken).
     pub gps_edges: usize,
     /// Optimizations run.
@@ -129,6 +135,7 @@ pub struct Mapper2d {
     last_optimization: Option<OptimizeReport>,
     optimization_pending: bool,
     submaps: submaps::Submaps,
+    contact: Vec<first_contact::ContactSearch>,
 }
 
 impl Mapper2d {
@@ -209,7 +216,8 @@ impl Mapper2d {
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
             self.record_chain_step(robot, node, None);
             let closed = self.close_loops(node);
-            let closed = closed + self.search_submaps(node, closed) > 0;
+            let closed =
+                closed + self.search_submaps(node, closed) + self.seek_first_contact(node) > 0;
             if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored()?;
             }
@@ -260,7 +268,9 @@ impl Mapper2d {
         self.record_chain_step(robot, node, Some(last));
         let expired = self.expire_closures(false);
         let closed = self.close_loops(node);
-        let closed = expired + closed + self.search_submaps(node, closed) > 0;
+        let closed =
+            expired + closed + self.search_submaps(node, closed) + self.seek_first_contact(node)
+                > 0;
         if self.add_gps(node, gps) || closed {
             self.optimize_when_anchored()?;
         }

@@ -75,6 +75,13 @@ impl Mapper2d {
         let p = self.params.clone();
         let here = self.graph.poses[node];
         let (robot, place) = self.node_robot[node];
+        let components = self.graph.components();
+        let floating = self.graph.unanchored_part_roots();
+        let floats = |part: usize| floating.binary_search(&part).is_ok();
+        let shared_frame = |j: usize| {
+            let (a, b) = (components[node], components[j]);
+            a == b || !(floats(a) || floats(b))
+        };
         let mut candidates: Vec<(f64, usize)> = (0..node)
             .filter_map(|j| {
                 let d = (self.graph.poses[j].x - here.x).hypot(self.graph.poses[j].y - here.y);
@@ -84,7 +91,9 @@ impl Mapper2d {
                         && d <= p.loop_search_radius_m
                             + p.loop_search_growth * (self.node_path_m[node] - self.node_path_m[j])
                 } else {
-                    d <= p.inter_robot_search_radius_m
+                    // Another robot's estimate is comparable only in a shared frame: the
+                    // same part, or two parts both anchored by GPS.
+                    d <= p.inter_robot_search_radius_m && shared_frame(j)
                 };
                 near.then_some((d, j))
             })

@@ -66,6 +66,8 @@ pub struct Mapper2dParams {
     pub optimize: OptimizeParams,
     /// Loop closure by correlative search against submaps.
     pub submaps: super::SubmapSearchParams,
+    /// A lone robot (no GPS, no closure with another) looked for in the others' submaps.
+    pub first_contact: super::FirstContactParams,
 }
 
 impl Default for Mapper2dParams {
@@ -95,6 +97,7 @@ impl Default for Mapper2dParams {
             gate: QualityGate::default(),
             optimize: OptimizeParams::default(),
             submaps: super::SubmapSearchParams::default(),
+            first_contact: super::FirstContactParams::default(),
         }
     }
 }

@@ -122,21 +122,7 @@ impl Mapper2d {
         {
             return None;
         }
-        // IDC against the submap node nearest to the found pose, from that pose.
-        let &(near, near_pose) = submap.nodes.iter().min_by(|a, b| {
-            let d = |q: &Pose2| (q.x - found.pose.x).hypot(q.y - found.pose.y);
-            d(&a.1).total_cmp(&d(&b.1))
-        })?;
-        let guess = near_pose.between(&found.pose);
-        let m = idc(&self.node_scans[near], scan, guess, &self.params.idc).ok()?;
-        let shift = (m.pose.x - guess.x).hypot(m.pose.y - guess.y);
-        let turn = wrap_angle(m.pose.theta - guess.theta).abs();
-        if !accept(&m, &self.params.gate)
-            || shift > p.refine_max_shift_m
-            || turn > p.refine_max_turn_rad
-        {
-            return None;
-        }
+        let (near, m) = self.refine_in_submap(k, node, &found.pose, true)?;
         Some(RelativeEdge {
             from: near,
             to: node,
@@ -145,5 +131,44 @@ impl Mapper2d {
             kind: EdgeKind::LoopClosure,
             robust: self.params.loop_robust,
         })
+    }
+
+    /// IDC of `node`'s scan against submap `k`'s node nearest to `found` (the scan's pose in
+    /// the submap's frame), from that pose: the closure's node and match, if IDC stays near
+    /// the correlative pose and (with `gated`) the quality gate accepts it.
+    pub(super) fn refine_in_submap(
+        &self,
+        k: usize,
+        node: usize,
+        found: &Pose2,
+        gated: bool,
+    ) -> Option<(usize, crate::matching::Match)> {
+        let p = &self.params.submaps;
+        let submap = &self.submaps.done[k];
+        let &(near, near_pose) = submap.nodes.iter().min_by(|a, b| {
+            let d = |q: &Pose2| (q.x - found.x).hypot(q.y - found.y);
+            d(&a.1).total_cmp(&d(&b.1))
+        })?;
+        let guess = near_pose.between(found);
+        let m = idc(
+            &self.node_scans[near],
+            &self.node_scans[node],
+            guess,
+            &self.params.idc,
+        )
+        .ok()?;
+        let shift = (m.pose.x - guess.x).hypot(m.pose.y - guess.y);
+        let turn = wrap_angle(m.pose.theta - guess.theta).abs();
+        if std::env::var("FC_DEBUG").is_ok() {
+            eprintln!(
+                "   idc near {near}: shift {shift:.2} turn {:.1}° accept {}",
+                turn.to_degrees(),
+                accept(&m, &self.params.gate)
+            );
+        }
+        ((!gated || accept(&m, &self.params.gate))
+            && shift <= p.refine_max_shift_m
+            && turn <= p.refine_max_turn_rad)
+            .then_some((near, m))
     }
 }
