@@ -40,8 +40,10 @@ fn map(name: &str, fraction: f64) -> (f64, MapperStats, usize, usize) {
 
 fn holds_against_wrong_closures(name: &str) {
     let (clean, clean_stats, ..) = map(name, 0.0);
-    // 10 % of the clean run's closures, spread over the matches as they come.
-    let fraction = 0.1 * clean_stats.loop_closures as f64 / clean_stats.loop_matches as f64;
+    // At least 10 % of the clean run's closures, spread over the matches as they come: 11 %
+    // of them is asked, since the closures also count the submap search's, which are not
+    // matches the injector sees, and the dirty run makes a few matches fewer.
+    let fraction = 0.11 * clean_stats.loop_closures as f64 / clean_stats.loop_matches as f64;
     let (dirty, stats, injected, accepted) = map(name, fraction);
     println!(
         "{name}: clean {clean:.4} m ({} closures, {} rejected); with {injected} wrong closures \
@@ -56,8 +58,9 @@ fn holds_against_wrong_closures(name: &str) {
         "clean {clean}, with wrong closures {dirty}"
     );
     assert!(
-        injected * 10 + 10 >= clean_stats.loop_closures,
-        "{injected} injected"
+        injected * 10 >= clean_stats.loop_closures,
+        "{injected} injected, fewer than 10 % of {}",
+        clean_stats.loop_closures
     );
 }
 
