@@ -315,7 +315,8 @@ mod tests {
     use nalgebra::{Matrix2, Vector2};
     use std::f64::consts::PI;
 
-    fn scan_at(pose: &Pose2, seed: u64) -> Scan2 {
+    /// A 361-beam scan of the synthetic park from `pose` (1 cm noise): the mapper tests' scan.
+    pub(super) fn scan_at(pose: &Pose2, seed: u64) -> Scan2 {
         let bearings = uniform_bearings(361, -PI / 2.0, PI / 360.0);
         let ranges = Scene::park().scan(pose, &bearings, 40.0, 0.01, seed);
         Scan2::from_polar(&bearings, &ranges, 40.0).expect("same lengths")

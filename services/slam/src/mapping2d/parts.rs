@@ -47,17 +47,9 @@ impl Mapper2d {
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::scan_at;
     use super::super::{Mapper2d, Mapper2dParams};
-    use crate::matching::Scan2;
-    use crate::matching::synthetic::{Scene, uniform_bearings};
     use crate::se2::Pose2;
-    use std::f64::consts::PI;
-
-    fn scan_at(pose: &Pose2, seed: u64) -> Scan2 {
-        let bearings = uniform_bearings(361, -PI / 2.0, PI / 360.0);
-        let ranges = Scene::park().scan(pose, &bearings, 40.0, 0.01, seed);
-        Scan2::from_polar(&bearings, &ranges, 40.0).expect("same lengths")
-    }
 
     #[test]
     fn a_closure_between_parts_moves_the_later_one_onto_the_map() {
