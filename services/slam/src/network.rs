@@ -237,14 +237,7 @@ impl PoseGraph {
         }
         // With GPS, each component must hold fixes on two different nodes (position and
         // orientation); otherwise it floats.
-        let mut anchored =
-            std::collections::HashMap::<usize, std::collections::BTreeSet<usize>>::new();
-        for g in &self.gps {
-            anchored
-                .entry(components[g.node])
-                .or_default()
-                .insert(g.node);
-        }
+        let anchored = self.gps_nodes_by_part(&components);
         let floating: Vec<usize> = unreachable
             .into_iter()
             .filter(|&i| anchored.get(&components[i]).is_none_or(|s| s.len() < 2))
@@ -280,18 +273,24 @@ impl PoseGraph {
     /// do not anchor, in order: where each such part's gauge is fixed when parts may float.
     pub fn unanchored_part_roots(&self) -> Vec<usize> {
         let components = self.components();
-        let mut fixed_nodes =
-            std::collections::HashMap::<usize, std::collections::BTreeSet<usize>>::new();
-        for g in &self.gps {
-            fixed_nodes
-                .entry(components[g.node])
-                .or_default()
-                .insert(g.node);
-        }
+        let fixed_nodes = self.gps_nodes_by_part(&components);
         (0..self.poses.len())
             .filter(|&i| components[i] == i)
             .filter(|root| fixed_nodes.get(root).is_none_or(|s| s.len() < 2))
             .collect()
+    }
+
+    /// The distinct nodes with GPS fixes, by connected part (`components`' labels).
+    fn gps_nodes_by_part(
+        &self,
+        components: &[usize],
+    ) -> std::collections::HashMap<usize, std::collections::BTreeSet<usize>> {
+        let mut nodes =
+            std::collections::HashMap::<usize, std::collections::BTreeSet<usize>>::new();
+        for g in &self.gps {
+            nodes.entry(components[g.node]).or_default().insert(g.node);
+        }
+        nodes
     }
 
     /// How many connected parts the relative edges make (GPS edges link nothing).

@@ -1,29 +1,20 @@
 //! The whole 2D pipeline (slam::Mapper2d) on the ACES log, scored with its 1,279 manually
 //! verified relations (Kümmerle et al. 2009). Graph mapping in that paper reports
-//! 0.044 ± 0.044 m; this test guards levelmap's current level (0.0379 ± 0.0434 m with the
-//! point-to-line refinement, 0.0433 ± 0.0509 m before it) against regressions. The aim is
+//! 0.044 ± 0.044 m; this test guards levelmap's current level (0.0376 ± 0.0431 m with the
+//! refinement, the consistency check and the submap search; 0.0433 ± 0.0509 m before them)
+//! against regressions. The aim is
 //! ≤ 0.03 m. The relations that span less than a second measure the local matching alone
 //! (0.0367 m with the refinement, 0.0418 m before it).
 
-use graphio::{carmen, relations};
-use slam::{Mapper2d, Mapper2dParams, Placed};
-use testdata::shared_data;
+mod common;
+
+use common::MappedLog;
 
 #[test]
 fn aces_relations_error_stays_low() {
-    let log = carmen::read(&shared_data("radish_2d_laser_logs/aces.clf.bz2")).expect("log");
-    let rel =
-        relations::read(&shared_data("radish_2d_laser_logs/aces.relations")).expect("relations");
-    let mut mapper = Mapper2d::new(Mapper2dParams::default());
-    let placed: Vec<Placed> = log
-        .scans
-        .iter()
-        .map(|s| mapper.add_scan(s.laser_pose, s.to_scan2()).expect("add"))
-        .collect();
-    mapper.finish().expect("optimize");
-    let m = relations::score(&rel, &log.scans, |k| mapper.pose_of(placed[k]))
-        .expect("every relation has its scans");
-    let stats = mapper.stats();
+    let run = MappedLog::map("aces");
+    let m = run.score(&run.relations);
+    let stats = run.mapper.stats();
     println!(
         "ACES: {} nodes, {} loop closures; relation error {:.4} ± {:.4} m (max {:.3}), rotation {:.4} rad",
         stats.nodes,
@@ -41,13 +32,13 @@ fn aces_relations_error_stays_low() {
         m.translation_mean_m
     );
     assert!(m.translation_max_m <= 1.0, "max {}", m.translation_max_m);
-    let short: Vec<_> = rel
+    let short: Vec<_> = run
+        .relations
         .iter()
         .filter(|r| (r.t2_s - r.t1_s).abs() < 1.0)
         .copied()
         .collect();
-    let local = relations::score(&short, &log.scans, |k| mapper.pose_of(placed[k]))
-        .expect("every relation has its scans");
+    let local = run.score(&short);
     println!(
         "relations under 1 s: {}, error {:.4} m",
         local.count, local.translation_mean_m

@@ -3,25 +3,15 @@
 //! IDC's basin: without the correlative submap search they were never closed (relation
 //! error 1.14 ± 2.31 m, max 7.9 m). Cartographer reports 0.0452 m.
 
-use graphio::{carmen, relations};
-use slam::{Mapper2d, Mapper2dParams, Placed};
-use testdata::shared_data;
+mod common;
+
+use common::MappedLog;
 
 #[test]
 fn fr079_revisits_are_closed_by_the_submap_search() {
-    let log = carmen::read(&shared_data("radish_2d_laser_logs/fr079.clf.bz2")).expect("log");
-    let rel =
-        relations::read(&shared_data("radish_2d_laser_logs/fr079.relations")).expect("relations");
-    let mut mapper = Mapper2d::new(Mapper2dParams::default());
-    let placed: Vec<Placed> = log
-        .scans
-        .iter()
-        .map(|s| mapper.add_scan(s.laser_pose, s.to_scan2()).expect("add"))
-        .collect();
-    mapper.finish().expect("optimize");
-    let m = relations::score(&rel, &log.scans, |k| mapper.pose_of(placed[k]))
-        .expect("every relation has its scans");
-    let stats = mapper.stats();
+    let run = MappedLog::map("fr079");
+    let m = run.score(&run.relations);
+    let stats = run.mapper.stats();
     println!(
         "FR079: {} nodes, {} loop closures ({} by submap search); relation error {:.4} ± {:.4} m (max {:.3})",
         stats.nodes,
