@@ -1,15 +1,16 @@
 //! The demo's claims, measured: three simulated robots map the hilly park over Zenoh; the
 //! map's nodes are within 0.10 m RMSE of ground truth, robots that meet close loops with each
 //! other, and the same run mapped from fixed horizontal 2D scanners is at least 3× worse (the
-//! paper's claim). Run as fast as the machine goes (`--speed 0`).
+//! paper's claim). Run as fast as the machine goes (`--speed 0`). Without GPS and with the
+//! robots started at places the mapper does not know, they still end in one map.
 
 mod common;
 
 use common::*;
 
-#[test]
-fn the_fleet_demo_maps_the_park_and_beats_a_fixed_2d_scanner_threefold() {
-    let dir = temp_dir("demo");
+/// `levelmap demo --duration 120 --speed 0 --json` with `extra` arguments: its report.
+fn demo(name: &str, extra: &[&str]) -> serde_json::Value {
+    let dir = temp_dir(name);
     let out = levelmap()
         .args([
             "demo",
@@ -21,6 +22,7 @@ fn the_fleet_demo_maps_the_park_and_beats_a_fixed_2d_scanner_threefold() {
             "--http",
             "127.0.0.1:0",
         ])
+        .args(extra)
         .args(["--zenoh", &format!("tcp/127.0.0.1:{}", free_port())])
         .arg("--dir")
         .arg(dir.join("run"))
@@ -33,6 +35,13 @@ fn the_fleet_demo_maps_the_park_and_beats_a_fixed_2d_scanner_threefold() {
     );
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
     eprintln!("{report:#}");
+    std::fs::remove_dir_all(&dir).ok();
+    report
+}
+
+#[test]
+fn the_fleet_demo_maps_the_park_and_beats_a_fixed_2d_scanner_threefold() {
+    let report = demo("demo", &[]);
     let ate = report["ate_rmse_m"].as_f64().unwrap();
     let fixed = report["ate_rmse_fixed2d_m"].as_f64().unwrap();
     assert_eq!(report["robots"], 3);
@@ -47,5 +56,23 @@ fn the_fleet_demo_maps_the_park_and_beats_a_fixed_2d_scanner_threefold() {
         fixed >= 3.0 * ate,
         "fixed 2D {fixed:.3} m vs leveled {ate:.3} m"
     );
-    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn robots_without_gps_or_a_known_start_meet_in_one_map() {
+    let report = demo(
+        "demo-scattered",
+        &["--no-gps", "--scatter-starts", "--seed", "7"],
+    );
+    assert_eq!(report["robots"], 3);
+    assert_eq!(report["gps_edges"], 0, "{report}");
+    assert_eq!(report["outbox_pending"], 0, "every node reached the map");
+    assert_eq!(report["components"], 1, "one connected network: {report}");
+    assert!(
+        report["inter_robot_closures"].as_u64().unwrap() >= 2,
+        "{report}"
+    );
+    assert_eq!(report["ate_aligned"], true);
+    let ate = report["ate_rmse_m"].as_f64().unwrap();
+    assert!(ate <= 0.15, "ATE after an SE(2) fit {ate:.3} m");
 }

@@ -119,29 +119,23 @@ fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
 
 /// The robots start at random places along their loops with odometry from the identity,
 /// and without GPS: nothing tells the mapper where they are relative to one another. They
-/// must find one another in their maps (first contact: correlative search of a lone robot
-/// in the others' submaps, confirmed by a second match). Measured (120 s, seed 7): one
-/// contact, two of the three robots in one part of 62 nodes, 0.165 m from the truth once
-/// fitted (the lone third 0.084 m); the third robot is not found, so issue 12's aim (one
-/// part, ATE ≤ 0.15 m) is not met. What this guards: a contact is made, and none is wrong.
-/// A wrong contact moves a part by metres (the false matches seen were 4 m apart), so a
-/// joined part must stay within 0.3 m of the truth.
+/// must find one another in their maps (first contact: pairs of submaps searched by the
+/// correlative matcher, a match confirmed by a second). Measured (120 s, seed 7): one part
+/// of 93 nodes, 0.114 m from the truth once fitted. A wrong contact would move a part by
+/// metres. Over seeds 1–9 no contact was wrong; seeds 1, 2, 4, 8 and 9 leave one robot
+/// alone in 120 s (docs/slam.md).
 #[test]
-fn lone_robots_are_found_and_never_joined_wrongly() {
+fn robots_without_gps_or_a_known_start_meet_in_one_map() {
     let world = World::park();
     let (leveled, _) = fleet_inputs(&world, FleetStart::Scattered, false);
     let (stats, ate, parts) = map_fleet(leveled, true);
     eprintln!(
         "scattered, no GPS: ATE {ate:.3} m (fitted), parts (nodes, fitted ATE) {parts:?}, {stats:?}"
     );
-    assert!(stats.first_contacts >= 1, "{stats:?}");
-    assert!(parts.len() < 3, "a contact joins two robots: {parts:?}");
-    for (nodes, part_ate) in &parts {
-        assert!(
-            *part_ate <= 0.3,
-            "a part of {nodes} nodes is {part_ate:.3} m off: {parts:?}"
-        );
-    }
+    // Measured: one part, 0.114 m, 4 inter-robot closures (2 first contacts).
+    assert_eq!(parts.len(), 1, "the three robots meet: {parts:?}");
+    assert!(stats.inter_robot_closures >= 2, "{stats:?}");
+    assert!(ate <= 0.15, "ATE after an SE(2) fit {ate:.3} m");
 }
 
 /// The fleet's nodes, leveled and from the fixed 2D scanner, in time order.

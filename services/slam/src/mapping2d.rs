@@ -135,7 +135,7 @@ pub struct Mapper2d {
     last_optimization: Option<OptimizeReport>,
     optimization_pending: bool,
     submaps: submaps::Submaps,
-    contact: Vec<first_contact::ContactSearch>,
+    contact: first_contact::ContactSearch,
 }
 
 impl Mapper2d {
@@ -216,8 +216,7 @@ impl Mapper2d {
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
             self.record_chain_step(robot, node, None);
             let closed = self.close_loops(node);
-            let closed =
-                closed + self.search_submaps(node, closed) + self.seek_first_contact(node) > 0;
+            let closed = closed + self.search_submaps(node, closed) + self.seek_first_contact() > 0;
             if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored()?;
             }
@@ -269,8 +268,7 @@ impl Mapper2d {
         let expired = self.expire_closures(false);
         let closed = self.close_loops(node);
         let closed =
-            expired + closed + self.search_submaps(node, closed) + self.seek_first_contact(node)
-                > 0;
+            expired + closed + self.search_submaps(node, closed) + self.seek_first_contact() > 0;
         if self.add_gps(node, gps) || closed {
             self.optimize_when_anchored()?;
         }

@@ -1,41 +1,44 @@
-//! First contact between robots that share no frame: a robot whose part of the network
-//! floats alone (no GPS anchor, no closure with another robot) cannot be looked for near
-//! its estimate, which is in a frame of its own. Its new nodes are searched instead in the
-//! other robots' submaps, each whole and at every heading (the correlative matcher needs no
-//! guess), a few submaps per node in turn. The query is not the node's scan alone but the
-//! robot's recent nodes' scans in the node's frame: more of the place, fewer look-alikes.
-//! A match that scores well and that IDC confirms is a hypothesis: where the robot's part
-//! lies in the other part. Only when a second match, from another node, puts the part at
-//! the same place (`agree_m`, `agree_rad`) do both become inter-robot closures, and the
-//! robot's part is moved onto the map (`parts.rs`); from then on the ordinary searches
-//! find its closures. A park's trees and a building's corridors repeat: one match alone,
-//! searched over a whole map, is too often wrong.
+//! First contact between parts of the network that share no frame: a robot that floats
+//! alone (no GPS anchor, no closure with another robot) cannot be looked for near its
+//! estimate, which is in a frame of its own. Instead, every pair of submaps of two robots
+//! in different parts (one of them floating) is searched once, when the later of the two
+//! is finished, both ways: each node of one, its scan alone, in the other's grid, whole and
+//! at every heading (the correlative matcher needs no guess). Pairs, not a robot's nodes
+//! against whatever submaps exist at the time: two robots that pass the same place minutes
+//! apart, in either order, are compared.
+//!
+//! Two robots on different paths see a place from different sides, so a true match scores
+//! lower than a loop closure of one robot (`min_score`). What keeps wrong matches out is
+//! the rest: a match whose runner-up elsewhere scores nearly as well is ambiguous and
+//! dropped (the park's lamp posts stand in rows), IDC must confirm it, and it is only a
+//! hypothesis (where one part lies in the other) until a second, from four other nodes,
+//! places the two parts the same way (`agree_m` plus `agree_drift` of the path between
+//! them, `agree_rad`). Then both become inter-robot closures and one part is moved onto the
+//! other (`parts.rs`); from then on the ordinary searches find its closures.
 
 use super::Mapper2d;
-use crate::matching::Scan2;
-use crate::matching::correlative::{SearchWindow, search};
+use crate::matching::correlative::{Exclusion, SearchWindow, runner_up, search};
 use crate::network::{EdgeKind, RelativeEdge};
 use crate::se2::{Pose2, wrap_angle};
 use serde::{Deserialize, Serialize};
 
-/// When and how hard a lone robot is looked for in the others' submaps.
+/// How parts that share no frame are searched for one another.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct FirstContactParams {
-    /// Look for lone robots at all.
+    /// Search at all.
     pub enabled: bool,
-    /// Search at a node when the robot has travelled this far since its last search (m).
-    pub every_m: f64,
-    /// Submaps searched per node; the next node takes the next ones.
-    pub submaps_per_search: usize,
+    /// Pairs of submaps searched per new node at most; the rest wait for the next nodes.
+    pub pairs_per_node: usize,
     /// Translations within the submap's extent plus this margin (m).
     pub margin_m: f64,
     /// The best pose must score at least this (a whole-map search scores many wrong poses).
     pub min_score: f64,
-    /// The query: the robot's nodes over this much path up to the node (m).
-    pub query_path_m: f64,
-    /// Two matches confirm each other when they place the part within this (m)…
+    /// Two matches confirm each other when they place the parts within this (m)…
     pub agree_m: f64,
+    /// …plus this share of the path (m) between the two matches' nodes on each part, over
+    /// which the estimates drift apart…
+    pub agree_drift: f64,
     /// …and this (rad) of each other.
     pub agree_rad: f64,
     /// IDC's refinement must pass the quality gate too (else it must only stay near the
@@ -48,139 +51,156 @@ impl Default for FirstContactParams {
     fn default() -> Self {
         FirstContactParams {
             enabled: true,
-            every_m: 2.0,
-            submaps_per_search: 4,
+            pairs_per_node: 32,
             margin_m: 5.0,
-            min_score: 0.55,
-            query_path_m: 12.0,
+            min_score: 0.45,
             agree_m: 0.5,
+            agree_drift: 0.01,
             agree_rad: 2f64.to_radians(),
             gated: false,
         }
     }
 }
 
-/// Per robot: its path at the last search, the next submap to search, and the matches
-/// that wait for a second to confirm them.
+/// The submaps whose pairs are searched, and the matches that wait for a second.
 #[derive(Clone, Debug, Default)]
 pub(super) struct ContactSearch {
-    last_search_m: Option<f64>,
-    next_submap: usize,
+    /// The next pair to consider: submap `later` with submap `earlier` (< `later`).
+    later: usize,
+    earlier: usize,
     hypotheses: Vec<Hypothesis>,
 }
 
-/// A match of a lone robot's node in another part: the closure, and the motion that would
-/// move the robot's part onto the other (its frame in the other's).
+/// A match between parts: the closure it would be.
 #[derive(Clone, Debug)]
 struct Hypothesis {
     edge: RelativeEdge,
-    motion: Pose2,
 }
 
-/// Hypotheses kept per robot (the oldest go).
-const MAX_HYPOTHESES: usize = 16;
+/// Hypotheses kept (the oldest go).
+const MAX_HYPOTHESES: usize = 64;
 
 impl Mapper2d {
-    /// Searches `node` in other robots' submaps when its robot floats alone; returns 1 when
-    /// it found the robot (and moved its part onto the map), else 0.
-    pub(super) fn seek_first_contact(&mut self, node: usize) -> usize {
+    /// Searches the next pairs of submaps, at most `pairs_per_node` of them (the rest wait
+    /// for the next node: a lone robot in a big map has many); returns how many parts it
+    /// joined.
+    pub(super) fn seek_first_contact(&mut self) -> usize {
         let p = self.params.first_contact.clone();
-        let robot = self.node_robot[node].0;
-        let others: Vec<usize> = (0..self.submaps.done.len())
-            .filter(|&k| self.submaps.done[k].robot != robot)
-            .collect();
-        if !p.enabled || others.is_empty() {
-            return 0;
-        }
-        if self.contact.len() <= robot {
-            self.contact.resize(robot + 1, ContactSearch::default());
-        }
-        let path = self.node_path_m[node];
-        if self.contact[robot]
-            .last_search_m
-            .is_some_and(|last| path - last < p.every_m)
-            || !self.floats_alone(node)
-        {
-            return 0;
-        }
-        self.contact[robot].last_search_m = Some(path);
-        let first = self.contact[robot].next_submap;
-        self.contact[robot].next_submap = first + p.submaps_per_search;
-        let query = self.contact_query(node, p.query_path_m);
-        for i in 0..p.submaps_per_search.min(others.len()) {
-            let k = others[(first + i) % others.len()];
-            self.stats.contact_searches += 1;
-            let Some(edge) = self.contact_in_submap(k, node, &query, &p) else {
+        let (mut joined, mut budget) = (0, p.pairs_per_node);
+        while p.enabled && budget > 0 && self.contact.later < self.submaps.done.len() {
+            let (later, earlier) = (self.contact.later, self.contact.earlier);
+            if earlier >= later {
+                (self.contact.later, self.contact.earlier) = (later + 1, 0);
                 continue;
-            };
-            let poses = &self.graph.poses;
-            let motion = poses[edge.from]
-                .compose(&edge.measurement)
-                .compose(&poses[node].inverse());
-            let agreeing = self.contact[robot].hypotheses.iter().position(|h| {
-                let d = h.motion.between(&motion);
-                h.edge.from != edge.from
-                    && h.edge.to != node
-                    && d.x.hypot(d.y) <= p.agree_m
-                    && wrap_angle(d.theta).abs() <= p.agree_rad
-            });
-            let Some(earlier) = agreeing else {
-                let hypotheses = &mut self.contact[robot].hypotheses;
-                if hypotheses.len() == MAX_HYPOTHESES {
-                    hypotheses.remove(0);
+            }
+            self.contact.earlier += 1;
+            let (a, b) = (&self.submaps.done[later], &self.submaps.done[earlier]);
+            if a.robot != b.robot && self.parts_may_meet(a.anchor, b.anchor) {
+                budget -= 1;
+                joined += self.search_pair(later, earlier, &p);
+            }
+        }
+        joined
+    }
+
+    /// Each node of one submap in the other's grid, both ways, until two parts join;
+    /// returns how many parts it joined.
+    fn search_pair(&mut self, later: usize, earlier: usize, p: &FirstContactParams) -> usize {
+        for (grid, queries) in [(earlier, later), (later, earlier)] {
+            let nodes: Vec<usize> = self.submaps.done[queries]
+                .nodes
+                .iter()
+                .map(|n| n.0)
+                .collect();
+            for node in nodes {
+                self.stats.contact_searches += 1;
+                let Some(edge) = self.contact_in_submap(grid, node, p) else {
+                    continue;
+                };
+                let joined = self.confirm_contact(edge, p);
+                if joined > 0 {
+                    return joined;
                 }
-                hypotheses.push(Hypothesis { edge, motion });
-                continue;
-            };
-            let confirmed = self.contact[robot].hypotheses.swap_remove(earlier).edge;
-            self.contact[robot].hypotheses.clear();
-            self.join_parts(edge.from, edge.to, &edge.measurement);
-            self.graph.edges.push(confirmed);
-            self.graph.edges.push(edge);
-            self.stats.loop_closures += 2;
-            self.stats.inter_robot_closures += 2;
-            self.stats.first_contacts += 1;
-            return 1;
+            }
         }
         0
     }
 
-    /// The robot's nodes over `path_m` of path up to `node`, their returns in `node`'s frame
-    /// at the current estimates, as one scan.
-    fn contact_query(&self, node: usize, path_m: f64) -> Scan2 {
-        let (robot, _) = self.node_robot[node];
-        let here = self.graph.poses[node];
-        let (mut bearings, mut ranges) = (Vec::new(), Vec::new());
-        for n in (0..=node).rev() {
-            if self.node_robot[n].0 != robot {
-                continue;
-            }
-            if self.node_path_m[node] - self.node_path_m[n] > path_m {
-                break;
-            }
-            let frame = here.between(&self.graph.poses[n]);
-            for point in self.node_scans[n].points() {
-                let [x, y] = frame.transform_point(*point);
-                bearings.push(y.atan2(x) as f32);
-                ranges.push(x.hypot(y) as f32);
-            }
-        }
-        Scan2::from_polar(&bearings, &ranges, f32::MAX).expect("returns come in pairs")
+    /// Whether the parts of nodes `a` and `b` differ and one of them floats.
+    fn parts_may_meet(&self, a: usize, b: usize) -> bool {
+        let components = self.graph.components();
+        let (part_a, part_b) = (components[a], components[b]);
+        let floating = self.graph.unanchored_part_roots();
+        let floats = |c: usize| floating.binary_search(&c).is_ok();
+        part_a != part_b && (floats(part_a) || floats(part_b))
     }
 
-    /// Whether `node`'s part has no GPS anchor and no node of another robot.
-    fn floats_alone(&self, node: usize) -> bool {
+    /// Keeps `edge` as a hypothesis; then, while two hypotheses place two parts the same
+    /// way, joins those parts with both (a join can make older hypotheses agree: they are
+    /// taken at today's estimates). Returns how many parts it joined.
+    fn confirm_contact(&mut self, edge: RelativeEdge, p: &FirstContactParams) -> usize {
+        let hypotheses = &mut self.contact.hypotheses;
+        if hypotheses.len() == MAX_HYPOTHESES {
+            hypotheses.remove(0);
+        }
+        hypotheses.push(Hypothesis { edge });
+        let mut joined = 0;
+        while let Some((i, j)) = self.agreeing_hypotheses(p) {
+            let hypotheses = &mut self.contact.hypotheses;
+            let second = hypotheses.remove(j).edge;
+            let first = hypotheses.remove(i).edge;
+            self.join_parts(second.from, second.to, &second.measurement);
+            self.graph.edges.push(first);
+            self.graph.edges.push(second);
+            self.stats.loop_closures += 2;
+            self.stats.inter_robot_closures += 2;
+            self.stats.first_contacts += 1;
+            joined += 1;
+            // Hypotheses within one part now say nothing the searches will not find.
+            let components = self.graph.components();
+            self.contact
+                .hypotheses
+                .retain(|h| components[h.edge.from] != components[h.edge.to]);
+        }
+        joined
+    }
+
+    /// Two hypotheses (`i < j`) that place the same two parts the same way, at today's
+    /// estimates, from four distinct nodes.
+    fn agreeing_hypotheses(&self, p: &FirstContactParams) -> Option<(usize, usize)> {
         let components = self.graph.components();
-        let part = components[node];
-        let robot = self.node_robot[node].0;
-        self.graph
-            .unanchored_part_roots()
-            .binary_search(&part)
-            .is_ok()
-            && components
-                .iter()
-                .zip(&self.node_robot)
-                .all(|(&c, &(r, _))| c != part || r == robot)
+        let (poses, path) = (&self.graph.poses, &self.node_path_m);
+        // Moves the part of `to` onto the part of `from`.
+        let motion = |e: &RelativeEdge| {
+            poses[e.from]
+                .compose(&e.measurement)
+                .compose(&poses[e.to].inverse())
+        };
+        let agree = |a: &RelativeEdge, b: &RelativeEdge| {
+            let ends = |e: &RelativeEdge| (components[e.from], components[e.to]);
+            // The same two ends, or swapped; and how far apart (path) the two matches'
+            // nodes lie on each part, over which the estimates drift apart.
+            let (d, apart_m) = if ends(a) == ends(b) {
+                let apart = (path[a.from] - path[b.from]).abs() + (path[a.to] - path[b.to]).abs();
+                (motion(a).between(&motion(b)), apart)
+            } else if ends(a) == (ends(b).1, ends(b).0) {
+                let apart = (path[a.from] - path[b.to]).abs() + (path[a.to] - path[b.from]).abs();
+                (motion(a).inverse().between(&motion(b)), apart)
+            } else {
+                return false;
+            };
+            let nodes = [a.from, a.to];
+            !nodes.contains(&b.from)
+                && !nodes.contains(&b.to)
+                && d.x.hypot(d.y) <= p.agree_m + p.agree_drift * apart_m
+                && wrap_angle(d.theta).abs() <= p.agree_rad
+        };
+        let h = &self.contact.hypotheses;
+        (0..h.len()).find_map(|j| {
+            (0..j)
+                .find(|&i| agree(&h[i].edge, &h[j].edge))
+                .map(|i| (i, j))
+        })
     }
 
     /// `node`'s scan searched in the whole of submap `k`, every heading; the inter-robot
@@ -189,10 +209,10 @@ impl Mapper2d {
         &self,
         k: usize,
         node: usize,
-        query: &Scan2,
         p: &FirstContactParams,
     ) -> Option<RelativeEdge> {
         let submap = &self.submaps.done[k];
+        let scan = &self.node_scans[node];
         let (centre, reach) = submap.centre_and_reach();
         let window = SearchWindow {
             linear_m: reach + p.margin_m,
@@ -200,23 +220,28 @@ impl Mapper2d {
         };
         let initial = Pose2::new(centre[0], centre[1], 0.0);
         let grid = &self.params.submaps.grid;
-        let found = search(&submap.grids, query, initial, &window, p.min_score, grid);
-        if std::env::var("FC_DEBUG").is_ok() {
-            eprintln!(
-                "node {node} r{} in submap {k} (r{}): {:?}",
-                self.node_robot[node].0,
-                submap.robot,
-                found.map(|f| (f.score, f.nodes))
-            );
+        let found = search(&submap.grids, scan, initial, &window, p.min_score, grid)?;
+        // Ambiguous (a row of like lamp posts, a corridor): as likely wrong as right.
+        let s = &self.params.submaps;
+        let excluded = Exclusion {
+            pose: found.pose,
+            radius_m: s.ambiguity_radius_m,
+        };
+        let rival_floor = found.score * s.max_runner_up_ratio;
+        if runner_up(
+            &submap.grids,
+            scan,
+            initial,
+            &window,
+            &excluded,
+            rival_floor,
+            grid,
+        )
+        .is_some()
+        {
+            return None;
         }
-        let found = found?;
         let refined = self.refine_in_submap(k, node, &found.pose, p.gated);
-        if std::env::var("FC_DEBUG").is_ok() {
-            eprintln!(
-                "   refined: {:?}",
-                refined.as_ref().map(|(n, m)| (n, m.pose))
-            );
-        }
         let (near, m) = refined?;
         Some(RelativeEdge {
             from: near,

@@ -159,13 +159,6 @@ impl Mapper2d {
         .ok()?;
         let shift = (m.pose.x - guess.x).hypot(m.pose.y - guess.y);
         let turn = wrap_angle(m.pose.theta - guess.theta).abs();
-        if std::env::var("FC_DEBUG").is_ok() {
-            eprintln!(
-                "   idc near {near}: shift {shift:.2} turn {:.1}° accept {}",
-                turn.to_degrees(),
-                accept(&m, &self.params.gate)
-            );
-        }
         ((!gated || accept(&m, &self.params.gate))
             && shift <= p.refine_max_shift_m
             && turn <= p.refine_max_turn_rad)
