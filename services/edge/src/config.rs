@@ -3,7 +3,7 @@
 
 use crate::cloud::CloudParams;
 use crate::node::NodeParams;
-use crate::source::{FilesSourceConfig, SimSourceConfig};
+use crate::source::{FilesSourceConfig, McapSourceConfig, SimSourceConfig};
 use leveling::SegmentParams;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -47,6 +47,8 @@ pub enum SourceConfig {
     Sim(SimSourceConfig),
     /// Scan files in a folder (KITTI, 3DTK, simulator JSON).
     Files(FilesSourceConfig),
+    /// A ROS 2 recording (MCAP).
+    Mcap(McapSourceConfig),
 }
 
 impl Default for SourceConfig {

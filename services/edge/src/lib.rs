@@ -17,7 +17,10 @@ pub use config::{EdgeConfig, SourceConfig};
 pub use node::{GpsReading, NodeBuilder, NodeError, NodeParams, PlanarScan, SensorScan};
 pub use outbox::{Outbox, OutboxError};
 pub use service::{EdgeReport, run};
-pub use source::{FilesSource, FilesSourceConfig, SimSourceConfig, Source, SourceEvent};
+pub use source::{
+    FilesSource, FilesSourceConfig, McapSource, McapSourceConfig, SimSourceConfig, Source,
+    SourceEvent,
+};
 #[cfg(feature = "sim")]
 pub use source::{SimSource, park, sim_gps_reading};
 
@@ -35,5 +38,6 @@ pub fn open_source(config: &EdgeConfig, epoch_ns: u64) -> anyhow::Result<Box<dyn
              edge, in levelmap's `lab` feature); use [source.files] or a build with it"
         ),
         SourceConfig::Files(files) => Ok(Box::new(FilesSource::new(files, epoch_ns)?)),
+        SourceConfig::Mcap(mcap) => Ok(Box::new(McapSource::new(mcap)?)),
     }
 }

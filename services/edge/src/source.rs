@@ -5,6 +5,10 @@ use crate::node::SensorScan;
 use leveling::{PoseTrack, TimedPose};
 use serde::{Deserialize, Serialize};
 
+mod mcap;
+pub mod ros;
+pub use self::mcap::{McapSource, McapSourceConfig};
+
 // The simulated robot: only with the `sim` feature (the lab, not a robot's build).
 #[cfg(feature = "sim")]
 mod sim;

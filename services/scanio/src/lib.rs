@@ -4,6 +4,7 @@
 //! simulator's own JSON scans are read by `sim::scan_file` (the lab), with this crate's
 //! [`LoadedScan`] and [`LoadError`], so that a robot's build needs no simulator.
 
+pub mod cloud;
 pub mod kitti;
 pub mod labels;
 pub mod threedtk;
