@@ -1,8 +1,8 @@
 //! `[source.mcap]` on a recording written by rosbags (PyPI, its own MCAP and CDR code; the
-//! script is `rosbags_recording.py`, run in a venv made once under the build's temporary
-//! folder): odometry with the IMU's roll, scans with their columns' times and the lidar's
-//! mount from /tf_static, fixes with their odometry, and the bad samples counted. The same
-//! recording cut mid-file still yields what came before the cut.
+//! script is `rosbags_recording.py`, run by `testdata::rosbags_python`): odometry with the
+//! IMU's roll, scans with their columns' times and the lidar's mount from /tf_static, fixes
+//! with their odometry, and the bad samples counted. The same recording cut mid-file still
+//! yields what came before the cut.
 
 use edge::source::ros::RosCounts;
 use edge::{McapSource, McapSourceConfig, Source, SourceEvent};
@@ -11,31 +11,13 @@ use std::process::Command;
 
 const T0: u64 = 1_700_000_000_000_000_000;
 
-/// The venv's python, made when missing (rosbags 0.11.9 and numpy from PyPI).
-fn python() -> PathBuf {
-    let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("rosbags-0.11.9-venv");
-    let python = venv.join("bin/python");
-    if !python.exists() {
-        let run = |cmd: &mut Command| {
-            let status = cmd.status().expect("python3 runs");
-            assert!(
-                status.success(),
-                "{cmd:?} failed: the test needs python3 and PyPI"
-            );
-        };
-        run(Command::new("python3").args(["-m", "venv"]).arg(&venv));
-        run(Command::new(venv.join("bin/pip")).args(["install", "-q", "rosbags==0.11.9", "numpy"]));
-    }
-    python
-}
-
 /// The recording, written once per run: the rosbag2 folder.
 fn recording(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("scratch folder");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rosbags_recording.py");
-    let out = Command::new(python())
+    let out = Command::new(testdata::rosbags_python())
         .arg(script)
         .arg(&dir)
         .output()

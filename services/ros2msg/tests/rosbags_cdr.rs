@@ -1,8 +1,7 @@
 //! Cross-implementation: every message levelmap reads, encoded by rosbags (PyPI, its own
 //! CDR code) in both byte orders, decodes here to the message rosbags describes in JSON;
 //! the messages levelmap writes, decoded by rosbags, are the ones written. The Python side
-//! is `rosbags_messages.py`, run in a venv made once under the build's temporary folder
-//! (rosbags 0.11.9 and numpy from PyPI; the test fails if they cannot be installed).
+//! is `rosbags_messages.py`, run by `testdata::rosbags_python` (a venv made once beside the build).
 
 use ros2msg::{
     CloudPoints, Imu, NavSatFix, OccupancyGrid, Odometry, TfMessage, decode, decode_cloud, encode,
@@ -11,29 +10,9 @@ use serde::de::DeserializeOwned;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-const ROSBAGS: &str = "rosbags==0.11.9";
-
-/// The venv's python, made when missing.
-fn python() -> PathBuf {
-    let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("rosbags-0.11.9-venv");
-    let python = venv.join("bin/python");
-    if !python.exists() {
-        let run = |cmd: &mut Command| {
-            let status = cmd.status().expect("python3 runs");
-            assert!(
-                status.success(),
-                "{cmd:?} failed: the test needs python3 and PyPI"
-            );
-        };
-        run(Command::new("python3").args(["-m", "venv"]).arg(&venv));
-        run(Command::new(venv.join("bin/pip")).args(["install", "-q", ROSBAGS, "numpy"]));
-    }
-    python
-}
-
 fn rosbags(mode: &str, dir: &Path) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rosbags_messages.py");
-    let out = Command::new(python())
+    let out = Command::new(testdata::rosbags_python())
         .arg(script)
         .arg(mode)
         .arg(dir)

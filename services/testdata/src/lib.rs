@@ -41,3 +41,35 @@ mod tests {
         );
     }
 }
+
+/// The rosbags release the cross-implementation tests check ROS 2 encodings against.
+pub const ROSBAGS: &str = "rosbags==0.11.9";
+
+/// A python with rosbags and numpy from PyPI: a venv made on first use beside the build
+/// (`target/rosbags-0.11.9-venv`). Panics, naming the step, when python3 or PyPI is missing:
+/// the tests that need it must fail, not skip.
+pub fn rosbags_python() -> PathBuf {
+    let exe = std::env::current_exe().expect("the test's path");
+    // target/<profile>/deps/<test>: the venv goes in target/.
+    let target = exe
+        .ancestors()
+        .nth(3)
+        .expect("a test runs from target/<profile>/deps");
+    let venv = target.join("rosbags-0.11.9-venv");
+    let python = venv.join("bin/python");
+    if !python.exists() {
+        let run = |cmd: &mut std::process::Command| {
+            let status = cmd.status().expect("python3 runs");
+            assert!(
+                status.success(),
+                "{cmd:?} failed: the test needs python3 and PyPI"
+            );
+        };
+        run(std::process::Command::new("python3")
+            .args(["-m", "venv"])
+            .arg(&venv));
+        run(std::process::Command::new(venv.join("bin/pip"))
+            .args(["install", "-q", ROSBAGS, "numpy"]));
+    }
+    python
+}
