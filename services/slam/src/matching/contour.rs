@@ -73,6 +73,45 @@ pub(super) struct RangeMatchPoint {
     pub weight: f64,
 }
 
+/// What the searches read of a segment a → b of the polyline.
+#[derive(Clone, Copy, Debug)]
+struct Segment {
+    /// b − a (m); zero where a and b are not joined, which no projection falls inside.
+    ab: [f64; 2],
+    /// |b − a|² (m²).
+    len2: f64,
+    /// The smaller and the larger range of a and b (m); an empty interval (+∞, −∞) where
+    /// not joined, which no range falls inside.
+    range_lo: f64,
+    range_hi: f64,
+    /// Bearing from a to b (rad), `bearing_offset(bearing a, bearing b)`.
+    gap: f64,
+}
+
+impl Segment {
+    fn new(scan: &Scan2, i: usize, j: usize, joined: bool) -> Segment {
+        let (points, bearings, ranges) = (scan.points(), scan.bearings_rad(), scan.ranges_m());
+        if !joined {
+            return Segment {
+                ab: [0.0; 2],
+                len2: 0.0,
+                range_lo: f64::INFINITY,
+                range_hi: f64::NEG_INFINITY,
+                gap: 0.0,
+            };
+        }
+        let (a, b) = (points[i], points[j]);
+        let ab = [b[0] - a[0], b[1] - a[1]];
+        Segment {
+            ab,
+            len2: ab[0] * ab[0] + ab[1] * ab[1],
+            range_lo: ranges[i].min(ranges[j]),
+            range_hi: ranges[i].max(ranges[j]),
+            gap: bearing_offset(bearings[i], bearings[j]),
+        }
+    }
+}
+
 /// The reference scan with its joins and a bearing lookup table.
 pub(super) struct Contour<'a> {
     points: &'a [[f64; 2]],
@@ -80,6 +119,9 @@ pub(super) struct Contour<'a> {
     ranges: &'a [f64],
     /// `joined[i]`: the segment from return i to return (i + 1) mod n lies on one surface.
     joined: Vec<bool>,
+    /// `segments[i]`: segment i → (i + 1) mod n as both searches read it, computed once
+    /// rather than per query; empty where not joined, so the walks need not test `joined`.
+    segments: Vec<Segment>,
     /// Surface normal at each return; `None` for an isolated return.
     normals: Vec<Option<[f64; 2]>>,
     /// `buckets[k]`: the first return whose bearing is ≥ −π + k·2π/len (len = buckets.len()).
@@ -114,6 +156,9 @@ impl<'a> Contour<'a> {
                     && dist2(points[i], points[j]) <= limit * limit
             })
             .collect();
+        let segments = (0..n)
+            .map(|i| Segment::new(scan, i, (i + 1) % n, joined[i]))
+            .collect();
         let normals = vec![None; n];
         let len = (2 * n).max(64);
         let mut buckets = Vec::with_capacity(len);
@@ -130,6 +175,7 @@ impl<'a> Contour<'a> {
             bearings,
             ranges,
             joined,
+            segments,
             normals,
             buckets,
         }

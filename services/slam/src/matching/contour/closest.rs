@@ -18,9 +18,7 @@ impl Contour<'_> {
         for k in 0..n {
             let j = wrap_index(query.start + k, n);
             let i = if j == 0 { n - 1 } else { j - 1 };
-            if self.joined[i] {
-                self.try_segment(q, i, &mut best);
-            }
+            self.try_segment(q, i, &mut best);
             if self.beyond(query, j, best.d2) {
                 break;
             }
@@ -30,7 +28,7 @@ impl Contour<'_> {
         // Left (clockwise), over the returns the right walk did not reach.
         for k in 0..n.saturating_sub(visited) {
             let j = wrap_index(query.start + n - 1 - k, n);
-            if k > 0 && self.joined[j] {
+            if k > 0 {
                 self.try_segment(q, j, &mut best);
             }
             if self.beyond(query, j, best.d2) {
@@ -83,21 +81,19 @@ impl Contour<'_> {
     }
 
     /// The projection of `q` on segment i → i + 1, when it falls strictly inside (the ends
-    /// are returns, tried on their own).
+    /// are returns, tried on their own; an unjoined segment is empty).
+    #[inline(always)]
     fn try_segment(&self, q: [f64; 2], i: usize, best: &mut Best) {
-        let j = if i + 1 == self.len() { 0 } else { i + 1 };
-        let (a, b) = (self.points[i], self.points[j]);
-        let ab = [b[0] - a[0], b[1] - a[1]];
+        let (a, seg) = (self.points[i], &self.segments[i]);
+        let (ab, len2) = (seg.ab, seg.len2);
         let aq = [q[0] - a[0], q[1] - a[1]];
-        let len2 = ab[0] * ab[0] + ab[1] * ab[1];
         let along = aq[0] * ab[0] + aq[1] * ab[1];
-        // Outside the segment (or a segment of length 0): its ends are tried on their own.
-        if along <= 0.0 || along >= len2 {
-            return;
-        }
         // Squared distance to the line, cross² / len2, compared before dividing.
         let cross = aq[0] * ab[1] - aq[1] * ab[0];
-        if cross * cross >= best.d2 * len2 {
+        // Inside the segment (not at or past an end, not of length 0) and nearer than the
+        // best: one branch, rarely taken, instead of three hard to predict.
+        let nearer = !(along <= 0.0) & !(along >= len2) & !(cross * cross >= best.d2 * len2);
+        if !nearer {
             return;
         }
         let s = along / len2;
