@@ -11,7 +11,9 @@ impl Contour<'_> {
         let q = query.point;
         let mut best = Best {
             d2: max_distance_m * max_distance_m,
-            hit: None,
+            at: usize::MAX,
+            on_segment: false,
+            s: 0.0,
         };
         // Right (counter-clockwise): at each return, first the segment that leads to it.
         let mut visited = 0;
@@ -36,20 +38,27 @@ impl Contour<'_> {
             }
             self.try_return(q, j, &mut best);
         }
+        if best.at == usize::MAX {
+            return None;
+        }
         let distance_m = best.d2.sqrt();
-        Some(match best.hit? {
-            Hit::Segment { point, segment, s } => Closest {
-                point,
+        let j = best.at;
+        Some(if best.on_segment {
+            let (a, ab) = (self.points[j], self.segments[j].ab);
+            Closest {
+                point: [a[0] + best.s * ab[0], a[1] + best.s * ab[1]],
                 distance_m,
-                normal: self.blended_normal(segment, s),
+                normal: self.blended_normal(j, best.s),
                 open_end: false,
-            },
-            Hit::Return(j) => Closest {
+            }
+        } else {
+            let before = if j == 0 { n - 1 } else { j - 1 };
+            Closest {
                 point: self.points[j],
                 distance_m,
                 normal: self.normals[j],
-                open_end: self.joined[(j + n - 1) % n] != self.joined[j],
-            },
+                open_end: self.joined[before] != self.joined[j],
+            }
         })
     }
 
@@ -70,14 +79,14 @@ impl Contour<'_> {
         cross * cross > d2 * self.ranges[j] * self.ranges[j]
     }
 
+    /// Branch-free: whether a return beats the best is as often yes as no.
+    #[inline(always)]
     fn try_return(&self, q: [f64; 2], j: usize, best: &mut Best) {
         let d2 = dist2(q, self.points[j]);
-        if d2 < best.d2 {
-            *best = Best {
-                d2,
-                hit: Some(Hit::Return(j)),
-            };
-        }
+        let better = d2 < best.d2;
+        best.d2 = if better { d2 } else { best.d2 };
+        best.at = if better { j } else { best.at };
+        best.on_segment &= !better;
     }
 
     /// The projection of `q` on segment i → i + 1, when it falls strictly inside (the ends
@@ -96,16 +105,11 @@ impl Contour<'_> {
         if !nearer {
             return;
         }
-        let s = along / len2;
-        let point = [a[0] + s * ab[0], a[1] + s * ab[1]];
-        let hit = Some(Hit::Segment {
-            point,
-            segment: i,
-            s,
-        });
         *best = Best {
             d2: cross * cross / len2,
-            hit,
+            at: i,
+            on_segment: true,
+            s: along / len2,
         };
     }
 
@@ -122,17 +126,11 @@ impl Contour<'_> {
     }
 }
 
+/// The nearest candidate so far: return `at`, or the point at fraction `s` of segment
+/// `at` → `at` + 1 when `on_segment`; `at` is `usize::MAX` while there is none.
 struct Best {
     d2: f64,
-    hit: Option<Hit>,
-}
-
-enum Hit {
-    Return(usize),
-    /// At fraction s of segment i → i + 1.
-    Segment {
-        point: [f64; 2],
-        segment: usize,
-        s: f64,
-    },
+    at: usize,
+    on_segment: bool,
+    s: f64,
 }
