@@ -124,8 +124,10 @@ pub(super) struct Contour<'a> {
     segments: Vec<Segment>,
     /// Surface normal at each return; `None` for an isolated return.
     normals: Vec<Option<[f64; 2]>>,
-    /// `buckets[k]`: the first return whose bearing is ≥ −π + k·2π/len (len = buckets.len()).
+    /// `buckets[k]`: the first return whose [`bucket`] is ≥ k.
     buckets: Vec<u32>,
+    /// buckets.len() / 2π.
+    bucket_scale: f64,
 }
 
 impl<'a> Contour<'a> {
@@ -161,11 +163,11 @@ impl<'a> Contour<'a> {
             .collect();
         let normals = vec![None; n];
         let len = (2 * n).max(64);
+        let bucket_scale = len as f64 / TAU;
         let mut buckets = Vec::with_capacity(len);
         let mut i = 0;
         for k in 0..len {
-            let lower = -PI + TAU * k as f64 / len as f64;
-            while i < n && bearings[i] < lower {
+            while i < n && bucket(bearings[i], bucket_scale, len) < k {
                 i += 1;
             }
             buckets.push(i as u32);
@@ -178,6 +180,7 @@ impl<'a> Contour<'a> {
             segments,
             normals,
             buckets,
+            bucket_scale,
         }
     }
 
@@ -209,8 +212,7 @@ impl<'a> Contour<'a> {
     /// Index of the first return at or after `bearing` going counter-clockwise (wrapping to 0).
     fn position(&self, bearing: f64) -> usize {
         let n = self.len();
-        let len = self.buckets.len();
-        let k = (((bearing + PI) / TAU * len as f64) as usize).min(len - 1);
+        let k = bucket(bearing, self.bucket_scale, self.buckets.len());
         let mut i = self.buckets[k] as usize;
         while i < n && self.bearings[i] < bearing {
             i += 1;
@@ -242,6 +244,12 @@ impl<'a> Contour<'a> {
         }
         min
     }
+}
+
+/// The bucket of a bearing among `len`, by multiplication (no division per query). It never
+/// decreases with the bearing, so every return before `buckets[k]` lies before the bearing.
+fn bucket(bearing: f64, scale: f64, len: usize) -> usize {
+    (((bearing + PI) * scale) as usize).min(len - 1)
 }
 
 #[cfg(test)]
