@@ -101,7 +101,7 @@ impl Contour<'_> {
         let cross = aq[0] * ab[1] - aq[1] * ab[0];
         // Inside the segment (not at or past an end, not of length 0) and nearer than the
         // best: one branch, rarely taken, instead of three hard to predict.
-        let nearer = !(along <= 0.0) & !(along >= len2) & !(cross * cross >= best.d2 * len2);
+        let nearer = (along > 0.0) & (along < len2) & (cross * cross < best.d2 * len2);
         if !nearer {
             return;
         }
