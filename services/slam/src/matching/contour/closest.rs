@@ -115,7 +115,7 @@ impl Contour<'_> {
 
     /// The surface normal at fraction s of segment i → i + 1: both ends are joined, so both
     /// have normals; blended along the segment.
-    #[inline]
+    #[inline(always)]
     pub(super) fn blended_normal(&self, i: usize, s: f64) -> Option<[f64; 2]> {
         let j = if i + 1 == self.len() { 0 } else { i + 1 };
         let (na, nb) = (

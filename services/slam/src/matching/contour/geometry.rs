@@ -56,6 +56,7 @@ pub(super) fn unit_normal(a: [f64; 2], b: [f64; 2]) -> Option<[f64; 2]> {
     unit([a[1] - b[1], b[0] - a[0]])
 }
 
+#[inline(always)]
 pub(super) fn unit(v: [f64; 2]) -> Option<[f64; 2]> {
     let len = (v[0] * v[0] + v[1] * v[1]).sqrt();
     (len > 1e-12).then(|| [v[0] / len, v[1] / len])
