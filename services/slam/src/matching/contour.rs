@@ -73,6 +73,45 @@ pub(super) struct RangeMatchPoint {
     pub weight: f64,
 }
 
+/// What the searches read of a segment a → b of the polyline.
+#[derive(Clone, Copy, Debug)]
+struct Segment {
+    /// b − a (m); zero where a and b are not joined, which no projection falls inside.
+    ab: [f64; 2],
+    /// |b − a|² (m²).
+    len2: f64,
+    /// The smaller and the larger range of a and b (m); an empty interval (+∞, −∞) where
+    /// not joined, which no range falls inside.
+    range_lo: f64,
+    range_hi: f64,
+    /// Bearing from a to b (rad), `bearing_offset(bearing a, bearing b)`.
+    gap: f64,
+}
+
+impl Segment {
+    fn new(scan: &Scan2, i: usize, j: usize, joined: bool) -> Segment {
+        let (points, bearings, ranges) = (scan.points(), scan.bearings_rad(), scan.ranges_m());
+        if !joined {
+            return Segment {
+                ab: [0.0; 2],
+                len2: 0.0,
+                range_lo: f64::INFINITY,
+                range_hi: f64::NEG_INFINITY,
+                gap: 0.0,
+            };
+        }
+        let (a, b) = (points[i], points[j]);
+        let ab = [b[0] - a[0], b[1] - a[1]];
+        Segment {
+            ab,
+            len2: ab[0] * ab[0] + ab[1] * ab[1],
+            range_lo: ranges[i].min(ranges[j]),
+            range_hi: ranges[i].max(ranges[j]),
+            gap: bearing_offset(bearings[i], bearings[j]),
+        }
+    }
+}
+
 /// The reference scan with its joins and a bearing lookup table.
 pub(super) struct Contour<'a> {
     points: &'a [[f64; 2]],
@@ -80,10 +119,15 @@ pub(super) struct Contour<'a> {
     ranges: &'a [f64],
     /// `joined[i]`: the segment from return i to return (i + 1) mod n lies on one surface.
     joined: Vec<bool>,
+    /// `segments[i]`: segment i → (i + 1) mod n as both searches read it, computed once
+    /// rather than per query; empty where not joined, so the walks need not test `joined`.
+    segments: Vec<Segment>,
     /// Surface normal at each return; `None` for an isolated return.
     normals: Vec<Option<[f64; 2]>>,
-    /// `buckets[k]`: the first return whose bearing is ≥ −π + k·2π/len (len = buckets.len()).
+    /// `buckets[k]`: the first return whose [`bucket`] is ≥ k.
     buckets: Vec<u32>,
+    /// buckets.len() / 2π.
+    bucket_scale: f64,
 }
 
 impl<'a> Contour<'a> {
@@ -114,13 +158,16 @@ impl<'a> Contour<'a> {
                     && dist2(points[i], points[j]) <= limit * limit
             })
             .collect();
+        let segments = (0..n)
+            .map(|i| Segment::new(scan, i, (i + 1) % n, joined[i]))
+            .collect();
         let normals = vec![None; n];
         let len = (2 * n).max(64);
+        let bucket_scale = len as f64 / TAU;
         let mut buckets = Vec::with_capacity(len);
         let mut i = 0;
         for k in 0..len {
-            let lower = -PI + TAU * k as f64 / len as f64;
-            while i < n && bearings[i] < lower {
+            while i < n && bucket(bearings[i], bucket_scale, len) < k {
                 i += 1;
             }
             buckets.push(i as u32);
@@ -130,8 +177,10 @@ impl<'a> Contour<'a> {
             bearings,
             ranges,
             joined,
+            segments,
             normals,
             buckets,
+            bucket_scale,
         }
     }
 
@@ -163,8 +212,7 @@ impl<'a> Contour<'a> {
     /// Index of the first return at or after `bearing` going counter-clockwise (wrapping to 0).
     fn position(&self, bearing: f64) -> usize {
         let n = self.len();
-        let len = self.buckets.len();
-        let k = (((bearing + PI) / TAU * len as f64) as usize).min(len - 1);
+        let k = bucket(bearing, self.bucket_scale, self.buckets.len());
         let mut i = self.buckets[k] as usize;
         while i < n && self.bearings[i] < bearing {
             i += 1;
@@ -196,6 +244,12 @@ impl<'a> Contour<'a> {
         }
         min
     }
+}
+
+/// The bucket of a bearing among `len`, by multiplication (no division per query). It never
+/// decreases with the bearing, so every return before `buckets[k]` lies before the bearing.
+fn bucket(bearing: f64, scale: f64, len: usize) -> usize {
+    (((bearing + PI) * scale) as usize).min(len - 1)
 }
 
 #[cfg(test)]

@@ -11,16 +11,16 @@ impl Contour<'_> {
         let q = query.point;
         let mut best = Best {
             d2: max_distance_m * max_distance_m,
-            hit: None,
+            at: usize::MAX,
+            on_segment: false,
+            s: 0.0,
         };
         // Right (counter-clockwise): at each return, first the segment that leads to it.
         let mut visited = 0;
         for k in 0..n {
             let j = wrap_index(query.start + k, n);
             let i = if j == 0 { n - 1 } else { j - 1 };
-            if self.joined[i] {
-                self.try_segment(q, i, &mut best);
-            }
+            self.try_segment(q, i, &mut best);
             if self.beyond(query, j, best.d2) {
                 break;
             }
@@ -30,7 +30,7 @@ impl Contour<'_> {
         // Left (clockwise), over the returns the right walk did not reach.
         for k in 0..n.saturating_sub(visited) {
             let j = wrap_index(query.start + n - 1 - k, n);
-            if k > 0 && self.joined[j] {
+            if k > 0 {
                 self.try_segment(q, j, &mut best);
             }
             if self.beyond(query, j, best.d2) {
@@ -38,20 +38,27 @@ impl Contour<'_> {
             }
             self.try_return(q, j, &mut best);
         }
+        if best.at == usize::MAX {
+            return None;
+        }
         let distance_m = best.d2.sqrt();
-        Some(match best.hit? {
-            Hit::Segment { point, segment, s } => Closest {
-                point,
+        let j = best.at;
+        Some(if best.on_segment {
+            let (a, ab) = (self.points[j], self.segments[j].ab);
+            Closest {
+                point: [a[0] + best.s * ab[0], a[1] + best.s * ab[1]],
                 distance_m,
-                normal: self.blended_normal(segment, s),
+                normal: self.blended_normal(j, best.s),
                 open_end: false,
-            },
-            Hit::Return(j) => Closest {
+            }
+        } else {
+            let before = if j == 0 { n - 1 } else { j - 1 };
+            Closest {
                 point: self.points[j],
                 distance_m,
                 normal: self.normals[j],
-                open_end: self.joined[(j + n - 1) % n] != self.joined[j],
-            },
+                open_end: self.joined[before] != self.joined[j],
+            }
         })
     }
 
@@ -72,49 +79,43 @@ impl Contour<'_> {
         cross * cross > d2 * self.ranges[j] * self.ranges[j]
     }
 
+    /// Branch-free: whether a return beats the best is as often yes as no.
+    #[inline(always)]
     fn try_return(&self, q: [f64; 2], j: usize, best: &mut Best) {
         let d2 = dist2(q, self.points[j]);
-        if d2 < best.d2 {
-            *best = Best {
-                d2,
-                hit: Some(Hit::Return(j)),
-            };
-        }
+        let better = d2 < best.d2;
+        best.d2 = if better { d2 } else { best.d2 };
+        best.at = if better { j } else { best.at };
+        best.on_segment &= !better;
     }
 
     /// The projection of `q` on segment i → i + 1, when it falls strictly inside (the ends
-    /// are returns, tried on their own).
+    /// are returns, tried on their own; an unjoined segment is empty).
+    #[inline(always)]
     fn try_segment(&self, q: [f64; 2], i: usize, best: &mut Best) {
-        let j = if i + 1 == self.len() { 0 } else { i + 1 };
-        let (a, b) = (self.points[i], self.points[j]);
-        let ab = [b[0] - a[0], b[1] - a[1]];
+        let (a, seg) = (self.points[i], &self.segments[i]);
+        let (ab, len2) = (seg.ab, seg.len2);
         let aq = [q[0] - a[0], q[1] - a[1]];
-        let len2 = ab[0] * ab[0] + ab[1] * ab[1];
         let along = aq[0] * ab[0] + aq[1] * ab[1];
-        // Outside the segment (or a segment of length 0): its ends are tried on their own.
-        if along <= 0.0 || along >= len2 {
-            return;
-        }
         // Squared distance to the line, cross² / len2, compared before dividing.
         let cross = aq[0] * ab[1] - aq[1] * ab[0];
-        if cross * cross >= best.d2 * len2 {
+        // Inside the segment (not at or past an end, not of length 0) and nearer than the
+        // best: one branch, rarely taken, instead of three hard to predict.
+        let nearer = (along > 0.0) & (along < len2) & (cross * cross < best.d2 * len2);
+        if !nearer {
             return;
         }
-        let s = along / len2;
-        let point = [a[0] + s * ab[0], a[1] + s * ab[1]];
-        let hit = Some(Hit::Segment {
-            point,
-            segment: i,
-            s,
-        });
         *best = Best {
             d2: cross * cross / len2,
-            hit,
+            at: i,
+            on_segment: true,
+            s: along / len2,
         };
     }
 
     /// The surface normal at fraction s of segment i → i + 1: both ends are joined, so both
     /// have normals; blended along the segment.
+    #[inline(always)]
     pub(super) fn blended_normal(&self, i: usize, s: f64) -> Option<[f64; 2]> {
         let j = if i + 1 == self.len() { 0 } else { i + 1 };
         let (na, nb) = (
@@ -126,17 +127,11 @@ impl Contour<'_> {
     }
 }
 
+/// The nearest candidate so far: return `at`, or the point at fraction `s` of segment
+/// `at` → `at` + 1 when `on_segment`; `at` is `usize::MAX` while there is none.
 struct Best {
     d2: f64,
-    hit: Option<Hit>,
-}
-
-enum Hit {
-    Return(usize),
-    /// At fraction s of segment i → i + 1.
-    Segment {
-        point: [f64; 2],
-        segment: usize,
-        s: f64,
-    },
+    at: usize,
+    on_segment: bool,
+    s: f64,
 }

@@ -31,14 +31,14 @@ pub(super) fn surface_normal(points: &[[f64; 2]], joined: &[bool], j: usize) -> 
     let half2 = (NORMAL_SPAN_M / 2.0).powi(2);
     let (mut lo, mut hi) = (j, j);
     for _ in 0..n {
-        let prev = (lo + n - 1) % n;
+        let prev = if lo == 0 { n - 1 } else { lo - 1 };
         if !joined[prev] || prev == hi || dist2(points[lo], points[j]) >= half2 {
             break;
         }
         lo = prev;
     }
     for _ in 0..n {
-        let next = (hi + 1) % n;
+        let next = if hi + 1 == n { 0 } else { hi + 1 };
         if !joined[hi] || next == lo || dist2(points[hi], points[j]) >= half2 {
             break;
         }
@@ -56,6 +56,7 @@ pub(super) fn unit_normal(a: [f64; 2], b: [f64; 2]) -> Option<[f64; 2]> {
     unit([a[1] - b[1], b[0] - a[0]])
 }
 
+#[inline(always)]
 pub(super) fn unit(v: [f64; 2]) -> Option<[f64; 2]> {
     let len = (v[0] * v[0] + v[1] * v[1]).sqrt();
     (len > 1e-12).then(|| [v[0] / len, v[1] / len])

@@ -39,9 +39,7 @@ impl Contour<'_> {
             let j = wrap_index(query.start + k, n);
             let offset = bearing_offset(query.bearing_rad, self.bearings[j]);
             let i = if j == 0 { n - 1 } else { j - 1 };
-            if self.joined[i] {
-                self.try_range(i, query, window, weight, &mut best);
-            }
+            self.try_range(i, query, window, weight, &mut best);
             if !(0.0..=window).contains(&offset) || weight * offset > best.cost {
                 break;
             }
@@ -54,7 +52,7 @@ impl Contour<'_> {
         for k in 0..n.saturating_sub(visited) {
             let j = wrap_index(query.start + n - 1 - k, n);
             let offset = bearing_offset(self.bearings[j], query.bearing_rad);
-            if k > 0 && self.joined[j] {
+            if k > 0 {
                 self.try_range(j, query, window, weight, &mut best);
             }
             if !(0.0..=window).contains(&offset) || weight * offset > best.cost {
@@ -96,7 +94,9 @@ impl Contour<'_> {
     }
 
     /// On segment i → i + 1, the bearing where the linearly interpolated range is the
-    /// query's, if the segment spans that range and the bearing is within `window_rad`.
+    /// query's, if the segment spans that range (an unjoined one spans none) and the
+    /// bearing is within `window_rad`.
+    #[inline(always)]
     fn try_range(
         &self,
         i: usize,
@@ -105,18 +105,18 @@ impl Contour<'_> {
         weight: f64,
         best: &mut RangeMatch,
     ) {
-        let j = if i + 1 == self.len() { 0 } else { i + 1 };
-        let (ra, rb, r_q) = (self.ranges[i], self.ranges[j], query.range_m);
-        if r_q < ra.min(rb) || r_q > ra.max(rb) {
+        let (seg, r_q) = (&self.segments[i], query.range_m);
+        if r_q < seg.range_lo || r_q > seg.range_hi {
             return;
         }
+        let j = if i + 1 == self.len() { 0 } else { i + 1 };
+        let (ra, rb) = (self.ranges[i], self.ranges[j]);
         let s = if rb == ra {
             0.5
         } else {
             (r_q - ra) / (rb - ra)
         };
-        let bearing =
-            wrap(self.bearings[i] + s * bearing_offset(self.bearings[i], self.bearings[j]));
+        let bearing = wrap(self.bearings[i] + s * seg.gap);
         let offset = bearing_offset(query.bearing_rad, bearing).abs();
         if offset <= window_rad {
             best.consider(weight * offset, RangeAt::Segment { segment: i, s });
