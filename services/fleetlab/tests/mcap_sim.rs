@@ -1,0 +1,186 @@
+//! Cross-implementation, end to end on the robot's side: the simulator's park run for one
+//! robot is written to a ROS 2 recording by rosbags (PyPI; `sim_recording.py`: unorganized
+//! PointCloud2 with per-point time, Odometry, Imu, NavSatFix, /tf_static, in rosbags' own
+//! MCAP and CDR code), played through `[source.mcap]` and mapped with the mapper's own code;
+//! its ATE must be within 0.02 m of the same run taken straight from `[source.sim]`.
+
+use edge::{
+    EdgeConfig, McapSource, McapSourceConfig, NodeBuilder, SimSource, SimSourceConfig, Source,
+    SourceEvent,
+};
+use fleetlab::{FLEET, sim_mapping_params};
+use mapper::{FleetMap, MapperConfig};
+use sim::FleetRobot;
+use slam::Pose2;
+use std::path::Path;
+use std::process::Command;
+
+const EPOCH_NS: u64 = 1_700_000_000_000_000_000;
+const DURATION_S: f64 = 60.0;
+
+fn sim_config() -> SimSourceConfig {
+    SimSourceConfig {
+        duration_s: DURATION_S,
+        ..SimSourceConfig::default()
+    }
+}
+
+/// The sim source's events for robot 0.
+fn sim_events() -> Vec<SourceEvent> {
+    let mut source = SimSource::new(&sim_config(), EPOCH_NS, 10.0).expect("loop 0");
+    std::iter::from_fn(|| source.next_event()).collect()
+}
+
+/// The events as the files `sim_recording.py` reads; returns the columns of a scan.
+fn export(events: &[SourceEvent], dir: &Path) -> usize {
+    let (mut odom, mut points, mut clouds, mut fixes) = (vec![], vec![], vec![], vec![]);
+    let mut tf = serde_json::Value::Null;
+    let mut columns = 0;
+    for event in events {
+        match event {
+            SourceEvent::Odometry(p) => {
+                let (t, q) = (p.pose.translation.vector, p.pose.rotation.coords);
+                odom.extend(p.stamp_ns.to_le_bytes());
+                for v in [t.x, t.y, t.z, q.x, q.y, q.z, q.w] {
+                    odom.extend(v.to_le_bytes());
+                }
+            }
+            SourceEvent::Scan(scan) => {
+                columns = scan.raw.columns.len();
+                let start = scan.raw.start_stamp_ns();
+                let first = points.len() / 16;
+                for c in &scan.raw.columns {
+                    let t = (c.stamp_ns - start) as u32;
+                    let range = c.start as usize..(c.start + c.len) as usize;
+                    for p in &scan.raw.points[range] {
+                        let [x, y, z] = if p.is_valid() {
+                            p.to_xyz()
+                        } else {
+                            [f32::NAN; 3]
+                        };
+                        for v in [x, y, z] {
+                            points.extend(v.to_le_bytes());
+                        }
+                        points.extend(t.to_le_bytes());
+                    }
+                }
+                let count = points.len() / 16 - first;
+                clouds.push(serde_json::json!({"stamp": start, "first": first, "count": count}));
+                for f in &scan.gps {
+                    fixes.push(serde_json::json!({
+                        "stamp": f.stamp_ns, "lat": f.latitude_deg, "lon": f.longitude_deg,
+                        "alt": f.altitude_m, "sigma_h": f.sigma_horizontal_m,
+                        "sigma_v": f.sigma_vertical_m,
+                    }));
+                    let a = f.antenna_in_robot_m;
+                    tf["gps"] = serde_json::json!([a.x, a.y, a.z]);
+                }
+                let m = &scan.sensor_in_robot;
+                let (t, q) = (m.translation.vector, m.rotation.coords);
+                tf["lidar"] = serde_json::json!([t.x, t.y, t.z, q.x, q.y, q.z, q.w]);
+            }
+        }
+    }
+    let write = |name: &str, bytes: &[u8]| std::fs::write(dir.join(name), bytes).expect(name);
+    write("odom.bin", &odom);
+    write("clouds.bin", &points);
+    write(
+        "clouds.json",
+        serde_json::to_string(&clouds).unwrap().as_bytes(),
+    );
+    write(
+        "fixes.json",
+        serde_json::to_string(&fixes).unwrap().as_bytes(),
+    );
+    write("tf.json", tf.to_string().as_bytes());
+    columns
+}
+
+/// The events mapped as the mapper maps them: the ATE against the truth, and the nodes.
+fn map(events: impl IntoIterator<Item = SourceEvent>) -> (f64, usize) {
+    let defaults = MapperConfig::default();
+    let datum = slam::geodesy::GeoDatum {
+        origin: sim::PARK_DATUM.origin,
+    };
+    let mut map = FleetMap::new(
+        FLEET,
+        sim_mapping_params(),
+        Some(datum),
+        defaults.max_range_m,
+    );
+    let base = EdgeConfig::default();
+    let mut builder = NodeBuilder::new(FLEET, "robot0", base.node.clone(), base.leveling, 0);
+    let duration_ns = (DURATION_S * 1e9) as u64;
+    let robot = FleetRobot::new(edge::park(), 0, duration_ns, 7).expect("loop 0");
+    let mount = robot.scanner().mount;
+    let mut truth = Vec::new();
+    for event in events {
+        let SourceEvent::Scan(scan) = event else {
+            continue;
+        };
+        let Some(node) = builder.offer(&scan).expect("a node") else {
+            continue;
+        };
+        map.ingest(&wire::node_input(&node).expect("valid"))
+            .expect("ingested");
+        map.optimize_pending().expect("optimized");
+        let start = scan.raw.columns[0].stamp_ns - EPOCH_NS;
+        truth.push(Pose2::from_isometry3(&(robot.truth_at(start) * mount)));
+    }
+    map.optimize_now().expect("optimized");
+    let ate = slam::position_rmse(
+        map.poses()
+            .iter()
+            .copied()
+            .zip(&truth)
+            .map(|(a, b)| (a, *b)),
+    );
+    (ate, truth.len())
+}
+
+#[test]
+fn the_park_run_recorded_by_rosbags_maps_as_the_simulated_source_does() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("mcap-sim");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let events = sim_events();
+    let columns = export(&events, &dir);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/sim_recording.py");
+    let out = Command::new(testdata::rosbags_python())
+        .arg(script)
+        .arg(&dir)
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let (sim_ate, sim_nodes) = map(events);
+    let mut source = McapSource::new(&McapSourceConfig {
+        path: dir.join("rec"),
+        cloud_topic: "/points".into(),
+        odometry_topic: "/odom".into(),
+        imu_topic: "/imu".into(),
+        gps_topic: "/fix".into(),
+        columns,
+        ..McapSourceConfig::default()
+    })
+    .expect("the recording opens");
+    let played: Vec<SourceEvent> = std::iter::from_fn(|| source.next_event()).collect();
+    let counts = source.counts().expect("read to the end");
+    let (mcap_ate, mcap_nodes) = map(played);
+    eprintln!(
+        "sim: {sim_nodes} nodes, ATE {sim_ate:.4} m; mcap: {mcap_nodes} nodes, ATE {mcap_ate:.4} m; {counts:?}"
+    );
+    assert!(counts.refused.is_empty(), "{counts:?}");
+    assert!(
+        mcap_nodes + 1 >= sim_nodes,
+        "{mcap_nodes} vs {sim_nodes} nodes"
+    );
+    assert!(
+        (mcap_ate - sim_ate).abs() <= 0.02,
+        "ATE {mcap_ate:.4} m from the recording, {sim_ate:.4} m from the simulator"
+    );
+}
