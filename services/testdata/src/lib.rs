@@ -27,21 +27,6 @@ pub fn shared_data(relative: &str) -> PathBuf {
     path
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_missing_file_names_its_path_and_the_override() {
-        let err = std::panic::catch_unwind(|| shared_data("no/such/file.bin")).unwrap_err();
-        let message = err.downcast_ref::<String>().expect("a formatted message");
-        assert!(
-            message.contains("no/such/file.bin") && message.contains(ENV),
-            "{message}"
-        );
-    }
-}
-
 /// The rosbags release the cross-implementation tests check ROS 2 encodings against.
 pub const ROSBAGS: &str = "rosbags==0.11.9";
 
@@ -72,4 +57,19 @@ pub fn rosbags_python() -> PathBuf {
             .args(["install", "-q", ROSBAGS, "numpy"]));
     }
     python
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_file_names_its_path_and_the_override() {
+        let err = std::panic::catch_unwind(|| shared_data("no/such/file.bin")).unwrap_err();
+        let message = err.downcast_ref::<String>().expect("a formatted message");
+        assert!(
+            message.contains("no/such/file.bin") && message.contains(ENV),
+            "{message}"
+        );
+    }
 }
