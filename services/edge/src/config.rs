@@ -3,7 +3,7 @@
 
 use crate::cloud::CloudParams;
 use crate::node::NodeParams;
-use crate::source::{FilesSourceConfig, McapSourceConfig, SimSourceConfig};
+use crate::source::{FilesSourceConfig, McapSourceConfig, Ros2SourceConfig, SimSourceConfig};
 use leveling::SegmentParams;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -49,6 +49,8 @@ pub enum SourceConfig {
     Files(FilesSourceConfig),
     /// A ROS 2 recording (MCAP).
     Mcap(McapSourceConfig),
+    /// A ROS 2 robot's live topics over Zenoh.
+    Ros2(Ros2SourceConfig),
 }
 
 impl Default for SourceConfig {

@@ -18,8 +18,8 @@ pub use node::{GpsReading, NodeBuilder, NodeError, NodeParams, PlanarScan, Senso
 pub use outbox::{Outbox, OutboxError};
 pub use service::{EdgeReport, run};
 pub use source::{
-    FilesSource, FilesSourceConfig, McapSource, McapSourceConfig, SimSourceConfig, Source,
-    SourceEvent,
+    FilesSource, FilesSourceConfig, McapSource, McapSourceConfig, Ros2Source, Ros2SourceConfig,
+    SimSourceConfig, Source, SourceEvent,
 };
 #[cfg(feature = "sim")]
 pub use source::{SimSource, park, sim_gps_reading};
@@ -39,5 +39,6 @@ pub fn open_source(config: &EdgeConfig, epoch_ns: u64) -> anyhow::Result<Box<dyn
         ),
         SourceConfig::Files(files) => Ok(Box::new(FilesSource::new(files, epoch_ns)?)),
         SourceConfig::Mcap(mcap) => Ok(Box::new(McapSource::new(mcap)?)),
+        SourceConfig::Ros2(ros2) => Ok(Box::new(Ros2Source::new(ros2)?)),
     }
 }

@@ -7,7 +7,9 @@ use serde::{Deserialize, Serialize};
 
 mod mcap;
 pub mod ros;
+mod ros2;
 pub use self::mcap::{McapSource, McapSourceConfig};
+pub use self::ros2::{KeyStyle, Ros2Source, Ros2SourceConfig, dds_type_name, topic_key};
 
 // The simulated robot: only with the `sim` feature (the lab, not a robot's build).
 #[cfg(feature = "sim")]

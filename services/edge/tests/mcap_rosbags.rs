@@ -4,7 +4,7 @@
 //! with their odometry, and the bad samples counted. The same recording cut mid-file still
 //! yields what came before the cut.
 
-use edge::source::ros::RosCounts;
+use edge::source::ros::{RosCounts, RosStreams};
 use edge::{McapSource, McapSourceConfig, Source, SourceEvent};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -33,11 +33,14 @@ fn recording(name: &str) -> PathBuf {
 fn config(path: &Path) -> McapSourceConfig {
     McapSourceConfig {
         path: path.to_owned(),
-        cloud_topic: "/points".into(),
-        odometry_topic: "/odom".into(),
-        imu_topic: "/imu".into(),
-        gps_topic: "/fix".into(),
-        columns: 64,
+        streams: RosStreams {
+            cloud_topic: "/points".into(),
+            odometry_topic: "/odom".into(),
+            imu_topic: "/imu".into(),
+            gps_topic: "/fix".into(),
+            columns: 64,
+            ..RosStreams::default()
+        },
         ..McapSourceConfig::default()
     }
 }

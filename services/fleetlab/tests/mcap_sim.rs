@@ -4,6 +4,7 @@
 //! MCAP and CDR code), played through `[source.mcap]` and mapped with the mapper's own code;
 //! its ATE must be within 0.02 m of the same run taken straight from `[source.sim]`.
 
+use edge::source::ros::RosStreams;
 use edge::{
     EdgeConfig, McapSource, McapSourceConfig, NodeBuilder, SimSource, SimSourceConfig, Source,
     SourceEvent,
@@ -160,11 +161,14 @@ fn the_park_run_recorded_by_rosbags_maps_as_the_simulated_source_does() {
     let (sim_ate, sim_nodes) = map(events);
     let mut source = McapSource::new(&McapSourceConfig {
         path: dir.join("rec"),
-        cloud_topic: "/points".into(),
-        odometry_topic: "/odom".into(),
-        imu_topic: "/imu".into(),
-        gps_topic: "/fix".into(),
-        columns,
+        streams: RosStreams {
+            cloud_topic: "/points".into(),
+            odometry_topic: "/odom".into(),
+            imu_topic: "/imu".into(),
+            gps_topic: "/fix".into(),
+            columns,
+            ..RosStreams::default()
+        },
         ..McapSourceConfig::default()
     })
     .expect("the recording opens");

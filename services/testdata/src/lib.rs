@@ -27,11 +27,12 @@ pub fn shared_data(relative: &str) -> PathBuf {
     path
 }
 
-/// The rosbags release the cross-implementation tests check ROS 2 encodings against.
-pub const ROSBAGS: &str = "rosbags==0.11.9";
+/// What the ROS 2 cross-implementation tests check levelmap against, from PyPI: rosbags
+/// (CDR, MCAP, rosbag2) and the Python Zenoh (live rmw_zenoh keys).
+pub const ROS2_PYTHON: [&str; 3] = ["rosbags==0.11.9", "eclipse-zenoh==1.10.2", "numpy"];
 
-/// A python with rosbags and numpy from PyPI: a venv made on first use beside the build
-/// (`target/rosbags-0.11.9-venv`). Panics, naming the step, when python3 or PyPI is missing:
+/// A python with [`ROS2_PYTHON`]: a venv made on first use beside the build
+/// (`target/ros2-python-venv-1`; the number changes with the list). Panics, naming the step, when python3 or PyPI is missing:
 /// the tests that need it must fail, not skip.
 pub fn rosbags_python() -> PathBuf {
     let exe = std::env::current_exe().expect("the test's path");
@@ -40,7 +41,7 @@ pub fn rosbags_python() -> PathBuf {
         .ancestors()
         .nth(3)
         .expect("a test runs from target/<profile>/deps");
-    let venv = target.join("rosbags-0.11.9-venv");
+    let venv = target.join("ros2-python-venv-1");
     let python = venv.join("bin/python");
     if !python.exists() {
         let run = |cmd: &mut std::process::Command| {
@@ -54,7 +55,8 @@ pub fn rosbags_python() -> PathBuf {
             .args(["-m", "venv"])
             .arg(&venv));
         run(std::process::Command::new(venv.join("bin/pip"))
-            .args(["install", "-q", ROSBAGS, "numpy"]));
+            .args(["install", "-q"])
+            .args(ROS2_PYTHON));
     }
     python
 }

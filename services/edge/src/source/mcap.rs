@@ -3,79 +3,36 @@
 //! events over a bounded channel, so a recording of any length is read at the pace the
 //! service takes them (the edge's `speed` paces them; 0 is as fast as possible).
 
-use super::ros::{RosAssembler, RosCounts, RosInputs};
+use super::ros::{RosAssembler, RosCounts, RosInputs, RosStreams};
 use super::{Source, SourceEvent};
-use leveling::nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::sync::{Arc, Mutex};
 
-/// See the module. Topics as `ros2 topic list` prints them.
+/// See the module.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
+#[serde(default)]
 pub struct McapSourceConfig {
     /// The `.mcap` file, or the rosbag2 folder (its `.mcap` files in name order).
     pub path: PathBuf,
-    /// The lidar's `sensor_msgs/PointCloud2`.
-    pub cloud_topic: String,
-    /// `nav_msgs/Odometry`: dead reckoning, and roll and pitch without an IMU.
-    pub odometry_topic: String,
-    /// `sensor_msgs/Imu` for roll and pitch (empty: none).
-    pub imu_topic: String,
-    /// `sensor_msgs/NavSatFix` (empty: none).
-    pub gps_topic: String,
-    /// The lidar on the robot, `[x, y, z, roll, pitch, yaw]` (m, rad); empty: from
-    /// `/tf_static` (the cloud's frame as a child of the base).
-    pub lidar_in_base: Vec<f64>,
-    /// The GNSS antenna on the robot, `[x, y, z]` (m); empty: from `/tf_static`, else 0.
-    pub antenna_in_base: Vec<f64>,
-    /// Azimuth columns a cloud is organized into (a 1024-column Ouster: 1024).
-    pub columns: usize,
+    /// The topics and frames.
+    #[serde(flatten)]
+    pub streams: RosStreams,
+    /// Keys no field takes: refused when the source opens (a typo must not become a
+    /// default; `deny_unknown_fields` does not work beside `flatten`).
+    #[serde(flatten, skip_serializing)]
+    pub unknown: BTreeMap<String, toml::Value>,
 }
 
 impl Default for McapSourceConfig {
     fn default() -> Self {
         McapSourceConfig {
             path: "recording.mcap".into(),
-            cloud_topic: "/points".into(),
-            odometry_topic: "/odom".into(),
-            imu_topic: String::new(),
-            gps_topic: String::new(),
-            lidar_in_base: Vec::new(),
-            antenna_in_base: Vec::new(),
-            columns: 1024,
+            streams: RosStreams::default(),
+            unknown: BTreeMap::new(),
         }
-    }
-}
-
-impl McapSourceConfig {
-    /// The assembler's inputs; an error for a malformed pose.
-    pub fn inputs(&self) -> anyhow::Result<RosInputs> {
-        let lidar_in_base = match self.lidar_in_base.as_slice() {
-            [] => None,
-            &[x, y, z, roll, pitch, yaw] => Some(Isometry3::from_parts(
-                Translation3::new(x, y, z),
-                UnitQuaternion::from_euler_angles(roll, pitch, yaw),
-            )),
-            other => anyhow::bail!("lidar_in_base: 6 numbers, not {}", other.len()),
-        };
-        let antenna_in_base = match self.antenna_in_base.as_slice() {
-            [] => None,
-            &[x, y, z] => Some(Vector3::new(x, y, z)),
-            other => anyhow::bail!("antenna_in_base: 3 numbers, not {}", other.len()),
-        };
-        let optional = |t: &str| (!t.is_empty()).then(|| t.to_owned());
-        anyhow::ensure!(self.columns > 0, "columns: at least 1");
-        Ok(RosInputs {
-            cloud_topic: self.cloud_topic.clone(),
-            odometry_topic: self.odometry_topic.clone(),
-            imu_topic: optional(&self.imu_topic),
-            gps_topic: optional(&self.gps_topic),
-            lidar_in_base,
-            antenna_in_base,
-            columns: self.columns,
-        })
     }
 }
 
@@ -88,7 +45,7 @@ pub struct McapSource {
 impl McapSource {
     /// Starts reading `config.path`; an error if it has no `.mcap` file or a bad setting.
     pub fn new(config: &McapSourceConfig) -> anyhow::Result<McapSource> {
-        let inputs = config.inputs()?;
+        let inputs = config.streams.inputs("[source.mcap]", &config.unknown)?;
         let files = recording_files(&config.path)?;
         let (tx, events) = sync_channel(64);
         let counts = Arc::new(Mutex::new(None));

@@ -9,6 +9,7 @@ use crate::node::{GpsReading, SensorScan};
 use leveling::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use leveling::{PoseTrack, TimedPose};
 use ros2msg::{CloudPoints, NavSatFix, NavSatStatus, Odometry, TfMessage};
+use serde::{Deserialize, Serialize};
 use slam::gnss::FixStatus;
 use std::collections::{BTreeMap, VecDeque};
 
@@ -29,6 +30,80 @@ pub const TF_STATIC_TOPIC: &str = "/tf_static";
 const ODOMETRY_KEPT_NS: u64 = 10_000_000_000;
 /// Scans and fixes waiting for odometry, at most (the oldest go, counted).
 const MAX_WAITING: usize = 8;
+
+/// The streams of a ROS 2 source as configured (`[source.mcap]`, `[source.ros2]`): topics
+/// as `ros2 topic list` prints them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct RosStreams {
+    /// The lidar's `sensor_msgs/PointCloud2`.
+    pub cloud_topic: String,
+    /// `nav_msgs/Odometry`: dead reckoning, and roll and pitch without an IMU.
+    pub odometry_topic: String,
+    /// `sensor_msgs/Imu` for roll and pitch (empty: none).
+    pub imu_topic: String,
+    /// `sensor_msgs/NavSatFix` (empty: none).
+    pub gps_topic: String,
+    /// The lidar on the robot, `[x, y, z, roll, pitch, yaw]` (m, rad); empty: from
+    /// `/tf_static` (the cloud's frame as a child of the base).
+    pub lidar_in_base: Vec<f64>,
+    /// The GNSS antenna on the robot, `[x, y, z]` (m); empty: from `/tf_static`, else 0.
+    pub antenna_in_base: Vec<f64>,
+    /// Azimuth columns a cloud is organized into (a 1024-column Ouster: 1024).
+    pub columns: usize,
+}
+
+impl Default for RosStreams {
+    fn default() -> Self {
+        RosStreams {
+            cloud_topic: "/points".into(),
+            odometry_topic: "/odom".into(),
+            imu_topic: String::new(),
+            gps_topic: String::new(),
+            lidar_in_base: Vec::new(),
+            antenna_in_base: Vec::new(),
+            columns: 1024,
+        }
+    }
+}
+
+impl RosStreams {
+    /// The assembler's inputs; an error, naming `table`, for a malformed pose or a key
+    /// in `unknown`.
+    pub fn inputs(
+        &self,
+        table: &str,
+        unknown: &BTreeMap<String, toml::Value>,
+    ) -> anyhow::Result<RosInputs> {
+        if let Some(key) = unknown.keys().next() {
+            anyhow::bail!("{table}: unknown key {key:?}");
+        }
+        let lidar_in_base = match self.lidar_in_base.as_slice() {
+            [] => None,
+            &[x, y, z, roll, pitch, yaw] => Some(Isometry3::from_parts(
+                Translation3::new(x, y, z),
+                UnitQuaternion::from_euler_angles(roll, pitch, yaw),
+            )),
+            other => anyhow::bail!("{table} lidar_in_base: 6 numbers, not {}", other.len()),
+        };
+        let antenna_in_base = match self.antenna_in_base.as_slice() {
+            [] => None,
+            &[x, y, z] => Some(Vector3::new(x, y, z)),
+            other => anyhow::bail!("{table} antenna_in_base: 3 numbers, not {}", other.len()),
+        };
+        anyhow::ensure!(self.columns > 0, "{table} columns: at least 1");
+        let optional = |t: &str| (!t.is_empty()).then(|| t.to_owned());
+        Ok(RosInputs {
+            cloud_topic: self.cloud_topic.clone(),
+            odometry_topic: self.odometry_topic.clone(),
+            imu_topic: optional(&self.imu_topic),
+            gps_topic: optional(&self.gps_topic),
+            lidar_in_base,
+            antenna_in_base,
+            columns: self.columns,
+        })
+    }
+}
 
 /// Which topics play which part, and the frames the messages do not give.
 #[derive(Clone, Debug, PartialEq)]
