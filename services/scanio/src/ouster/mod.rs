@@ -285,8 +285,8 @@ impl XyzLut {
     }
 }
 
-/// An organized scan of `frame`: destaggered columns in measurement order, bottom-up; each
-/// column stamped with its middle beam's measurement time. `file_index` holds each point's
+/// An organized scan of `frame`: destaggered columns, bottom-up, in the order of (and stamped
+/// with) their middle beam's measurement. `file_index` holds each point's
 /// staggered pixel index (row × columns_per_frame + measurement id), as the SDK lays them out.
 pub fn to_scan(frame: &Frame, meta: &SensorMeta, lut: &XyzLut) -> LoadedScan {
     let (w, h) = (meta.columns_per_frame, meta.pixels_per_column);
@@ -296,9 +296,11 @@ pub fn to_scan(frame: &Frame, meta: &SensorMeta, lut: &XyzLut) -> LoadedScan {
     };
     let mut raw = Scan3d::with_capacity(w, h);
     let mut file_index = Vec::with_capacity(w * h);
-    for v in 0..w {
-        let stamp_col = staggered(h / 2, v).clamp(first, last);
-        raw.begin_column(frame.stamps_ns[stamp_col]);
+    // Columns in the order of their middle beam's measurement, so stamps rise.
+    let mid = h / 2;
+    for k in 0..w {
+        let v = (k as i64 + meta.pixel_shift_by_row[mid]).rem_euclid(w as i64) as usize;
+        raw.begin_column(frame.stamps_ns[k.clamp(first, last)]);
         for row in (0..h).rev() {
             let m = staggered(row, v);
             let i = row * w + m;
