@@ -352,6 +352,11 @@ impl OusterScans {
     pub fn report(&self) -> OusterReport {
         self.reader.report()
     }
+
+    /// The metadata the capture is read with.
+    pub fn meta(&self) -> &SensorMeta {
+        self.reader.meta()
+    }
 }
 
 /// Reads every complete frame of `pcap`; an error naming the file if there is none.
@@ -368,7 +373,7 @@ pub fn load_all(pcap: &Path, meta: &Path) -> Result<(Vec<LoadedScan>, OusterRepo
             why.push(format!(
                 "{}: no lidar packets on port {} ({} UDP datagrams)",
                 pcap.display(),
-                scans.reader.meta().udp_port_lidar,
+                scans.meta().udp_port_lidar,
                 report.counts.pcap.udp
             ));
         }
