@@ -5,6 +5,17 @@ use testdata::shared_data as data;
 
 const EPOCH_NS: u64 = 1_000_000_000_000;
 
+/// KITTI odometry sequence 00's published `calib.txt` `Tr:` (Velodyne → cam0), written to a
+/// scratch file (the data folder's copy was typed in and has no download source).
+fn kitti_00_calib() -> PathBuf {
+    let path = std::env::temp_dir().join(format!("edge-calib-{}.txt", std::process::id()));
+    let tr = "Tr: 4.276802385584e-04 -9.999672484946e-01 -8.084491683471e-03 -1.198459927713e-02 \
+              -7.210626507497e-03 8.081198471645e-03 -9.999413164504e-01 -5.403984729748e-02 \
+              9.999738645903e-01 4.859485810390e-04 -7.206933692422e-03 -2.921968648686e-01\n";
+    std::fs::write(&path, tr).unwrap();
+    path
+}
+
 /// Every (odometry, scan) pair of a source.
 fn drain(source: &mut FilesSource) -> Vec<(TimedPose, SensorScan)> {
     let mut out = Vec::new();
@@ -27,7 +38,7 @@ fn kitti_scans_take_their_numbered_poses_and_times() {
         folder: data("kitti_velodyne/patchwork-plusplus"),
         poses: Some(gt.join("KITTI_00_gt.txt")),
         times: Some(gt.join("KITTI_00_gt_times.txt")),
-        calib: Some(gt.join("calib_00_Tr_velo_to_cam.txt")),
+        calib: Some(kitti_00_calib()),
         ..FilesSourceConfig::default()
     };
     let scans = drain(&mut FilesSource::new(&config, EPOCH_NS).unwrap());
@@ -83,11 +94,12 @@ fn a_capture_without_its_metadata_is_refused_by_name() {
     );
     let config = FilesSourceConfig {
         folder: data("kitti_velodyne/patchwork-plusplus"),
-        poses: Some(data(
-            "kitti_odometry_gt_trajectories/calib_00_Tr_velo_to_cam.txt",
-        )),
+        poses: Some(kitti_00_calib()),
         ..FilesSourceConfig::default()
     };
     let e = FilesSource::new(&config, 0).err().unwrap().to_string();
-    assert!(e.contains("calib_00_Tr_velo_to_cam.txt: line 1"), "{e}");
+    assert!(
+        e.contains("edge-calib-") && e.contains("txt: line 1"),
+        "{e}"
+    );
 }
