@@ -71,16 +71,18 @@ pub fn run(args: &LevelArgs, params: SegmentParams) -> Result<()> {
     }
     let read = scans.report();
     let warnings = read.warnings(file);
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
     if frames.is_empty() {
-        bail!(
-            "{}: no complete frame ({} lidar packets on port {})",
-            file.display(),
+        // One error line, with what went wrong folded in.
+        let mut why = vec![format!(
+            "{} lidar packets on port {}",
             read.counts.lidar_packets,
             scans.meta().udp_port_lidar
-        );
+        )];
+        why.extend(warnings);
+        bail!("{}: no complete frame ({})", file.display(), why.join("; "));
+    }
+    for w in &warnings {
+        eprintln!("warning: {w}");
     }
     let capture = CaptureReport {
         file: file.display().to_string(),
