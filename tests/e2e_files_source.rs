@@ -37,3 +37,54 @@ fn real_3dtk_scans_flow_from_an_edge_service_into_the_map() {
     drop(mapper);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The Ouster capture of the SDK's tests (3 frames, about 0.25 m apart) with its KITTI-format
+/// poses as odometry: the map's poses stay within 0.05 m of the poses file, read back over
+/// HTTP after the mapper has matched the scans.
+#[test]
+fn an_ouster_capture_maps_at_its_poses() {
+    let data = testdata::shared_data("ouster_organized_scans");
+    let poses_file = data.join("OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt");
+    let dir = temp_dir("ouster-source");
+    let mapper = MapperProcess::start(&dir);
+    // A node per frame: the frames are closer than the default 1 m.
+    let source = format!(
+        "[node]\nnode_distance_m = 0.1\n[source.files]\npcap = {:?}\nouster_meta = {:?}\nposes = {:?}\n",
+        data.join("OS-1-128_v2.3.0_1024x10_lb_n3.pcap"),
+        data.join("OS-1-128_v2.3.0_1024x10.json"),
+        poses_file
+    );
+    let edge = spawn_edge_with(&dir, 0, &mapper.zenoh, 0.0, &source);
+    let report = edge_report(edge, Duration::from_secs(120));
+    assert_eq!(report["nodes"], 3, "{report}");
+    assert_eq!(report["outbox_pending"], 0, "{report}");
+    // x y of each line's [R|t] (the sensor's frame: x forward, y left).
+    let expected: Vec<(f64, f64)> = std::fs::read_to_string(&poses_file)
+        .expect("poses file")
+        .lines()
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|f| f.parse().unwrap()).collect();
+            (v[3], v[7])
+        })
+        .collect();
+    // The mapper's solved graph once all three nodes are in.
+    let graph = wait_for(Duration::from_secs(30), || {
+        get_json(&mapper.http, "/api/v1/fleets/park/graph")
+            .filter(|g| g["nodes"].as_array().is_some_and(|n| n.len() == 3))
+    })
+    .expect("a graph of 3 nodes");
+    let mut worst = 0f64;
+    for node in graph["nodes"].as_array().unwrap() {
+        let seq = node["node_seq"].as_u64().unwrap() as usize;
+        let (x, y) = (
+            node["pose"]["x"].as_f64().unwrap(),
+            node["pose"]["y"].as_f64().unwrap(),
+        );
+        let (ex, ey) = expected[seq];
+        worst = worst.max((x - ex).hypot(y - ey));
+    }
+    println!("ouster capture: worst map pose vs the poses file {worst:.4} m; {graph}");
+    assert!(worst <= 0.05, "{worst} m: {graph}");
+    drop(mapper);
+    std::fs::remove_dir_all(&dir).ok();
+}

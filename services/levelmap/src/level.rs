@@ -13,6 +13,8 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
     Scan(ScanFormat),
+    /// An Ouster pcap capture (many scans), read with `--meta`.
+    Ouster,
     #[cfg(feature = "lab")]
     Sim,
 }
@@ -23,6 +25,7 @@ impl Format {
         match self {
             Format::Scan(ScanFormat::Kitti) => "kitti",
             Format::Scan(ScanFormat::ThreeDtk) => "threedtk",
+            Format::Ouster => "ouster",
             #[cfg(feature = "lab")]
             Format::Sim => "sim",
         }
@@ -30,15 +33,16 @@ impl Format {
 }
 
 #[cfg(feature = "lab")]
-const FORMATS: (&str, &str) = ("kitti, 3dtk or sim", "kitti|3dtk|sim");
+const FORMATS: (&str, &str) = ("kitti, 3dtk, ouster or sim", "kitti|3dtk|ouster|sim");
 #[cfg(not(feature = "lab"))]
-const FORMATS: (&str, &str) = ("kitti or 3dtk", "kitti|3dtk");
+const FORMATS: (&str, &str) = ("kitti, 3dtk or ouster", "kitti|3dtk|ouster");
 
 /// The format named by `--format`, or guessed from the file's extension.
 pub fn scan_format(file: &Path, format: Option<&str>) -> Result<Format> {
     match format {
         Some("kitti") => Ok(Format::Scan(ScanFormat::Kitti)),
         Some("3dtk") => Ok(Format::Scan(ScanFormat::ThreeDtk)),
+        Some("ouster") => Ok(Format::Ouster),
         #[cfg(feature = "lab")]
         Some("sim") => Ok(Format::Sim),
         Some(other) => bail!(
@@ -48,6 +52,7 @@ pub fn scan_format(file: &Path, format: Option<&str>) -> Result<Format> {
         ),
         #[cfg(feature = "lab")]
         None if file.extension().is_some_and(|e| e == "json") => Ok(Format::Sim),
+        None if file.extension().is_some_and(|e| e == "pcap") => Ok(Format::Ouster),
         None => ScanFormat::from_extension(file)
             .map(Format::Scan)
             .with_context(|| {
@@ -63,14 +68,18 @@ pub fn scan_format(file: &Path, format: Option<&str>) -> Result<Format> {
 /// Level one 3D scan: motion compensation, segmentation (eqs. 3.2–3.3), projection (eq. 3.4).
 #[derive(Args, Debug)]
 pub struct LevelArgs {
-    /// The 3D scan file.
+    /// The 3D scan file (an Ouster capture: every complete frame).
     pub file: PathBuf,
     /// File format: kitti (Velodyne .bin, float32 x y z reflectance), 3dtk (.3d text in cm,
-    /// with FILE.pose beside it if present) or sim (levelmap simulator JSON; lab builds only).
-    /// Guessed from the extension (.bin, .3d, .json) when omitted.
-    #[cfg_attr(feature = "lab", arg(long, value_name = "kitti|3dtk|sim"))]
-    #[cfg_attr(not(feature = "lab"), arg(long, value_name = "kitti|3dtk"))]
+    /// with FILE.pose beside it if present), ouster (pcap capture, with --meta) or sim
+    /// (levelmap simulator JSON; lab builds only). Guessed from the extension (.bin, .3d,
+    /// .pcap, .json) when omitted.
+    #[cfg_attr(feature = "lab", arg(long, value_name = "kitti|3dtk|ouster|sim"))]
+    #[cfg_attr(not(feature = "lab"), arg(long, value_name = "kitti|3dtk|ouster"))]
     pub format: Option<String>,
+    /// The sensor's metadata JSON for an Ouster capture (required with one).
+    #[arg(long, value_name = "FILE.json")]
+    pub meta: Option<PathBuf>,
     /// SemanticKITTI .label file for the scan: adds landmark_precision and beam_precision.
     #[arg(long, value_name = "FILE.label")]
     pub labels: Option<PathBuf>,
@@ -144,8 +153,18 @@ pub fn load_params(config: Option<&Path>) -> Result<SegmentParams> {
 pub fn run(args: &LevelArgs) -> Result<()> {
     let params = load_params(args.config.as_deref())?;
     let format = scan_format(&args.file, args.format.as_deref())?;
+    if format == Format::Ouster {
+        return crate::level_ouster::run(args, params);
+    }
+    if args.meta.is_some() {
+        bail!(
+            "--meta is for Ouster captures (.pcap), not {} files",
+            format.name()
+        );
+    }
     let t0 = Instant::now();
     let (loaded, sim_truth): (LoadedScan, Option<Vec<Option<bool>>>) = match format {
+        Format::Ouster => unreachable!("read above"),
         #[cfg(feature = "lab")]
         Format::Sim => sim::scan_file::load(&args.file).map(|(scan, truth)| {
             // Per point: on the ground or not (None: no surface, no return).
@@ -177,46 +196,16 @@ pub fn run(args: &LevelArgs) -> Result<()> {
             .map(|truth| Precision::score(&leveled.classes, &leveled.first_landmarks, |i| truth[i]))
     };
 
-    let mut warnings = Vec::new();
-    if leveled.counts.invalid == loaded.raw.points.len() {
-        warnings.push(format!(
-            "{}: none of the {} points is a valid return (NaN, or outside {}..{} m)",
-            args.file.display(),
-            loaded.raw.points.len(),
-            params.min_range_m,
-            params.max_range_m
-        ));
-    }
-    if leveled.scan.return_count() == 0 {
-        warnings.push(format!(
-            "{}: no landmark found: the leveled scan has no beams",
-            args.file.display()
-        ));
-    }
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
-
-    let report = LevelReport {
-        file: args.file.display().to_string(),
-        format: format.name().into(),
-        points: loaded.raw.points.len(),
-        columns: loaded.raw.columns.len(),
-        invalid: leveled.counts.invalid,
-        ground: leveled.counts.ground,
-        landmark: leveled.counts.landmark,
-        overhang: leveled.counts.overhang,
-        beams: leveled.scan.return_count(),
-        elapsed_ms,
-        repeat: args.repeat,
-        load_ms,
-        deskew_ms,
+    let report = report(
+        &args.file,
+        format.name(),
+        &loaded,
+        &leveled,
+        (load_ms, deskew_ms, elapsed_ms),
+        args.repeat,
         params,
-        landmark_precision: precision.map(|p| p.landmark_precision()),
-        beam_precision: precision.map(|p| p.beam_precision()),
-        scoring: precision,
-        warnings,
-    };
+        precision,
+    );
     if let Some(out) = &args.svg {
         let picture = crate::svg::fig4(&loaded.raw, &leveled, &args.file.display().to_string());
         std::fs::write(out, picture)
@@ -228,6 +217,60 @@ pub fn run(args: &LevelArgs) -> Result<()> {
         print_text(&report);
     }
     Ok(())
+}
+
+/// The report of one leveled scan; its warnings also go to stderr.
+#[allow(clippy::too_many_arguments)]
+pub fn report(
+    file: &Path,
+    format: &str,
+    loaded: &LoadedScan,
+    leveled: &Leveled,
+    (load_ms, deskew_ms, elapsed_ms): (f64, f64, f64),
+    repeat: u32,
+    params: SegmentParams,
+    precision: Option<Precision>,
+) -> LevelReport {
+    let mut warnings = Vec::new();
+    if leveled.counts.invalid == loaded.raw.points.len() {
+        warnings.push(format!(
+            "{}: none of the {} points is a valid return (NaN, or outside {}..{} m)",
+            file.display(),
+            loaded.raw.points.len(),
+            params.min_range_m,
+            params.max_range_m
+        ));
+    }
+    if leveled.scan.return_count() == 0 {
+        warnings.push(format!(
+            "{}: no landmark found: the leveled scan has no beams",
+            file.display()
+        ));
+    }
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+
+    LevelReport {
+        file: file.display().to_string(),
+        format: format.into(),
+        points: loaded.raw.points.len(),
+        columns: loaded.raw.columns.len(),
+        invalid: leveled.counts.invalid,
+        ground: leveled.counts.ground,
+        landmark: leveled.counts.landmark,
+        overhang: leveled.counts.overhang,
+        beams: leveled.scan.return_count(),
+        elapsed_ms,
+        repeat,
+        load_ms,
+        deskew_ms,
+        params,
+        landmark_precision: precision.map(|p| p.landmark_precision()),
+        beam_precision: precision.map(|p| p.beam_precision()),
+        scoring: precision,
+        warnings,
+    }
 }
 
 /// Levels `loaded`; returns the result, the deskew time and the median segmentation +
@@ -257,11 +300,11 @@ pub fn level_timed(
     Ok((leveled, deskew_ms, times[times.len() / 2]))
 }
 
-fn ms(since: Instant) -> f64 {
+pub fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
 
-fn print_text(r: &LevelReport) {
+pub fn print_text(r: &LevelReport) {
     println!("{} ({})", r.file, r.format);
     println!(
         "  points     {:>8} in {} columns ({} invalid)",

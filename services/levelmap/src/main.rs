@@ -6,6 +6,7 @@
 //! every build. A command not compiled in is not in `--help` either.
 
 mod level;
+mod level_ouster;
 #[cfg(feature = "mapper")]
 mod optimize;
 #[cfg(feature = "lab")]

@@ -187,3 +187,42 @@ fn bad_thresholds_in_the_config_are_refused() {
         "{stderr}"
     );
 }
+
+/// An Ouster capture: every frame leveled with `--meta`; without it, or cut before a frame
+/// is complete, or with metadata lacking a field, a one-line error naming the file.
+#[test]
+fn ouster_captures_need_their_metadata_and_whole_frames() {
+    let data = testdata::shared_data("ouster_organized_scans");
+    let pcap = data.join("OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+    let meta = data.join("OS-1-128_v2.3.0_1024x10.json");
+    let (pcap_arg, meta_arg) = (pcap.to_str().unwrap(), meta.to_str().unwrap());
+    let out = levelmap(&[
+        "level", pcap_arg, "--meta", meta_arg, "--json", "--repeat", "1",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let frames = report["frames"].as_array().expect("frames");
+    assert_eq!(frames.len(), 3, "{report}");
+    for f in frames {
+        assert!(f["beams"].as_u64().unwrap() > 500, "{f}");
+        assert_eq!(f["points"], 131_072);
+    }
+
+    let out = levelmap(&["level", pcap_arg, "--json"]);
+    assert_clean_failure(&out, &["lb_n3.pcap", "--meta"]);
+
+    let bytes = std::fs::read(&pcap).expect("capture");
+    let cut = temp_file("ouster", "cut.pcap", &bytes[..bytes.len() / 4]);
+    let out = levelmap(&["level", cut.to_str().unwrap(), "--meta", meta_arg]);
+    assert_clean_failure(&out, &["cut.pcap", "no complete frame"]);
+
+    let text = std::fs::read_to_string(&meta).expect("metadata");
+    let lacking = text.replace("\"beam_azimuth_angles\"", "\"renamed\"");
+    let bad_meta = temp_file("ouster", "meta.json", lacking.as_bytes());
+    let out = levelmap(&["level", pcap_arg, "--meta", bad_meta.to_str().unwrap()]);
+    assert_clean_failure(&out, &["meta.json", "lacks beam_azimuth_angles"]);
+}

@@ -1,12 +1,16 @@
 //! Readers for 3D scan files, turning each into the organized [`leveling::Scan3d`] the
-//! leveling pipeline takes: KITTI Velodyne `.bin` and 3DTK `.3d` + `.pose` (nodding SICK);
-//! plus SemanticKITTI `.label` files for scoring. The algorithms stay free of I/O. The
+//! leveling pipeline takes: KITTI Velodyne `.bin`, 3DTK `.3d` + `.pose` (nodding SICK) and
+//! Ouster pcap captures with their metadata JSON (many scans a file); KITTI odometry
+//! `poses.txt` / `times.txt`; plus SemanticKITTI `.label` files for scoring. The algorithms stay free of I/O. The
 //! simulator's own JSON scans are read by `sim::scan_file` (the lab), with this crate's
 //! [`LoadedScan`] and [`LoadError`], so that a robot's build needs no simulator.
 
 pub mod cloud;
 pub mod kitti;
 pub mod labels;
+pub mod odometry;
+pub mod ouster;
+pub mod pcap;
 pub mod threedtk;
 
 use leveling::nalgebra::Isometry3;
