@@ -43,7 +43,13 @@ pub fn rosbags_python() -> PathBuf {
         .expect("a test runs from target/<profile>/deps");
     let venv = target.join("ros2-python-venv-1");
     let python = venv.join("bin/python");
-    if !python.exists() {
+    // Tests run in parallel, and in several processes: one makes the venv, the others wait.
+    let lock = std::fs::File::create(target.join("ros2-python-venv-1.lock"))
+        .expect("a lock file beside the build");
+    lock.lock().expect("the venv's lock");
+    // Written last: a venv whose install failed half-way is made again.
+    let ready = venv.join("installed");
+    if !ready.exists() {
         let run = |cmd: &mut std::process::Command| {
             let status = cmd.status().expect("python3 runs");
             assert!(
@@ -52,11 +58,12 @@ pub fn rosbags_python() -> PathBuf {
             );
         };
         run(std::process::Command::new("python3")
-            .args(["-m", "venv"])
+            .args(["-m", "venv", "--clear"])
             .arg(&venv));
         run(std::process::Command::new(venv.join("bin/pip"))
             .args(["install", "-q"])
             .args(ROS2_PYTHON));
+        std::fs::write(&ready, ROS2_PYTHON.join("\n")).expect("the venv's marker");
     }
     python
 }
