@@ -51,14 +51,18 @@ async fn a_flood_is_shed_at_the_bounded_queue_and_the_chain_stays_contiguous() {
     let metrics = {
         let h = http.clone();
         tokio::task::spawn_blocking(move || {
-            // Until the worker has drained what it took.
+            // Until the worker has drained what it took: the metrics still for a second and
+            // every node they count as accepted in the map (a loaded machine can stall the
+            // worker for longer than a second mid-drain).
             let mut last = String::new();
             wait_for(Duration::from_secs(120), || {
                 let text = http_get(&h, "/metrics")?.1;
-                let settled = text == last;
+                let still = text == last;
                 last = text.clone();
+                let accepted = metric(&text, "levelmap_nodes_accepted_total");
+                let drained = node_seqs(&h, "park", "robot0").len() as u64 == accepted;
                 std::thread::sleep(Duration::from_secs(1));
-                settled.then_some(text)
+                (still && drained).then_some(text)
             })
         })
         .await

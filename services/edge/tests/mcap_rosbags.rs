@@ -7,7 +7,6 @@
 use edge::source::ros::{RosCounts, RosStreams};
 use edge::{McapSource, McapSourceConfig, Source, SourceEvent};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 const T0: u64 = 1_700_000_000_000_000_000;
 
@@ -17,16 +16,7 @@ fn recording(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("scratch folder");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rosbags_recording.py");
-    let out = Command::new(testdata::rosbags_python())
-        .arg(script)
-        .arg(&dir)
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    testdata::run_ros2_python(&script, &[&dir]);
     dir.join("rec")
 }
 

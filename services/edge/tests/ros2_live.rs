@@ -62,16 +62,7 @@ fn live_topics_give_what_the_recording_gives(style: KeyStyle, name: &str) {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
-    let out = Command::new(&python)
-        .arg(tests.join("rosbags_recording.py"))
-        .arg(&dir)
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    testdata::run_ros2_python(&tests.join("rosbags_recording.py"), &[&dir]);
     let rec = dir.join("rec");
 
     let mut recorded = McapSource::new(&McapSourceConfig {

@@ -14,7 +14,6 @@ use mapper::{FleetMap, MapperConfig};
 use sim::FleetRobot;
 use slam::Pose2;
 use std::path::Path;
-use std::process::Command;
 
 const EPOCH_NS: u64 = 1_700_000_000_000_000_000;
 const DURATION_S: f64 = 60.0;
@@ -147,16 +146,7 @@ fn the_park_run_recorded_by_rosbags_maps_as_the_simulated_source_does() {
     let events = sim_events();
     let columns = export(&events, &dir);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/sim_recording.py");
-    let out = Command::new(testdata::rosbags_python())
-        .arg(script)
-        .arg(&dir)
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    testdata::run_ros2_python(&script, &[&dir]);
 
     let (sim_ate, sim_nodes) = map(events);
     let mut source = McapSource::new(&McapSourceConfig {

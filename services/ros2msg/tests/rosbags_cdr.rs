@@ -8,21 +8,10 @@ use ros2msg::{
 };
 use serde::de::DeserializeOwned;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn rosbags(mode: &str, dir: &Path) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rosbags_messages.py");
-    let out = Command::new(testdata::rosbags_python())
-        .arg(script)
-        .arg(mode)
-        .arg(dir)
-        .output()
-        .expect("the script runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    testdata::run_ros2_python(&script, &[std::ffi::OsStr::new(mode), dir.as_os_str()]);
 }
 
 fn scratch(name: &str) -> PathBuf {

@@ -68,6 +68,22 @@ pub fn rosbags_python() -> PathBuf {
     python
 }
 
+/// Runs `script` with `args` in [`rosbags_python`]'s python; panics with its stderr when it
+/// fails.
+pub fn run_ros2_python<S: AsRef<std::ffi::OsStr>>(script: &std::path::Path, args: &[S]) {
+    let out = std::process::Command::new(rosbags_python())
+        .arg(script)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("{}: {e}", script.display()));
+    assert!(
+        out.status.success(),
+        "{}: {}",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

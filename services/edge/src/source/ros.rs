@@ -30,6 +30,10 @@ pub const TF_STATIC_TOPIC: &str = "/tf_static";
 const ODOMETRY_KEPT_NS: u64 = 10_000_000_000;
 /// Scans and fixes waiting for odometry, at most (the oldest go, counted).
 const MAX_WAITING: usize = 8;
+/// Fixes waiting for a scan, at most (the oldest go, counted).
+const MAX_READINGS: usize = 64;
+/// Static frames kept, at most (a robot has a handful).
+const MAX_STATIC_FRAMES: usize = 256;
 
 /// The streams of a ROS 2 source as configured (`[source.mcap]`, `[source.ros2]`): topics
 /// as `ros2 topic list` prints them.
@@ -296,6 +300,10 @@ impl RosAssembler {
     fn take_tf_static(&mut self, tf: TfMessage) {
         for t in tf.transforms {
             let (p, q) = (&t.transform.translation, &t.transform.rotation);
+            let known = self.tf_static.contains_key(&t.child_frame_id);
+            if !known && self.tf_static.len() == MAX_STATIC_FRAMES {
+                continue;
+            }
             if let Ok(rotation) = finite_rotation(q.w, q.x, q.y, q.z) {
                 let pose = Isometry3::from_parts(Translation3::new(p.x, p.y, p.z), rotation);
                 self.tf_static
@@ -331,6 +339,11 @@ impl RosAssembler {
                 self.frame_in_base(&fix.header.frame_id)
                     .map_or_else(Vector3::zeros, |p| p.translation.vector)
             });
+            // Without scans (the lidar down), fixes must not pile up: the oldest go.
+            if self.readings.len() == MAX_READINGS {
+                self.readings.remove(0);
+                self.refuse(&topic, "no scan after it");
+            }
             self.readings
                 .push(gps_reading(&fix, stamp_ns, antenna, at_fix));
         }

@@ -17,7 +17,7 @@
 //! other (`parts.rs`); from then on the ordinary searches find its closures.
 
 use super::Mapper2d;
-use crate::matching::correlative::{Exclusion, SearchWindow, runner_up, search};
+use crate::matching::correlative::SearchWindow;
 use crate::network::{EdgeKind, RelativeEdge};
 use crate::se2::{Pose2, wrap_angle};
 use serde::{Deserialize, Serialize};
@@ -212,35 +212,13 @@ impl Mapper2d {
         p: &FirstContactParams,
     ) -> Option<RelativeEdge> {
         let submap = &self.submaps.done[k];
-        let scan = &self.node_scans[node];
         let (centre, reach) = submap.centre_and_reach();
         let window = SearchWindow {
             linear_m: reach + p.margin_m,
             angular_rad: std::f64::consts::PI,
         };
         let initial = Pose2::new(centre[0], centre[1], 0.0);
-        let grid = &self.params.submaps.grid;
-        let found = search(&submap.grids, scan, initial, &window, p.min_score, grid)?;
-        // Ambiguous (a row of like lamp posts, a corridor): as likely wrong as right.
-        let s = &self.params.submaps;
-        let excluded = Exclusion {
-            pose: found.pose,
-            radius_m: s.ambiguity_radius_m,
-        };
-        let rival_floor = found.score * s.max_runner_up_ratio;
-        if runner_up(
-            &submap.grids,
-            scan,
-            initial,
-            &window,
-            &excluded,
-            rival_floor,
-            grid,
-        )
-        .is_some()
-        {
-            return None;
-        }
+        let found = self.unambiguous_match(k, node, initial, &window, p.min_score)?;
         let refined = self.refine_in_submap(k, node, &found.pose, p.gated);
         let (near, m) = refined?;
         Some(RelativeEdge {

@@ -8,7 +8,7 @@
 
 use super::Mapper2d;
 use super::submaps::Submap;
-use crate::matching::correlative::{Exclusion, SearchWindow, runner_up, search};
+use crate::matching::correlative::{CorrelativeMatch, Exclusion, SearchWindow, runner_up, search};
 use crate::matching::{accept, idc};
 use crate::network::{EdgeKind, RelativeEdge};
 use crate::se2::{Pose2, wrap_angle};
@@ -101,27 +101,7 @@ impl Mapper2d {
             };
             (window, p.min_score)
         };
-        let scan = &self.node_scans[node];
-        let found = search(&submap.grids, scan, initial, &window, min_score, &p.grid)?;
-        // Ambiguous (a corridor, a row of like doors): as likely wrong as right.
-        let rival_floor = found.score * p.max_runner_up_ratio;
-        let excluded = Exclusion {
-            pose: found.pose,
-            radius_m: p.ambiguity_radius_m,
-        };
-        if runner_up(
-            &submap.grids,
-            scan,
-            initial,
-            &window,
-            &excluded,
-            rival_floor,
-            &p.grid,
-        )
-        .is_some()
-        {
-            return None;
-        }
+        let found = self.unambiguous_match(k, node, initial, &window, min_score)?;
         let (near, m) = self.refine_in_submap(k, node, &found.pose, true)?;
         Some(RelativeEdge {
             from: near,
@@ -163,5 +143,38 @@ impl Mapper2d {
             && shift <= p.refine_max_shift_m
             && turn <= p.refine_max_turn_rad)
             .then_some((near, m))
+    }
+
+    /// The best pose of `node`'s scan in submap `k`, within `window` around `initial` and
+    /// scoring at least `min_score`, unless a pose elsewhere (beyond `ambiguity_radius_m`)
+    /// scores nearly as well (`max_runner_up_ratio`): a corridor, a row of like doors or
+    /// lamp posts fits shifted poses too, and such a best pose is as likely wrong as right.
+    pub(super) fn unambiguous_match(
+        &self,
+        k: usize,
+        node: usize,
+        initial: Pose2,
+        window: &SearchWindow,
+        min_score: f64,
+    ) -> Option<CorrelativeMatch> {
+        let p = &self.params.submaps;
+        let (grids, scan) = (&self.submaps.done[k].grids, &self.node_scans[node]);
+        let found = search(grids, scan, initial, window, min_score, &p.grid)?;
+        let excluded = Exclusion {
+            pose: found.pose,
+            radius_m: p.ambiguity_radius_m,
+        };
+        let rival_floor = found.score * p.max_runner_up_ratio;
+        runner_up(
+            grids,
+            scan,
+            initial,
+            window,
+            &excluded,
+            rival_floor,
+            &p.grid,
+        )
+        .is_none()
+        .then_some(found)
     }
 }
