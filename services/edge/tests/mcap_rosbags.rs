@@ -4,47 +4,17 @@
 //! with their odometry, and the bad samples counted. The same recording cut mid-file still
 //! yields what came before the cut.
 
-use edge::source::ros::{RosCounts, RosStreams};
-use edge::{McapSource, McapSourceConfig, Source, SourceEvent};
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::{play, recording};
+use edge::SourceEvent;
 
 const T0: u64 = 1_700_000_000_000_000_000;
-
-/// The recording, written once per run: the rosbag2 folder.
-fn recording(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("scratch folder");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rosbags_recording.py");
-    testdata::run_ros2_python(&script, &[&dir]);
-    dir.join("rec")
-}
-
-fn config(path: &Path) -> McapSourceConfig {
-    McapSourceConfig {
-        path: path.to_owned(),
-        streams: RosStreams {
-            cloud_topic: "/points".into(),
-            odometry_topic: "/odom".into(),
-            imu_topic: "/imu".into(),
-            gps_topic: "/fix".into(),
-            columns: 64,
-            ..RosStreams::default()
-        },
-        ..McapSourceConfig::default()
-    }
-}
-
-fn read(config: &McapSourceConfig) -> (Vec<SourceEvent>, RosCounts) {
-    let mut source = McapSource::new(config).expect("the recording opens");
-    let events: Vec<SourceEvent> = std::iter::from_fn(|| source.next_event()).collect();
-    (events, source.counts().expect("read to the end"))
-}
 
 #[test]
 fn a_rosbags_recording_plays_as_odometry_scans_and_fixes() {
     let rec = recording("mcap-whole");
-    let (events, counts) = read(&config(&rec));
+    let (events, counts) = play(&rec);
     eprintln!("{counts:?}");
     let odometry: Vec<_> = events
         .iter()
@@ -122,7 +92,7 @@ fn a_recording_cut_mid_file_yields_what_came_before() {
     let bytes = std::fs::read(&file).unwrap();
     let cut = rec.join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() * 6 / 10]).unwrap();
-    let (events, _) = read(&config(&cut));
+    let (events, _) = play(&cut);
     let odometry = events
         .iter()
         .filter(|e| matches!(e, SourceEvent::Odometry(_)))

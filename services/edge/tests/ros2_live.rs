@@ -1,25 +1,16 @@
 //! `[source.ros2]` live: a rosbags-written recording (`rosbags_recording.py`) is put on
-//! rmw_zenoh keys, or zenoh-bridge-ros2dds's, by the Python Zenoh (`zenoh_publisher.py`, eclipse-zenoh from PyPI, in
-//! the venv `testdata::rosbags_python` makes); the live source must give the events the
-//! same recording gives through `[source.mcap]`.
+//! rmw_zenoh keys, or zenoh-bridge-ros2dds's, by the Python Zenoh (`zenoh_publisher.py`,
+//! eclipse-zenoh from PyPI, in the venv `testdata::rosbags_python` makes); the live source
+//! must give the events the same recording gives through `[source.mcap]`.
 
+mod common;
+
+use common::{play, recording, streams};
 use edge::source::KeyStyle;
-use edge::source::ros::RosStreams;
-use edge::{McapSource, McapSourceConfig, Ros2Source, Ros2SourceConfig, Source, SourceEvent};
+use edge::{Ros2Source, Ros2SourceConfig, Source, SourceEvent};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn streams() -> RosStreams {
-    RosStreams {
-        cloud_topic: "/points".into(),
-        odometry_topic: "/odom".into(),
-        imu_topic: "/imu".into(),
-        gps_topic: "/fix".into(),
-        columns: 64,
-        ..RosStreams::default()
-    }
-}
 
 /// Odometry stamps, and each scan's column stamps and fix stamps.
 type Summary = (Vec<u64>, Vec<(Vec<u64>, Vec<u64>)>);
@@ -58,20 +49,9 @@ fn live_ros2dds_bridge_topics_give_what_the_recording_gives() {
 
 fn live_topics_give_what_the_recording_gives(style: KeyStyle, name: &str) {
     let python = testdata::rosbags_python();
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("ros2-live-{name}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let rec = recording(&format!("ros2-live-{name}"));
+    let expected = summary(&play(&rec).0);
     let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
-    testdata::run_ros2_python(&tests.join("rosbags_recording.py"), &[&dir]);
-    let rec = dir.join("rec");
-
-    let mut recorded = McapSource::new(&McapSourceConfig {
-        path: rec.clone(),
-        streams: streams(),
-        ..McapSourceConfig::default()
-    })
-    .expect("the recording opens");
-    let expected = summary(&std::iter::from_fn(|| recorded.next_event()).collect::<Vec<_>>());
 
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let mut publisher = Command::new(&python)
