@@ -33,10 +33,14 @@ pub struct EdgeConfig {
     pub resend_after_ms: u64,
     /// Source time per wall-clock time: 1 is real time, 0 as fast as possible.
     pub speed: f64,
-    /// At the source's end, keep running until every node is acked (or shutdown).
+    /// At the source's end, keep running until every node is acked (or shutdown); with
+    /// `ros2_out`, also until the correction of the last node has come (at most 3 s).
     pub linger_for_acks: bool,
     /// The measurement source.
     pub source: SourceConfig,
+    /// Where the map→odom transform goes back to the robot's ROS 2 stack (`/tf`); unset:
+    /// nowhere.
+    pub ros2_out: Option<wire::ros2::RosOutConfig>,
 }
 
 /// The measurement source.
@@ -74,6 +78,7 @@ impl Default for EdgeConfig {
             speed: 1.0,
             linger_for_acks: true,
             source: SourceConfig::default(),
+            ros2_out: None,
         }
     }
 }

@@ -9,13 +9,15 @@
 use crate::config::EdgeConfig;
 use crate::node::{NodeBuilder, NodeError};
 use crate::outbox::Outbox;
+use crate::ros_out::{MapCorrection, NodeFrame, TfOut};
 use crate::source::{Source, SourceEvent};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::future::Future;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, oneshot};
+use wire::ros2::RosOutConfig;
 use wire::session::now_ns;
 use wire::{Message, v1};
 use zenoh::qos::CongestionControl;
@@ -51,10 +53,15 @@ pub struct EdgeReport {
     pub map_pose_updates: u64,
     /// The latest corrected pose of this robot's last node.
     pub map_pose: Option<slam::Pose2>,
+    /// The latest map→odom correction (`[ros2_out]` publishes it on `/tf`).
+    pub map_from_odometry: Option<slam::Pose2>,
+    /// Transforms published on `/tf` (`[ros2_out]`).
+    pub tf_published: u64,
 }
 
 enum Produced {
-    Node,
+    /// A node is in the outbox; its frame when it has one for corrections.
+    Node(Option<NodeFrame>),
     Odometry(Box<v1::Odometry>),
     ScanError,
     Quarantined,
@@ -123,6 +130,16 @@ struct Sending {
     last_gap_resend: Option<Instant>,
     /// This outbox's chain: acks of any other are not ours.
     chain_id: u64,
+    /// The map→odom correction from the mapper's poses.
+    correction: MapCorrection,
+    /// `[ros2_out]`: the `/tf` publisher once its session is open, and until then where it
+    /// comes from.
+    tf_out: Option<TfOut>,
+    tf_opening: Option<oneshot::Receiver<TfOut>>,
+    /// The newest live odometry's stamp: the transform's.
+    last_odometry_ns: u64,
+    /// When the source had ended and every node was acked.
+    settled_at: Option<Instant>,
 }
 
 /// The least time between two re-sends the mapper asked for: the nodes of the first must have
@@ -130,9 +147,17 @@ struct Sending {
 const GAP_RESEND_HOLDOFF: Duration = Duration::from_millis(300);
 
 impl Sending {
-    /// A new node is in the outbox: send it (and any before it not sent yet).
-    async fn on_node(&mut self, link: &Link) -> Result<()> {
+    /// A node was made (sent or not yet).
+    fn made(&mut self, frame: Option<NodeFrame>) {
         self.report.nodes += 1;
+        if let Some(frame) = frame {
+            self.correction.on_node(frame);
+        }
+    }
+
+    /// A new node is in the outbox: send it (and any before it not sent yet).
+    async fn on_node(&mut self, link: &Link, frame: Option<NodeFrame>) -> Result<()> {
+        self.made(frame);
         if self.next_to_send <= self.outbox.acked_below()? {
             // Nothing was waiting for an ack: the timer starts with this node.
             self.last_progress = Instant::now();
@@ -158,13 +183,15 @@ impl Sending {
         .await
     }
 
-    /// Live odometry, best effort.
+    /// Live odometry, best effort; the transform with its stamp.
     async fn on_odometry(&mut self, link: &Link, mut odometry: Box<v1::Odometry>) {
         self.header_seq += 1;
         if let Some(h) = odometry.header.as_mut() {
             h.seq = self.header_seq;
             h.sent_ns = now_ns();
+            self.last_odometry_ns = h.stamp_ns;
         }
+        self.publish_tf();
         if link.odometry.put(odometry.encode_to_vec()).await.is_ok() {
             self.report.odometry_sent += 1;
         }
@@ -231,9 +258,30 @@ impl Sending {
                 if let Some(p) = poses.into_iter().find(|p| p.robot == robot) {
                     self.report.map_pose_updates += 1;
                     self.report.map_pose = Some(p.pose);
+                    if self.correction.on_map_pose(p.node_seq, p.pose).is_some() {
+                        self.report.map_from_odometry = self.correction.map_from_odometry();
+                        self.publish_tf();
+                    }
                 }
             }
             Err(e) => tracing::warn!(robot, "bad map poses: {e}"),
+        }
+    }
+
+    /// The latest correction on `/tf`, once there is one and `[ros2_out]` is open.
+    fn publish_tf(&mut self) {
+        if let Some(opening) = self.tf_opening.as_mut()
+            && let Ok(tf_out) = opening.try_recv()
+        {
+            self.tf_out = Some(tf_out);
+            self.tf_opening = None;
+        }
+        if let (Some(tf_out), Some(correction)) =
+            (&self.tf_out, self.correction.map_from_odometry())
+            && self.last_odometry_ns > 0
+            && tf_out.publish(&correction, self.last_odometry_ns)
+        {
+            self.report.tf_published += 1;
         }
     }
 
@@ -242,7 +290,12 @@ impl Sending {
     async fn on_tick(&mut self, link: &Link, source_done: bool) -> Result<bool> {
         let pending = self.outbox.len()?;
         if source_done && pending == 0 {
-            return Ok(true);
+            let publishes_tf = self.tf_out.is_some() || self.tf_opening.is_some();
+            if !publishes_tf || self.correction.is_of_last_node() {
+                return Ok(true);
+            }
+            let settled = *self.settled_at.get_or_insert_with(Instant::now);
+            return Ok(settled.elapsed() >= FINAL_CORRECTION_WAIT);
         }
         if pending > 0 && self.last_progress.elapsed() >= self.resend_after {
             let from = self.outbox.acked_below()?;
@@ -279,7 +332,7 @@ async fn connect(
                 _ = shutdown.as_mut() => return None,
                 _ = &mut retry => break,
                 produced = rx.recv(), if !*source_done => match produced {
-                    Some(Produced::Node) => sending.report.nodes += 1,
+                    Some(Produced::Node(frame)) => sending.made(frame),
                     // Live odometry is best effort: nobody to send it to.
                     Some(Produced::Odometry(_)) => {}
                     Some(Produced::ScanError) => sending.report.scan_errors += 1,
@@ -327,6 +380,11 @@ pub async fn run(
         last_progress: Instant::now(),
         resend_after: Duration::from_millis(config.resend_after_ms),
         last_gap_resend: None,
+        correction: MapCorrection::default(),
+        tf_out: None,
+        tf_opening: config.ros2_out.clone().map(open_tf_out),
+        last_odometry_ns: 0,
+        settled_at: None,
     };
     let robot = config.robot.as_str();
     let mut source_done = false;
@@ -354,7 +412,7 @@ pub async fn run(
         tokio::select! {
             _ = &mut shutdown => break,
             produced = rx.recv(), if !source_done => match produced {
-                Some(Produced::Node) => sending.on_node(&link).await?,
+                Some(Produced::Node(frame)) => sending.on_node(&link, frame).await?,
                 Some(Produced::Odometry(odometry)) => sending.on_odometry(&link, odometry).await,
                 Some(Produced::ScanError) => sending.report.scan_errors += 1,
                 Some(Produced::Quarantined) => sending.report.quarantined += 1,
@@ -385,6 +443,32 @@ pub async fn run(
         .await
         .map_err(anyhow::Error::from_boxed)?;
     Ok(report)
+}
+
+/// With `[ros2_out]`, how long an edge whose source ended and whose nodes are all acked waits
+/// for the mapper's pose of its last node, so that its last transform is of the final map.
+const FINAL_CORRECTION_WAIT: Duration = Duration::from_secs(3);
+
+/// How long to wait before trying `[ros2_out]`'s session again.
+const TF_OUT_RETRY: Duration = Duration::from_secs(5);
+
+/// Opens `[ros2_out]` in the background, again every [`TF_OUT_RETRY`] while the robot's ROS 2
+/// network is out of reach (the robot maps meanwhile; only the transform waits).
+fn open_tf_out(config: RosOutConfig) -> oneshot::Receiver<TfOut> {
+    let (tx, rx) = oneshot::channel();
+    tokio::spawn(async move {
+        loop {
+            match TfOut::open(&config).await {
+                Ok(tf_out) => {
+                    let _ = tx.send(tf_out);
+                    return;
+                }
+                Err(e) => tracing::warn!("[ros2_out] not open ({e:#}); retrying"),
+            }
+            tokio::time::sleep(TF_OUT_RETRY).await;
+        }
+    });
+    rx
 }
 
 /// Sends the outbox's nodes from `from` on (at most a window), in order; returns the next
@@ -473,7 +557,7 @@ fn produce(
                         tracing::error!(robot = %config.robot, "node {} not kept: {e}", node.node_seq);
                         break;
                     }
-                    Produced::Node
+                    Produced::Node(NodeFrame::of(&node).ok())
                 }
                 Err(NodeError::Invalid { node, error }) => {
                     tracing::error!(robot = %config.robot, "node quarantined, not sent: {error}");

@@ -38,6 +38,8 @@ pub struct MapperConfig {
     pub solve_interval_ms: u64,
     /// The pose network and scan matching.
     pub mapping: Mapper2dParams,
+    /// Where each fleet's map goes to ROS 2 (`/levelmap/<fleet>/map`); unset: nowhere.
+    pub ros2_out: Option<wire::ros2::RosOutConfig>,
 }
 
 impl Default for MapperConfig {
@@ -54,6 +56,7 @@ impl Default for MapperConfig {
             max_range_m: 40.0,
             solve_interval_ms: 500,
             mapping: fleet_mapping_params(),
+            ros2_out: None,
         }
     }
 }

@@ -4,7 +4,8 @@
 //!
 //! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
 //! HTTP side reads), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
-//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`api`] (HTTP).
+//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`ros_out`] (the
+//! maps to ROS 2), [`api`] (HTTP).
 
 pub mod api;
 pub mod bus;
@@ -12,6 +13,7 @@ pub mod config;
 pub mod fleet;
 pub mod marginals;
 pub mod odometry;
+pub mod ros_out;
 pub mod server;
 pub mod state;
 pub mod store;

@@ -103,6 +103,9 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             })?
     };
 
+    if let Some(ros) = &config.ros2_out {
+        crate::ros_out::start_when_reachable(ros.clone(), shared.clone(), config.fleets.clone());
+    }
     let listener = tokio::net::TcpListener::bind(&config.http_listen)
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;

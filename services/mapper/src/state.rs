@@ -31,8 +31,13 @@ pub struct RobotView {
 impl RobotView {
     /// The map pose of the robot at odometry pose `odometry`.
     pub fn live_pose(&self, odometry: &Pose2) -> Pose2 {
+        self.map_from_odometry().compose(odometry)
+    }
+
+    /// The map pose of the robot's odometry frame (ROS's map→odom).
+    pub fn map_from_odometry(&self) -> Pose2 {
         self.map_pose_at_last_node
-            .compose(&self.odometry_at_last_node.between(odometry))
+            .compose(&self.odometry_at_last_node.inverse())
     }
 }
 
@@ -101,6 +106,12 @@ impl FleetView {
     /// A robot of the fleet by id.
     pub fn robot(&self, id: &str) -> Option<&RobotView> {
         self.robots.iter().find(|r| r.id == id)
+    }
+
+    /// The occupancy grid of the fleet's leveled scans at their optimized poses.
+    pub fn grid(&self, params: &slam::GridParams) -> Result<slam::OccupancyGrid, slam::GridError> {
+        let scans: Vec<slam::matching::Scan2> = self.nodes.iter().map(|n| n.scan()).collect();
+        slam::OccupancyGrid::from_scans(self.poses.iter().copied().zip(&scans), params)
     }
 }
 

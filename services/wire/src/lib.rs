@@ -31,6 +31,8 @@ pub use keys::{
 /// Re-exported so users can encode and decode without depending on prost themselves.
 pub use prost::Message;
 #[cfg(feature = "session")]
+pub mod ros2;
+#[cfg(feature = "session")]
 pub mod session;
 
 /// The wire version every [`v1::Header`] carries; receivers reject any other.

@@ -118,6 +118,9 @@ pub(super) struct RobotState {
     stamp_ns: u64,
     /// When that odometry arrived (0: none yet).
     last_seen_ns: u64,
+    /// The map pose of the robot's odometry frame (ROS's map→odom): `pose` is this composed
+    /// with the live odometry pose. The robot's edge publishes the same on `/tf` (`[ros2_out]`).
+    map_from_odometry: Pose2,
     nodes: usize,
     /// Highest node_seq taken of its newest chain.
     last_node_seq: u64,
@@ -144,6 +147,7 @@ fn robot_state(api: &Api, v: &FleetView, robot: &RobotView) -> RobotState {
         pose,
         stamp_ns,
         last_seen_ns,
+        map_from_odometry: robot.map_from_odometry(),
         nodes: robot.nodes,
         last_node_seq: robot.last_node_seq,
         chains: robot.chains.clone(),
