@@ -432,3 +432,6 @@ fn gps_reading(
         odometry_at_fix,
     }
 }
+
+#[cfg(test)]
+mod tests;
