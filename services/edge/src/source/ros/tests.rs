@@ -25,8 +25,10 @@ fn header(ns: u64) -> Header {
 }
 
 fn odometry(ns: u64, x: f64) -> Vec<u8> {
-    let mut m = Odometry::default();
-    m.header = header(ns);
+    let mut m = Odometry {
+        header: header(ns),
+        ..Odometry::default()
+    };
     m.pose.pose.position.x = x;
     encode(&m)
 }
