@@ -29,6 +29,9 @@ pub struct EdgeConfig {
     pub cloud: CloudParams,
     /// Live odometry publication rate (Hz).
     pub odometry_rate_hz: f64,
+    /// Live leveled scans for teleoperation views, at most this often (Hz, best effort, the
+    /// first dropped under load); 0: none.
+    pub live_scan_rate_hz: f64,
     /// Re-send every unacked node after this long without ack progress (ms).
     pub resend_after_ms: u64,
     /// Source time per wall-clock time: 1 is real time, 0 as fast as possible.
@@ -74,6 +77,7 @@ impl Default for EdgeConfig {
             leveling: SegmentParams::default(),
             cloud: CloudParams::default(),
             odometry_rate_hz: 10.0,
+            live_scan_rate_hz: 2.0,
             resend_after_ms: 1000,
             speed: 1.0,
             linger_for_acks: true,

@@ -20,7 +20,7 @@ use tokio::sync::{mpsc, oneshot};
 use wire::ros2::RosOutConfig;
 use wire::session::now_ns;
 use wire::{Message, v1};
-use zenoh::qos::CongestionControl;
+use zenoh::qos::{CongestionControl, Priority};
 
 /// Most nodes sent in one burst of re-sending.
 const RESEND_WINDOW: usize = 64;
@@ -38,6 +38,8 @@ pub struct EdgeReport {
     pub node_resends: u64,
     /// Live odometry messages sent.
     pub odometry_sent: u64,
+    /// Live leveled scans sent.
+    pub live_scans_sent: u64,
     /// Highest node_seq the mapper acked, if any.
     pub acked_node_seq: Option<u64>,
     /// Nodes still waiting for their ack at exit (they stay in the outbox for the next run).
@@ -63,6 +65,8 @@ enum Produced {
     /// A node is in the outbox; its frame when it has one for corrections.
     Node(Option<NodeFrame>),
     Odometry(Box<v1::Odometry>),
+    /// A live leveled scan (best effort).
+    LiveScan(Box<v1::LiveScan>),
     ScanError,
     Quarantined,
     End,
@@ -73,6 +77,7 @@ struct Link {
     session: zenoh::Session,
     nodes: zenoh::pubsub::Publisher<'static>,
     odometry: zenoh::pubsub::Publisher<'static>,
+    live_scans: zenoh::pubsub::Publisher<'static>,
     acks: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
     map_poses:
         zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
@@ -95,6 +100,13 @@ impl Link {
             .congestion_control(CongestionControl::Drop)
             .await
             .map_err(anyhow::Error::from_boxed)?;
+        // Below odometry: a teleoperator's view can wait, the robot's pose should not.
+        let live_scans = session
+            .declare_publisher(wire::scan_key(&config.fleet, &config.robot)?)
+            .congestion_control(CongestionControl::Drop)
+            .priority(Priority::DataLow)
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
         let acks = session
             .declare_subscriber(ack_key)
             .await
@@ -107,6 +119,7 @@ impl Link {
             session,
             nodes,
             odometry,
+            live_scans,
             acks,
             map_poses,
         })
@@ -194,6 +207,18 @@ impl Sending {
         self.publish_tf();
         if link.odometry.put(odometry.encode_to_vec()).await.is_ok() {
             self.report.odometry_sent += 1;
+        }
+    }
+
+    /// A live scan, best effort at low priority.
+    async fn on_live_scan(&mut self, link: &Link, mut scan: Box<v1::LiveScan>) {
+        self.header_seq += 1;
+        if let Some(h) = scan.header.as_mut() {
+            h.seq = self.header_seq;
+            h.sent_ns = now_ns();
+        }
+        if link.live_scans.put(scan.encode_to_vec()).await.is_ok() {
+            self.report.live_scans_sent += 1;
         }
     }
 
@@ -334,7 +359,7 @@ async fn connect(
                 produced = rx.recv(), if !*source_done => match produced {
                     Some(Produced::Node(frame)) => sending.made(frame),
                     // Live odometry is best effort: nobody to send it to.
-                    Some(Produced::Odometry(_)) => {}
+                    Some(Produced::Odometry(_) | Produced::LiveScan(_)) => {}
                     Some(Produced::ScanError) => sending.report.scan_errors += 1,
                     Some(Produced::Quarantined) => sending.report.quarantined += 1,
                     Some(Produced::End) | None => {
@@ -414,6 +439,7 @@ pub async fn run(
             produced = rx.recv(), if !source_done => match produced {
                 Some(Produced::Node(frame)) => sending.on_node(&link, frame).await?,
                 Some(Produced::Odometry(odometry)) => sending.on_odometry(&link, odometry).await,
+                Some(Produced::LiveScan(scan)) => sending.on_live_scan(&link, scan).await,
                 Some(Produced::ScanError) => sending.report.scan_errors += 1,
                 Some(Produced::Quarantined) => sending.report.quarantined += 1,
                 Some(Produced::End) | None => {
@@ -500,6 +526,30 @@ async fn send_pending(
     Ok(next)
 }
 
+/// Offers a scan to the node builder; when a live scan is due, it goes too (the node's own
+/// scan when the scan made one), dropped rather than waited for when the sender is behind.
+fn offer(
+    builder: &mut NodeBuilder,
+    scan: &crate::node::SensorScan,
+    live_due: bool,
+    tx: &mpsc::Sender<Produced>,
+) -> Result<Option<v1::Node>, NodeError> {
+    let offered = builder.offer(scan);
+    if live_due {
+        let live = match &offered {
+            Ok(Some(node)) => Ok(v1::LiveScan::of_node(node)),
+            _ => builder.live_scan(scan),
+        };
+        match live {
+            Ok(live) => {
+                let _ = tx.try_send(Produced::LiveScan(Box::new(live)));
+            }
+            Err(e) => tracing::debug!("live scan skipped: {e}"),
+        }
+    }
+    offered
+}
+
 /// The blocking side: paces the source, levels scans, commits nodes.
 fn produce(
     config: EdgeConfig,
@@ -531,6 +581,9 @@ fn produce(
     let mut first_stamp = None;
     let odometry_period_ns = (1e9 / config.odometry_rate_hz.max(0.1)) as u64;
     let mut last_odometry_ns: Option<u64> = None;
+    let live_period_ns =
+        (config.live_scan_rate_hz > 0.0).then(|| (1e9 / config.live_scan_rate_hz) as u64);
+    let mut last_live_ns: Option<u64> = None;
     while let Some(event) = source.next_event() {
         let stamp = event.stamp_ns();
         let first = *first_stamp.get_or_insert(stamp);
@@ -541,6 +594,11 @@ fn produce(
                 std::thread::sleep(wait);
             }
         }
+        let live_due =
+            live_period_ns.is_some_and(|period| last_live_ns.is_none_or(|t| stamp >= t + period));
+        if live_due && matches!(event, SourceEvent::Scan(_)) {
+            last_live_ns = Some(stamp);
+        }
         let produced = match event {
             SourceEvent::Odometry(pose) => {
                 if last_odometry_ns.is_some_and(|t| pose.stamp_ns < t + odometry_period_ns) {
@@ -550,7 +608,7 @@ fn produce(
                 let header = v1::Header::new(&config.fleet, &config.robot, 0, pose.stamp_ns, 0);
                 Produced::Odometry(Box::new(wire::odometry_to_wire(&pose, header)))
             }
-            SourceEvent::Scan(scan) => match builder.offer(&scan) {
+            SourceEvent::Scan(scan) => match offer(&mut builder, &scan, live_due, &tx) {
                 Ok(None) => continue,
                 Ok(Some(node)) => {
                     if let Err(e) = outbox.push(node.node_seq, &node.encode_to_vec()) {

@@ -89,7 +89,8 @@ pub struct HttpConfig {
     /// How long a heavy request is waited for (ms) before it is answered 503. Its work runs
     /// on and keeps its place among `heavy_requests` until it ends.
     pub heavy_timeout_ms: NonZeroU64,
-    /// Event streams (`/api/v1/events`) open at once; one more is answered 503.
+    /// Event streams (`/api/v1/events`) and robots' live feeds (`…/robots/{robot}/live`)
+    /// open at once; one more is answered 503.
     pub event_streams: NonZeroUsize,
     /// Origins (`https://host[:port]`) whose pages may call the API (CORS); empty: no CORS
     /// headers, so only pages served by the mapper itself can read its answers.
@@ -101,7 +102,7 @@ impl Default for HttpConfig {
         HttpConfig {
             heavy_requests: NonZeroUsize::new(4).expect("nonzero"),
             heavy_timeout_ms: NonZeroU64::new(10_000).expect("nonzero"),
-            event_streams: NonZeroUsize::new(64).expect("nonzero"),
+            event_streams: NonZeroUsize::new(256).expect("nonzero"),
             cors_origins: Vec::new(),
         }
     }

@@ -3,7 +3,7 @@
 //! embedded store before it is acked, and the map served over HTTP.
 //!
 //! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
-//! HTTP side reads), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
+//! HTTP side reads), [`live`] (each robot's live feed), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
 //! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`ros_out`] (the
 //! maps to ROS 2), [`api`] (HTTP).
 
@@ -11,6 +11,7 @@ pub mod api;
 pub mod bus;
 pub mod config;
 pub mod fleet;
+pub mod live;
 pub mod marginals;
 pub mod odometry;
 pub mod ros_out;

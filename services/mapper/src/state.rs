@@ -179,6 +179,8 @@ pub struct Shared {
     pub fleets: RwLock<HashMap<String, Arc<FleetView>>>,
     /// Each robot's (fleet, robot) latest odometry.
     pub live: Mutex<HashMap<(String, String), LiveOdometry>>,
+    /// Each robot's live feed for teleoperation.
+    pub live_feeds: crate::live::LiveFeeds,
     /// The counters of `/metrics`.
     pub metrics: Metrics,
     /// Events as JSON text (see `docs/api.md`).
@@ -203,6 +205,7 @@ impl Shared {
         Shared {
             fleets: RwLock::default(),
             live: Mutex::default(),
+            live_feeds: crate::live::LiveFeeds::default(),
             metrics: Metrics::default(),
             events: broadcast::channel(1024).0,
             token,

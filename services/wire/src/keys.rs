@@ -19,6 +19,9 @@ pub enum Topic {
     Odom,
     /// `.../ack`: the mapper's highest durably stored node ([`crate::v1::Ack`]).
     Ack,
+    /// `.../scan`: the latest leveled scan for live views ([`crate::v1::LiveScan`]); best
+    /// effort.
+    Scan,
 }
 
 impl Topic {
@@ -28,6 +31,7 @@ impl Topic {
             Topic::Node => "node",
             Topic::Odom => "odom",
             Topic::Ack => "ack",
+            Topic::Scan => "scan",
         }
     }
 
@@ -36,6 +40,7 @@ impl Topic {
             "node" => Some(Topic::Node),
             "odom" => Some(Topic::Odom),
             "ack" => Some(Topic::Ack),
+            "scan" => Some(Topic::Scan),
             _ => None,
         }
     }
@@ -79,6 +84,11 @@ pub fn node_key(fleet: &str, robot: &str) -> Result<String, WireError> {
 /// `levelmap/{fleet}/robots/{robot}/odom`: the robot's live odometry (best effort).
 pub fn odom_key(fleet: &str, robot: &str) -> Result<String, WireError> {
     robot_key(fleet, robot, Topic::Odom)
+}
+
+/// `levelmap/{fleet}/robots/{robot}/scan`: the robot's live leveled scans (best effort).
+pub fn scan_key(fleet: &str, robot: &str) -> Result<String, WireError> {
+    robot_key(fleet, robot, Topic::Scan)
 }
 
 /// `levelmap/{fleet}/robots/{robot}/ack`: the mapper's acknowledgements to the robot.

@@ -11,6 +11,7 @@ mod faults;
 mod fleets;
 mod graph;
 mod limits;
+mod live;
 mod map;
 mod nodes;
 mod service;
@@ -213,6 +214,7 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(fleets::summary))
         .routes(routes!(fleets::robots))
         .routes(routes!(fleets::robot_pose))
+        .routes(routes!(live::live))
         .routes(routes!(fleets::trajectory_tum))
         .routes(routes!(fleets::optimize))
         .routes(routes!(graph::graph))
