@@ -108,6 +108,99 @@ fn check_feed(samples: &[Value], what: &str) {
     );
 }
 
+/// A grayscale PNG's width, height and pixels (top row first).
+fn decode_png(bytes: &[u8]) -> (usize, usize, Vec<u8>) {
+    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .expect("PNG");
+    let mut pixels = vec![0; reader.output_buffer_size().expect("size")];
+    let info = reader.next_frame(&mut pixels).expect("a frame");
+    pixels.truncate(info.buffer_size());
+    (info.width as usize, info.height as usize, pixels)
+}
+
+/// A PNG answer with its `Levelmap-Grid` placement and `Levelmap-Tiles` counts.
+fn grid_png(http: &str, path: &str) -> (Value, Value, (usize, usize, Vec<u8>)) {
+    let mut answer = agent()
+        .get(format!("http://{http}{path}"))
+        .call()
+        .expect(path);
+    assert_eq!(answer.status(), 200, "{path}");
+    let header = |name: &str| -> Value {
+        answer.headers().get(name).map_or(Value::Null, |v| {
+            serde_json::from_str(v.to_str().unwrap()).unwrap()
+        })
+    };
+    let (placement, tiles) = (header("levelmap-grid"), header("levelmap-tiles"));
+    let mut bytes = Vec::new();
+    answer
+        .body_mut()
+        .as_reader()
+        .read_to_end(&mut bytes)
+        .unwrap();
+    (placement, tiles, decode_png(&bytes))
+}
+
+/// Once the map is still: the window around the robot, made from tiles and then served
+/// from them, is cell for cell the whole map's grid over the same square.
+fn window_is_the_map_around_the_robot(http: &str) {
+    let updated = || get_json(http, "/api/v1/fleets/park/summary").unwrap()["updated_ns"].clone();
+    let mut last = updated();
+    loop {
+        std::thread::sleep(Duration::from_millis(1500));
+        let now = updated();
+        if now == last {
+            break;
+        }
+        last = now;
+    }
+    let path = "/api/v1/fleets/park/robots/robot0/map.png?radius_m=20&resolution_m=0.1";
+    let (placement, cold, (w, h, window)) = grid_png(http, path);
+    assert!(cold["made"].as_u64().unwrap() >= 1, "{cold}");
+    let started = Instant::now();
+    let (_, warm, (_, _, again)) = grid_png(http, path);
+    println!(
+        "window 40 m at 0.1 m: cold {cold}, warm {warm} in {:?}",
+        started.elapsed()
+    );
+    assert_eq!(
+        (warm["made"].as_u64(), warm["stale"].as_u64()),
+        (Some(0), Some(0)),
+        "{warm}"
+    );
+    assert_eq!(window, again);
+    assert_eq!((w, h), (400, 400));
+    let [x0, y0] = [
+        placement["origin_m"][0].as_f64().unwrap(),
+        placement["origin_m"][1].as_f64().unwrap(),
+    ];
+    let bbox = format!("{x0},{y0},{},{}", x0 + 40.0, y0 + 40.0);
+    let (whole_at, _, (ww, wh, whole)) = grid_png(
+        http,
+        &format!("/api/v1/fleets/park/map.png?resolution_m=0.1&bbox={bbox}"),
+    );
+    // Both grids on the same lattice: the window's cell (col, row) is the whole grid's
+    // (col + dx, row + dy), rows counted from the south.
+    let dx = ((x0 - whole_at["origin_m"][0].as_f64().unwrap()) / 0.1).round() as i64;
+    let dy = ((y0 - whole_at["origin_m"][1].as_f64().unwrap()) / 0.1).round() as i64;
+    let (mut same, mut known) = (0, 0);
+    for row in 0..h as i64 {
+        for col in 0..w as i64 {
+            let (wc, wr) = (col + dx, row + dy);
+            let pixel = window[(h - 1 - row as usize) * w + col as usize];
+            let expected = if (0..ww as i64).contains(&wc) && (0..wh as i64).contains(&wr) {
+                whole[(wh - 1 - wr as usize) * ww + wc as usize]
+            } else {
+                205
+            };
+            same += usize::from(pixel == expected);
+            known += usize::from(pixel != 205);
+        }
+    }
+    assert_eq!(same, w * h, "{} of {} cells differ", w * h - same, w * h);
+    assert!(known > 1000, "only {known} known cells around the robot");
+}
+
 fn robot_has_a_node(http: &str) -> bool {
     get_json(http, "/api/v1/fleets/park/robots")
         .is_some_and(|r| r["robots"][0]["nodes"].as_u64().unwrap_or(0) >= 2)
@@ -150,6 +243,7 @@ fn a_robots_live_feed_follows_it_over_sse_and_websocket() {
     let mut edge = edge;
     edge.kill().ok();
     edge.wait().ok();
+    window_is_the_map_around_the_robot(&mapper.http);
     drop(mapper);
     std::fs::remove_dir_all(&dir).ok();
 }

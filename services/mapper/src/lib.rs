@@ -3,7 +3,8 @@
 //! embedded store before it is acked, and the map served over HTTP.
 //!
 //! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
-//! HTTP side reads), [`live`] (each robot's live feed), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
+//! HTTP side reads), [`live`] (each robot's live feed), [`tiles`] (the map's
+//! tiles for windows around robots), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
 //! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`ros_out`] (the
 //! maps to ROS 2), [`api`] (HTTP).
 
@@ -18,6 +19,7 @@ pub mod ros_out;
 pub mod server;
 pub mod state;
 pub mod store;
+pub mod tiles;
 pub mod worker;
 
 pub use config::{MapperConfig, fleet_mapping_params};

@@ -113,7 +113,7 @@ pub(super) async fn summary(
 pub(super) struct RobotState {
     id: String,
     /// Its map pose: live odometry since its last node composed onto that node's pose.
-    pose: Pose2,
+    pub(super) pose: Pose2,
     /// Stamp of the live odometry used (0: none yet).
     stamp_ns: u64,
     /// When that odometry arrived (0: none yet).
@@ -130,7 +130,7 @@ pub(super) struct RobotState {
 }
 
 /// The robot's pose on the map now: live odometry since its last node, or the node itself.
-fn robot_state(api: &Api, v: &FleetView, robot: &RobotView) -> RobotState {
+pub(super) fn robot_state(api: &Api, v: &FleetView, robot: &RobotView) -> RobotState {
     let live = api
         .shared
         .live
@@ -181,7 +181,7 @@ pub(super) async fn robots(
     }))
 }
 
-fn robot<'a>(v: &'a FleetView, robot: &str) -> Reply<&'a RobotView> {
+pub(super) fn robot<'a>(v: &'a FleetView, robot: &str) -> Reply<&'a RobotView> {
     v.robot(robot)
         .ok_or_else(|| ApiError::NotFound(format!("no robot {robot:?} in fleet {:?}", v.id)))
 }

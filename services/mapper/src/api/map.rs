@@ -68,7 +68,7 @@ pub(super) struct GridPlacement {
 }
 
 impl GridPlacement {
-    fn of(g: &slam::OccupancyGrid, nodes: usize) -> GridPlacement {
+    pub(super) fn of(g: &slam::OccupancyGrid, nodes: usize) -> GridPlacement {
         GridPlacement {
             resolution_m: g.resolution_m,
             origin_m: g.origin_m,

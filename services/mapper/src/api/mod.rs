@@ -16,6 +16,7 @@ mod map;
 mod nodes;
 mod service;
 mod web;
+mod window;
 
 use crate::config::MapperConfig;
 use crate::marginals::Marginals;
@@ -48,6 +49,8 @@ struct Api {
     tokens: Arc<access::Tokens>,
     /// Heavy requests and event streams at once.
     limits: Arc<limits::Limits>,
+    /// The map's tiles, for windows around robots.
+    tiles: Arc<crate::tiles::TileCache>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -225,6 +228,7 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(map::map_yaml))
         .routes(routes!(map::map_json))
         .routes(routes!(map::map_geojson))
+        .routes(routes!(window::robot_map_png))
         .routes(routes!(nodes::node_detail))
         .routes(routes!(nodes::node_cloud))
         .routes(routes!(events::events))
@@ -267,6 +271,7 @@ pub fn router(
         openapi: Arc::new(OnceLock::new()),
         tokens: Arc::new(access::Tokens::new(&config.token, &config.read_token)),
         limits: Arc::new(limits::Limits::new(&config.http)),
+        tiles: Arc::default(),
     };
     let (router, doc) = parts(Some(&api));
     let _ = api
