@@ -45,7 +45,8 @@ pub(super) async fn robot_map_png(
     let center = super::fleets::robot_state(&api, &v, robot).pose;
     let radius = q.radius_m.unwrap_or(20.0);
     let res = q.resolution_m.unwrap_or(0.1);
-    if !(radius > 0.0 && radius <= 200.0) || !(0.02..=2.0).contains(&res) {
+    let in_range = radius > 0.0 && radius <= 200.0 && (0.02..=2.0).contains(&res);
+    if !in_range {
         return Err(ApiError::BadRequest(format!(
             "radius_m={radius}, resolution_m={res}: want 0 < radius_m ≤ 200 and 0.02 ≤ resolution_m ≤ 2"
         )));
