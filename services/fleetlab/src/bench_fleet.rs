@@ -2,6 +2,8 @@
 //! on loopback, measured from outside through HTTP: how long a published node takes to become
 //! visible on the API's event stream, and how fast robot pose queries are answered meanwhile.
 
+mod live;
+
 use crate::FLEET;
 use anyhow::{Context, Result};
 use clap::Args;
@@ -61,6 +63,11 @@ pub struct BenchFleetArgs {
     /// deploy/edge.toml: about 40 KB a node); without it, none do.
     #[arg(long)]
     pub clouds: bool,
+    /// HTTP clients of robots' live feeds (`…/robots/{robot}/live`, one robot each, in turn),
+    /// reading during the whole run; with any, the report has their delays and rates, and
+    /// the map windows around the robots after the run.
+    #[arg(long, default_value_t = 0)]
+    pub live_clients: usize,
 }
 
 #[derive(Serialize, Default)]
@@ -106,6 +113,10 @@ struct BenchReport {
     map_nodes: usize,
     map_edges: usize,
     optimizations: u64,
+    /// The live feeds' clients (`--live-clients`).
+    live: Option<live::LiveReport>,
+    /// 40 m windows around the robots, after the run (`--live-clients`).
+    windows: Option<live::WindowReport>,
 }
 
 /// The nodes of the park's three loops, each a node per scan, to be replayed.
@@ -259,6 +270,17 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
         }
     }
 
+    // Live feed clients, during the whole run; they stop half a second before the robots
+    // do (a feed without odometry sends nothing that would wake a reader).
+    let live_stop = Arc::new(AtomicBool::new(false));
+    let live_clients: Vec<_> = (0..args.live_clients)
+        .map(|c| {
+            let (http, stop) = (http.clone(), live_stop.clone());
+            let robot = c % args.robots;
+            std::thread::spawn(move || live::follow_live(&http, robot, &stop))
+        })
+        .collect();
+
     // Pose queries, during the whole run.
     let queries = {
         let per_connection = args.query_rate / args.connections.max(1) as f64;
@@ -289,8 +311,13 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     let mut interval = tokio::time::interval(tick);
     let mut step = 0u64;
     let mut published = 0usize;
+    let mut live_stopped = None;
     while started.elapsed().as_secs_f64() < args.duration {
         interval.tick().await;
+        if live_stopped.is_none() && started.elapsed().as_secs_f64() >= args.duration - 0.5 {
+            live_stop.store(true, Ordering::SeqCst);
+            live_stopped = Some(Instant::now());
+        }
         let k = step / node_every.max(1);
         let node_turn = step % node_every.max(1);
         for (r, (robot, node_pub, odom_pub)) in publishers.iter().enumerate() {
@@ -333,6 +360,17 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
     stop.store(true, Ordering::SeqCst);
+    live_stop.store(true, Ordering::SeqCst);
+    let stopped = live_stopped.unwrap_or_else(Instant::now);
+    let mut clients = Vec::new();
+    for c in live_clients {
+        clients.push(
+            c.join()
+                .map_err(|_| anyhow::anyhow!("live client thread"))?,
+        );
+    }
+    let live = (args.live_clients > 0).then(|| live::LiveReport::of(clients, stopped));
+    let windows = (args.live_clients > 0).then(|| live::query_windows(&http, args.robots));
     let mut query_ms = Vec::new();
     let mut query_errors = 0;
     let query_time = started.elapsed().as_secs_f64();
@@ -368,6 +406,8 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
         map_nodes: view.poses.len(),
         map_edges: view.edges.len(),
         optimizations: mapper.shared.metrics.optimizations.load(Ordering::Relaxed),
+        live,
+        windows,
     };
     for s in sessions {
         s.close().await.map_err(anyhow::Error::from_boxed)?;

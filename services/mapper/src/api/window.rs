@@ -64,7 +64,8 @@ pub(super) async fn robot_map_png(
             let (grid, stale, stats) = tiles
                 .window(&view, [center.x, center.y], radius, res)
                 .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
-            let bytes = graphio::gridmap::to_png(&grid).map_err(ApiError::internal)?;
+            let bytes = graphio::gridmap::to_png_with(&grid, graphio::gridmap::PngSpeed::Fast)
+                .map_err(ApiError::internal)?;
             let placement = serde_json::to_string(&GridPlacement::of(&grid, view.poses.len()))
                 .expect("serializes");
             Ok((bytes, placement, stats, stale))
