@@ -4,7 +4,8 @@
 //!
 //! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
 //! HTTP side reads), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
-//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`api`] (HTTP).
+//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`recording`] (a recording fed
+//! in as the bus's traffic), [`api`] (HTTP).
 
 pub mod api;
 pub mod bus;
@@ -12,6 +13,7 @@ pub mod config;
 pub mod fleet;
 pub mod marginals;
 pub mod odometry;
+pub mod recording;
 pub mod server;
 pub mod state;
 pub mod store;

@@ -73,6 +73,15 @@ pub enum OptimizeError {
 }
 
 impl Work {
+    /// A node received on `key`, as the Zenoh subscription and a recording's feed both hand
+    /// it to the worker (which decodes and checks it).
+    pub fn node(key: &str, payload: Vec<u8>) -> Work {
+        Work::Node {
+            key: key.to_owned(),
+            payload,
+        }
+    }
+
     /// Asks the worker behind `work` to re-optimize `fleet` now and waits for its report.
     pub async fn optimize(
         work: &mpsc::SyncSender<Work>,
