@@ -68,17 +68,18 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
         if let Some(path) = &args.from_recording {
             let fed = running.feed_recording(path).await;
             match &fed {
-                Ok((report, solves)) => {
+                Ok(report) => {
                     tracing::info!(
                         messages = report.messages,
                         nodes = report.nodes,
                         odometry = report.odometry,
                         ignored = report.ignored,
+                        solves = report.solves,
                         "{}: fed",
                         path.display()
                     );
-                    for (fleet, solve) in solves {
-                        tracing::info!(fleet, "solved after the recording: {solve}");
+                    for (fleet, solve) in &report.last_solve {
+                        tracing::info!(fleet, "last solve: {solve}");
                     }
                 }
                 Err(e) => tracing::error!("{e:#}"),

@@ -45,28 +45,12 @@ impl Running {
     }
 
     /// Feeds the recording at `path` to the worker (`crate::recording`) and waits until it
-    /// has mapped it and solved each fleet once more: what was fed, and each final solve's
-    /// report (or why there was none), by fleet.
-    pub async fn feed_recording(
-        &self,
-        path: &std::path::Path,
-    ) -> Result<(FeedReport, Vec<(String, serde_json::Value)>)> {
+    /// has mapped it, solving where the recorded mapper solved and after the last node.
+    pub async fn feed_recording(&self, path: &std::path::Path) -> Result<FeedReport> {
         let (path, work) = (path.to_owned(), self.work.clone());
         let (shared, fleets) = (self.shared.clone(), self.fleets.clone());
-        let (report, answers) = tokio::task::spawn_blocking(move || {
-            crate::recording::feed(&path, &work, &shared, &fleets)
-        })
-        .await??;
-        let mut solves = Vec::new();
-        for (fleet, answer) in report.fleets.iter().zip(answers) {
-            let solve = match answer.await {
-                Ok(Ok(report)) => report,
-                Ok(Err(e)) => serde_json::Value::String(e.to_string()),
-                Err(_) => serde_json::Value::String("the mapping worker stopped".into()),
-            };
-            solves.push((fleet.clone(), solve));
-        }
-        Ok((report, solves))
+        tokio::task::spawn_blocking(move || crate::recording::feed(&path, &work, &shared, &fleets))
+            .await?
     }
 
     /// Stops accepting, ends the event streams, lets the worker finish what it holds, closes
