@@ -29,7 +29,7 @@ pub struct RecordArgs {
     /// The fleet: everything under levelmap/{fleet}/** is recorded.
     #[arg(long)]
     pub fleet: String,
-    /// A mapper.toml or edge.toml: its [zenoh] table (endpoints, TLS, config_file); every
+    /// A mapper.toml or edge.toml: its `[zenoh]` table (endpoints, TLS, config_file); every
     /// other key is ignored. The recorder is always a client: it connects to `connect`, else
     /// to the router's `listen` endpoints (a mapper's file, on its host).
     #[arg(long, value_name = "FILE")]
