@@ -7,7 +7,7 @@
 use crate::{DESCRIPTOR_SET, message_name_of_key, v1};
 use anyhow::{Context, anyhow};
 use mcap::records::{MessageHeader, Record};
-use mcap::sans_io::{LinearReadEvent, LinearReader};
+use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use prost::Message;
 use std::collections::{BTreeMap, HashMap};
 use std::io::{Read, Seek, Write};
@@ -100,6 +100,11 @@ fn header_stamp_ns(name: &str, payload: &[u8]) -> Option<u64> {
     (stamp > 0).then_some(stamp)
 }
 
+/// The largest record a reader takes (a chunk holds at most the writer's chunk size plus one
+/// message, and a message at most [`crate::MAX_NODE_BYTES`]): a damaged length field is an
+/// error, not an allocation of gigabytes.
+pub const MAX_RECORD_BYTES: usize = 4 * crate::MAX_NODE_BYTES;
+
 /// One message of a recording.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RecordedMessage {
@@ -140,7 +145,9 @@ impl<R: Read> RecordingReader<R> {
         RecordingReader {
             source,
             path: path.to_owned(),
-            reader: LinearReader::new(),
+            reader: LinearReader::new_with_options(
+                LinearReaderOptions::default().with_record_length_limit(MAX_RECORD_BYTES),
+            ),
             topics: HashMap::new(),
             bytes_read: 0,
             messages: 0,

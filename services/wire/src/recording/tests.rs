@@ -80,3 +80,15 @@ fn a_file_cut_mid_chunk_ends_with_an_error_naming_it() {
     assert!(reader.next().is_none(), "nothing after the error");
     assert!(reader.messages() < 200, "{} messages", reader.messages());
 }
+
+#[test]
+fn a_damaged_record_length_is_an_error_not_an_allocation() {
+    let mut bytes = recording(3);
+    let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+    // A record is its opcode, then its length (u64, little-endian).
+    let at = summary.chunk_indexes[0].chunk_start_offset as usize + 1;
+    bytes[at..at + 8].copy_from_slice(&(1u64 << 40).to_le_bytes());
+    let mut reader = RecordingReader::new(Cursor::new(&bytes), Path::new("big.mcap"));
+    let error = reader.find_map(Result::err).expect("an error");
+    assert!(error.to_string().starts_with("big.mcap: "), "{error}");
+}
