@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Writes the seed inputs of the fuzz targets into DIR/<target>/ (README.md, "Corpora"): small
 # excerpts of the public test data (tests/README.md; $LEVELMAP_DATA, else ../shared/data
-# beside the repository), and the node target's messages (examples/node_seeds.rs). The files
+# beside the repository), the node target's messages (examples/node_seeds.rs), the ROS 2
+# samples (examples/ros2_cdr_seeds.rs) and tiny Ouster captures (examples/pcap_ouster_seeds.rs). The files
 # read are never changed. The committed corpora are these seeds plus what the fuzzer found,
 # minimized (`cargo fuzz cmin`).
 set -euo pipefail
@@ -12,7 +13,7 @@ if [ ! -d "$data" ]; then
   echo "fuzz/make-seeds.sh: $data is missing (scripts/test-data.sh fetch)" >&2
   exit 1
 fi
-mkdir -p "$out"/{node,g2o,toro,carmen,relations,kitti,threedtk}
+mkdir -p "$out"/{node,g2o,toro,carmen,relations,kitti,threedtk,ros2_cdr,pcap_ouster}
 
 # A pose graph's first N vertices and the edges among them (the whole graph is megabytes).
 graph_excerpt() { # file vertex-tag edge-tag n
@@ -59,7 +60,16 @@ for scan in scan000 scan001; do
 done
 sed -n "$((360 * 60 + 1)),$((360 * 61))p" "$threedtk/scan002.3d" > "$out/threedtk/scan002-line-60"
 
+# Ouster: the shared capture's first two lidar packets and a cut third (records of 8490
+# bytes from byte 24), and its global header with its first IMU datagram (the record at byte
+# 34048, 106 bytes).
+ouster="$data/ouster_organized_scans/OS-1-128_v2.3.0_1024x10_lb_n3.pcap"
+head -c 20000 "$ouster" > "$out/pcap_ouster/os1-128-lb-cut"
+{ head -c 24 "$ouster"; dd if="$ouster" iflag=skip_bytes,count_bytes skip=34048 count=106 status=none; } > "$out/pcap_ouster/os1-128-imu"
+
 cargo run --quiet --locked --manifest-path fuzz/Cargo.toml --example node_seeds -- "$out/node"
+cargo run --quiet --locked --manifest-path fuzz/Cargo.toml --example ros2_cdr_seeds -- "$out/ros2_cdr"
+cargo run --quiet --locked --manifest-path fuzz/Cargo.toml --example pcap_ouster_seeds -- "$out/pcap_ouster"
 if find "$out" -type f -empty | grep .; then
   echo "fuzz/make-seeds.sh: the seeds above are empty" >&2
   exit 1

@@ -88,3 +88,69 @@ fn an_ouster_capture_maps_at_its_poses() {
     drop(mapper);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A KITTI odometry folder (the six patchwork frames of sequence 00) with the sequence's
+/// ground-truth poses, times and `Tr` as odometry: every frame becomes a node (nodes every
+/// 0.5 m; the poses step 0.859 m a frame), and the solved map moves forward along the
+/// Velodyne's x frame by frame. The frames' identities past 000000 are not verified
+/// (`MANIFEST.md` §3a: ICP between them gives 0.69–0.74 m a frame), so the steps are bounded,
+/// not scored.
+#[test]
+fn a_kitti_folder_maps_with_its_poses_as_odometry() {
+    let scans = testdata::shared_data("kitti_velodyne/patchwork-plusplus");
+    let gt = testdata::shared_data("kitti_odometry_gt_trajectories");
+    let dir = temp_dir("kitti-source");
+    // Sequence 00's published calib.txt `Tr:` (Velodyne → cam0).
+    let calib = dir.join("calib.txt");
+    std::fs::write(
+        &calib,
+        "Tr: 4.276802385584e-04 -9.999672484946e-01 -8.084491683471e-03 -1.198459927713e-02 \
+         -7.210626507497e-03 8.081198471645e-03 -9.999413164504e-01 -5.403984729748e-02 \
+         9.999738645903e-01 4.859485810390e-04 -7.206933692422e-03 -2.921968648686e-01\n",
+    )
+    .unwrap();
+    let mapper = MapperProcess::start(&dir);
+    let source = format!(
+        "[node]\nnode_distance_m = 0.5\n[source.files]\nfolder = {:?}\nposes = {:?}\ntimes = {:?}\ncalib = {:?}\n",
+        scans,
+        gt.join("KITTI_00_gt.txt"),
+        gt.join("KITTI_00_gt_times.txt"),
+        calib
+    );
+    let edge = spawn_edge_with(&dir, 0, &mapper.zenoh, 0.0, &source);
+    let report = edge_report(edge, Duration::from_secs(180));
+    assert_eq!(report["nodes"], 6, "{report}");
+    assert_eq!(report["outbox_pending"], 0, "{report}");
+    let graph = wait_for(Duration::from_secs(30), || {
+        get_json(&mapper.http, "/api/v1/fleets/park/graph")
+            .filter(|g| g["nodes"].as_array().is_some_and(|n| n.len() == 6))
+    })
+    .expect("a graph of 6 nodes");
+    let mut nodes: Vec<&serde_json::Value> = graph["nodes"].as_array().unwrap().iter().collect();
+    nodes.sort_by_key(|n| n["node_seq"].as_u64());
+    let xy = |n: &serde_json::Value| {
+        (
+            n["pose"]["x"].as_f64().unwrap(),
+            n["pose"]["y"].as_f64().unwrap(),
+        )
+    };
+    let steps: Vec<f64> = nodes
+        .windows(2)
+        .map(|w| {
+            let ((x0, y0), (x1, y1)) = (xy(w[0]), xy(w[1]));
+            (x1 - x0).hypot(y1 - y0)
+        })
+        .collect();
+    let heading_change = (nodes[5]["pose"]["theta"].as_f64().unwrap()
+        - nodes[0]["pose"]["theta"].as_f64().unwrap())
+    .abs();
+    println!(
+        "kitti 00 frames 0-5: map steps {steps:.3?} m, heading change {heading_change:.4} rad"
+    );
+    for s in &steps {
+        assert!((0.5..=1.0).contains(s), "step {s} m: {graph}");
+    }
+    assert!(heading_change < 0.1, "{heading_change} rad: {graph}");
+    drop(mapper);
+    std::fs::remove_dir_all(&dir).ok();
+}

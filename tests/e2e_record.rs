@@ -161,6 +161,7 @@ fn a_recorded_run_reads_back_in_python_and_replays_to_the_same_map() {
         assert_eq!(read["schemas"][key("node")], "levelmap.v1.Node");
         assert_eq!(read["schemas"][key("odom")], "levelmap.v1.Odometry");
         assert_eq!(read["schemas"][key("ack")], "levelmap.v1.Ack");
+        assert_eq!(read["schemas"][key("scan")], "levelmap.v1.LiveScan");
     }
     assert_eq!(
         read["schemas"]["levelmap/park/map/poses"],

@@ -5,6 +5,7 @@ import { scaleBarMetres, formatMetres, visibleBox, inBox, segInBox } from "./vie
 import { state, view, canvas, ctx, index, trackMap, robot, onRedraw } from "./state.js";
 import { drawGrid } from "./grid.js";
 import { drawLayerAndBlit, layerUpToDate } from "./layer.js";
+import { drawFollowScan } from "./follow.js";
 
 function bounds() {
   let x0 = Infinity, y0 = Infinity, x1 = -Infinity, y1 = -Infinity;
@@ -48,6 +49,7 @@ function drawFrame() {
   const box = visibleBox(view);
   drawLayerAndBlit(dpr);
   drawLiveTails(box);
+  drawFollowScan(ctx);
   drawRobots(box);
   drawSelection();
   drawScaleBar();
@@ -79,6 +81,7 @@ function drawRobots(box) {
   for (const r of Object.values(state.robots)) {
     if (!r.pose || !inBox(box, r.pose.x, r.pose.y)) continue;
     const [x, y] = view.toScreen(r.pose.x, r.pose.y);
+    if (state.follow?.robot === r.id) state.follow.drawnAt = [x, y, view.width / 2, view.height / 2];
     ctx.save();
     ctx.translate(x, y);
     ctx.rotate(-r.pose.theta);

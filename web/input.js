@@ -5,7 +5,15 @@ import { enuToGeodetic, formatLatLon } from "./geo.js";
 import { state, view, $, canvas, note, redraw } from "./state.js";
 import { refreshCovariances } from "./data.js";
 import { refreshGridDetail } from "./grid.js";
-import { inspect } from "./sidebar.js";
+import { inspect, renderRobots } from "./sidebar.js";
+import { unfollow } from "./follow.js";
+
+// Panning by hand lets the followed robot go (zooming keeps it).
+function panned() {
+  if (!state.follow) return;
+  unfollow();
+  renderRobots();
+}
 
 // After the view moves: the detail the new view needs, once the moving stops.
 let viewTimer = null;
@@ -100,6 +108,7 @@ canvas.addEventListener("pointermove", (e) => {
   if (drag.moved > 3) {
     canvas.classList.add("dragging");
     view.pan(dx, dy);
+    panned();
     viewMoved();
     redraw();
   }
@@ -141,6 +150,8 @@ $("toggle-grid").addEventListener("change", (e) => {
   redraw();
 });
 $("fit").addEventListener("click", () => {
+  unfollow();
+  renderRobots();
   state.autoFit = true;
   redraw();
   setTimeout(refreshGridDetail, 50);

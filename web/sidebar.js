@@ -3,6 +3,7 @@
 
 import { fillList } from "./panel.js";
 import { showCloud } from "./cloud.js";
+import { follow, unfollow } from "./follow.js";
 import { state, $, getJson, redraw } from "./state.js";
 
 export function renderSummary() {
@@ -37,7 +38,21 @@ export function renderRobots() {
       const age = document.createElement("span");
       age.className = "age";
       age.textContent = r.lastSeenMs ? `${((now - r.lastSeenMs) / 1000).toFixed(1)} s ago` : "no odometry";
-      li.append(sw, name, age);
+      const button = document.createElement("button");
+      button.type = "button";
+      button.className = "follow";
+      const following = state.follow?.robot === r.id;
+      button.textContent = following ? "stop" : "follow";
+      button.title = following ? "stop following" : `follow ${r.id}: the map moves with it, its live scan drawn`;
+      button.addEventListener("click", () => {
+        // Stopping goes back to the whole map.
+        if (state.follow?.robot === r.id) {
+          unfollow();
+          state.autoFit = true;
+        } else follow(r.id);
+        renderRobots();
+      });
+      li.append(sw, name, age, button);
       return li;
     });
   ul.replaceChildren(...items);

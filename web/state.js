@@ -26,6 +26,7 @@ export const state = {
   ellipses: "", // what the legend says about them
   events: 0,
   autoFit: true,
+  follow: null, // the followed robot (follow.js): {robot, pose, scan, samples, delayMs, drawnAt, scanPointsDrawn}
   errors: [],
   auth: null, // the token's standing (auth.js): needed, refused, none, off, read, ok
   cursor: null, // {x, y} map metres under the pointer, with latitude_deg, longitude_deg if the map has a datum

@@ -11,7 +11,7 @@
 #                                   tls/0.0.0.0:7447 requiring client certificates from this
 #                                   CA, and the access-control list for FLEET's ROBOTs
 #
-# Robot R may put only on levelmap/FLEET/robots/R/{node,odom}, and receive only its own
+# Robot R may put only on levelmap/FLEET/robots/R/{node,odom,scan}, and receive only its own
 # levelmap/FLEET/robots/R/ack and levelmap/FLEET/map/** (and query the latter); the mapper's
 # own session is the router, so acks and map data can come from nowhere else. Everything
 # else is denied, to anyone (a certificate of this CA with another common name included).
@@ -132,7 +132,7 @@ for robot in "${robots[@]}"; do
   map="levelmap/$fleet/map/**"
   rules+="
       { id: \"$robot-puts\", permission: \"allow\", flows: [\"ingress\"], messages: [\"put\"],
-        key_exprs: [\"$own/node\", \"$own/odom\"] },
+        key_exprs: [\"$own/node\", \"$own/odom\", \"$own/scan\"] },
       { id: \"$robot-subscribes\", permission: \"allow\", flows: [\"ingress\"],
         messages: [\"declare_subscriber\"], key_exprs: [\"$own/ack\", \"$map\"] },
       { id: \"$robot-receives\", permission: \"allow\", flows: [\"egress\"], messages: [\"put\"],
@@ -172,11 +172,11 @@ cat >"$out/router.json5" <<EOF
     default_permission: "deny",
     rules: [
       // A robot's publisher asks which subscribers match before it sends: the mapper's
-      // subscriptions (levelmap/*/robots/*/{node,odom}) must be declared to it, and its
+      // subscriptions (levelmap/*/robots/*/{node,odom,scan}) must be declared to it, and its
       // queryable (levelmap/*/map/*) to a robot's querier.
       { id: "mapper-declarations", permission: "allow", flows: ["egress"],
         messages: ["declare_subscriber", "declare_queryable"],
-        key_exprs: ["levelmap/*/robots/*/node", "levelmap/*/robots/*/odom", "levelmap/*/map/**"] },$rules
+        key_exprs: ["levelmap/*/robots/*/node", "levelmap/*/robots/*/odom", "levelmap/*/robots/*/scan", "levelmap/*/map/**"] },$rules
     ],
     subjects: [$subjects
     ],

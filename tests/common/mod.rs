@@ -216,6 +216,11 @@ impl MapperProcess {
         }
     }
 
+    /// The process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     /// The process, for signals and its exit.
     pub fn child(&mut self) -> &mut Child {
         &mut self.child

@@ -165,6 +165,32 @@ test("the robots move on the map", async () => {
   assert.equal(await page.locator("#robot-list li").count(), 3);
 });
 
+test("the follow view keeps a robot in the middle and draws its live scan", async () => {
+  await page.click('#robot-list li[data-robot="robot0"] button.follow');
+  await waitFor("the live feed", () => page.evaluate(() => window.levelmapState.follow?.samples > 3), 10_000);
+  const offsets = [];
+  const start = await page.evaluate(() => window.levelmapState.follow.samples);
+  for (let i = 0; i < 20; i++) {
+    await sleep(250);
+    const d = await page.evaluate(() => {
+      const [x, y, cx, cy] = window.levelmapState.follow.drawnAt;
+      return Math.hypot(x - cx, y - cy);
+    });
+    offsets.push(d);
+  }
+  const f = await page.evaluate(() => window.levelmapState.follow);
+  await page.screenshot({ path: path.join(artifacts, "2b-follow.png") });
+  console.log(`follow view: ${f.samples - start} samples in 5 s, largest offset ${Math.max(...offsets).toFixed(1)} px, ` +
+    `${f.scanPointsDrawn} scan points drawn, feed ${f.mapperDelayMs.toFixed(0)} ms from the mapper`);
+  assert.ok(Math.max(...offsets) <= 20, `the followed robot drifted from the centre: ${offsets.map((d) => d.toFixed(1))}`);
+  assert.ok(f.samples - start >= 20, `${f.samples - start} live samples in 5 s`);
+  // Every return of the newest live scan is drawn (the park's scans have tens of them).
+  assert.ok(f.scanPointsDrawn >= 10 && f.scanPointsDrawn === f.scanReturns, `${f.scanPointsDrawn} of ${f.scanReturns} returns drawn`);
+  assert.match(await page.textContent("#follow-status"), /following robot0 · feed -?\d+ ms from the mapper/);
+  await page.click('#robot-list li[data-robot="robot0"] button.follow');
+  await waitFor("the follow view to end", () => page.evaluate(() => window.levelmapState.follow === null), 5_000);
+});
+
 test("the status bar shows the pointer's WGS84 position", async () => {
   await waitFor("the map's GPS datum", () => page.evaluate(() => window.levelmapState.summary?.datum), 30_000);
   const box = await page.locator("#map").boundingBox();

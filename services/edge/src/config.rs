@@ -29,14 +29,21 @@ pub struct EdgeConfig {
     pub cloud: CloudParams,
     /// Live odometry publication rate (Hz).
     pub odometry_rate_hz: f64,
+    /// Live leveled scans for teleoperation views, at most this often (Hz, best effort, the
+    /// first dropped under load); 0: none.
+    pub live_scan_rate_hz: f64,
     /// Re-send every unacked node after this long without ack progress (ms).
     pub resend_after_ms: u64,
     /// Source time per wall-clock time: 1 is real time, 0 as fast as possible.
     pub speed: f64,
-    /// At the source's end, keep running until every node is acked (or shutdown).
+    /// At the source's end, keep running until every node is acked (or shutdown); with
+    /// `ros2_out`, also until the correction of the last node has come (at most 3 s).
     pub linger_for_acks: bool,
     /// The measurement source.
     pub source: SourceConfig,
+    /// Where the map→odom transform goes back to the robot's ROS 2 stack (`/tf`); unset:
+    /// nowhere.
+    pub ros2_out: Option<wire::ros2::RosOutConfig>,
 }
 
 /// The measurement source.
@@ -70,10 +77,12 @@ impl Default for EdgeConfig {
             leveling: SegmentParams::default(),
             cloud: CloudParams::default(),
             odometry_rate_hz: 10.0,
+            live_scan_rate_hz: 2.0,
             resend_after_ms: 1000,
             speed: 1.0,
             linger_for_acks: true,
             source: SourceConfig::default(),
+            ros2_out: None,
         }
     }
 }

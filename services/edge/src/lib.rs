@@ -3,12 +3,13 @@
 //! Zenoh until the mapper acks it; live odometry is published best effort.
 //!
 //! [`node`], [`cloud`] and [`source`] are pure; [`outbox`] is the disk; [`service`] is the thin
-//! async shell.
+//! async shell; [`ros_out`] gives the map→odom transform back to the robot's ROS 2 stack.
 
 pub mod cloud;
 pub mod config;
 pub mod node;
 pub mod outbox;
+pub mod ros_out;
 pub mod service;
 pub mod source;
 

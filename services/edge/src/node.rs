@@ -201,6 +201,39 @@ impl NodeBuilder {
         self.number(node).map(Some)
     }
 
+    /// The live leveled scan of `scan` (for live views, not a node): leveled as a node's
+    /// would be, with the robot's odometry at its start.
+    pub fn live_scan(&mut self, scan: &SensorScan) -> Result<v1::LiveScan, NodeError> {
+        let start_ns = scan.raw.columns.first().ok_or(NodeError::Empty)?.stamp_ns;
+        let robot_at_start = scan
+            .track
+            .at(start_ns)
+            .ok_or(NodeError::NoOdometry { stamp_ns: start_ns })?;
+        let leveled = self
+            .leveler
+            .level(&scan.raw, &scan.track, &scan.sensor_in_robot)
+            .map_err(NodeError::Deskew)?;
+        let scan_frame =
+            Pose2::from_isometry3(&leveled_frame(&robot_at_start, &scan.sensor_in_robot).inverse());
+        let robot2 = Pose2::from_isometry3(&robot_at_start);
+        Ok(v1::LiveScan {
+            header: Some(self.header(start_ns)),
+            scan: Some(wire::leveled_scan_to_wire(
+                &leveled.scan,
+                &leveled.counts,
+                self.header(start_ns),
+            )),
+            odometry: Some(wire::odometry_to_wire(
+                &leveling::TimedPose {
+                    stamp_ns: start_ns,
+                    pose: robot_at_start,
+                },
+                self.header(start_ns),
+            )),
+            scan_origin_in_robot: Some(pose2_to_wire(&robot2.between(&scan_frame))),
+        })
+    }
+
     /// The node of a scan from a fixed 2D scanner (no leveling: its frame tilts with the
     /// robot), by the same rule as [`Self::offer`]. For comparisons with the paper's baseline.
     pub fn offer_planar(&mut self, scan: &PlanarScan) -> Result<Option<v1::Node>, NodeError> {

@@ -9,16 +9,18 @@
 use crate::config::EdgeConfig;
 use crate::node::{NodeBuilder, NodeError};
 use crate::outbox::Outbox;
+use crate::ros_out::{MapCorrection, NodeFrame, TfOut};
 use crate::source::{Source, SourceEvent};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::future::Future;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, oneshot};
+use wire::ros2::RosOutConfig;
 use wire::session::now_ns;
 use wire::{Message, v1};
-use zenoh::qos::CongestionControl;
+use zenoh::qos::{CongestionControl, Priority};
 
 /// Most nodes sent in one burst of re-sending.
 const RESEND_WINDOW: usize = 64;
@@ -36,6 +38,8 @@ pub struct EdgeReport {
     pub node_resends: u64,
     /// Live odometry messages sent.
     pub odometry_sent: u64,
+    /// Live leveled scans sent.
+    pub live_scans_sent: u64,
     /// Highest node_seq the mapper acked, if any.
     pub acked_node_seq: Option<u64>,
     /// Nodes still waiting for their ack at exit (they stay in the outbox for the next run).
@@ -51,11 +55,18 @@ pub struct EdgeReport {
     pub map_pose_updates: u64,
     /// The latest corrected pose of this robot's last node.
     pub map_pose: Option<slam::Pose2>,
+    /// The latest map→odom correction (`[ros2_out]` publishes it on `/tf`).
+    pub map_from_odometry: Option<slam::Pose2>,
+    /// Transforms published on `/tf` (`[ros2_out]`).
+    pub tf_published: u64,
 }
 
 enum Produced {
-    Node,
+    /// A node is in the outbox; its frame when it has one for corrections.
+    Node(Option<NodeFrame>),
     Odometry(Box<v1::Odometry>),
+    /// A live leveled scan (best effort).
+    LiveScan(Box<v1::LiveScan>),
     ScanError,
     Quarantined,
     End,
@@ -66,6 +77,7 @@ struct Link {
     session: zenoh::Session,
     nodes: zenoh::pubsub::Publisher<'static>,
     odometry: zenoh::pubsub::Publisher<'static>,
+    live_scans: zenoh::pubsub::Publisher<'static>,
     acks: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
     map_poses:
         zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
@@ -88,6 +100,13 @@ impl Link {
             .congestion_control(CongestionControl::Drop)
             .await
             .map_err(anyhow::Error::from_boxed)?;
+        // Below odometry: a teleoperator's view can wait, the robot's pose should not.
+        let live_scans = session
+            .declare_publisher(wire::scan_key(&config.fleet, &config.robot)?)
+            .congestion_control(CongestionControl::Drop)
+            .priority(Priority::DataLow)
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
         let acks = session
             .declare_subscriber(ack_key)
             .await
@@ -100,6 +119,7 @@ impl Link {
             session,
             nodes,
             odometry,
+            live_scans,
             acks,
             map_poses,
         })
@@ -123,6 +143,16 @@ struct Sending {
     last_gap_resend: Option<Instant>,
     /// This outbox's chain: acks of any other are not ours.
     chain_id: u64,
+    /// The map→odom correction from the mapper's poses.
+    correction: MapCorrection,
+    /// `[ros2_out]`: the `/tf` publisher once its session is open, and until then where it
+    /// comes from.
+    tf_out: Option<TfOut>,
+    tf_opening: Option<oneshot::Receiver<TfOut>>,
+    /// The newest live odometry's stamp: the transform's.
+    last_odometry_ns: u64,
+    /// When the source had ended and every node was acked.
+    settled_at: Option<Instant>,
 }
 
 /// The least time between two re-sends the mapper asked for: the nodes of the first must have
@@ -130,9 +160,17 @@ struct Sending {
 const GAP_RESEND_HOLDOFF: Duration = Duration::from_millis(300);
 
 impl Sending {
-    /// A new node is in the outbox: send it (and any before it not sent yet).
-    async fn on_node(&mut self, link: &Link) -> Result<()> {
+    /// A node was made (sent or not yet).
+    fn made(&mut self, frame: Option<NodeFrame>) {
         self.report.nodes += 1;
+        if let Some(frame) = frame {
+            self.correction.on_node(frame);
+        }
+    }
+
+    /// A new node is in the outbox: send it (and any before it not sent yet).
+    async fn on_node(&mut self, link: &Link, frame: Option<NodeFrame>) -> Result<()> {
+        self.made(frame);
         if self.next_to_send <= self.outbox.acked_below()? {
             // Nothing was waiting for an ack: the timer starts with this node.
             self.last_progress = Instant::now();
@@ -158,15 +196,29 @@ impl Sending {
         .await
     }
 
-    /// Live odometry, best effort.
+    /// Live odometry, best effort; the transform with its stamp.
     async fn on_odometry(&mut self, link: &Link, mut odometry: Box<v1::Odometry>) {
         self.header_seq += 1;
         if let Some(h) = odometry.header.as_mut() {
             h.seq = self.header_seq;
             h.sent_ns = now_ns();
+            self.last_odometry_ns = h.stamp_ns;
         }
+        self.publish_tf();
         if link.odometry.put(odometry.encode_to_vec()).await.is_ok() {
             self.report.odometry_sent += 1;
+        }
+    }
+
+    /// A live scan, best effort at low priority.
+    async fn on_live_scan(&mut self, link: &Link, mut scan: Box<v1::LiveScan>) {
+        self.header_seq += 1;
+        if let Some(h) = scan.header.as_mut() {
+            h.seq = self.header_seq;
+            h.sent_ns = now_ns();
+        }
+        if link.live_scans.put(scan.encode_to_vec()).await.is_ok() {
+            self.report.live_scans_sent += 1;
         }
     }
 
@@ -231,9 +283,30 @@ impl Sending {
                 if let Some(p) = poses.into_iter().find(|p| p.robot == robot) {
                     self.report.map_pose_updates += 1;
                     self.report.map_pose = Some(p.pose);
+                    if self.correction.on_map_pose(p.node_seq, p.pose).is_some() {
+                        self.report.map_from_odometry = self.correction.map_from_odometry();
+                        self.publish_tf();
+                    }
                 }
             }
             Err(e) => tracing::warn!(robot, "bad map poses: {e}"),
+        }
+    }
+
+    /// The latest correction on `/tf`, once there is one and `[ros2_out]` is open.
+    fn publish_tf(&mut self) {
+        if let Some(opening) = self.tf_opening.as_mut()
+            && let Ok(tf_out) = opening.try_recv()
+        {
+            self.tf_out = Some(tf_out);
+            self.tf_opening = None;
+        }
+        if let (Some(tf_out), Some(correction)) =
+            (&self.tf_out, self.correction.map_from_odometry())
+            && self.last_odometry_ns > 0
+            && tf_out.publish(&correction, self.last_odometry_ns)
+        {
+            self.report.tf_published += 1;
         }
     }
 
@@ -242,7 +315,12 @@ impl Sending {
     async fn on_tick(&mut self, link: &Link, source_done: bool) -> Result<bool> {
         let pending = self.outbox.len()?;
         if source_done && pending == 0 {
-            return Ok(true);
+            let publishes_tf = self.tf_out.is_some() || self.tf_opening.is_some();
+            if !publishes_tf || self.correction.is_of_last_node() {
+                return Ok(true);
+            }
+            let settled = *self.settled_at.get_or_insert_with(Instant::now);
+            return Ok(settled.elapsed() >= FINAL_CORRECTION_WAIT);
         }
         if pending > 0 && self.last_progress.elapsed() >= self.resend_after {
             let from = self.outbox.acked_below()?;
@@ -279,9 +357,9 @@ async fn connect(
                 _ = shutdown.as_mut() => return None,
                 _ = &mut retry => break,
                 produced = rx.recv(), if !*source_done => match produced {
-                    Some(Produced::Node) => sending.report.nodes += 1,
+                    Some(Produced::Node(frame)) => sending.made(frame),
                     // Live odometry is best effort: nobody to send it to.
-                    Some(Produced::Odometry(_)) => {}
+                    Some(Produced::Odometry(_) | Produced::LiveScan(_)) => {}
                     Some(Produced::ScanError) => sending.report.scan_errors += 1,
                     Some(Produced::Quarantined) => sending.report.quarantined += 1,
                     Some(Produced::End) | None => {
@@ -327,6 +405,11 @@ pub async fn run(
         last_progress: Instant::now(),
         resend_after: Duration::from_millis(config.resend_after_ms),
         last_gap_resend: None,
+        correction: MapCorrection::default(),
+        tf_out: None,
+        tf_opening: config.ros2_out.clone().map(open_tf_out),
+        last_odometry_ns: 0,
+        settled_at: None,
     };
     let robot = config.robot.as_str();
     let mut source_done = false;
@@ -354,8 +437,9 @@ pub async fn run(
         tokio::select! {
             _ = &mut shutdown => break,
             produced = rx.recv(), if !source_done => match produced {
-                Some(Produced::Node) => sending.on_node(&link).await?,
+                Some(Produced::Node(frame)) => sending.on_node(&link, frame).await?,
                 Some(Produced::Odometry(odometry)) => sending.on_odometry(&link, odometry).await,
+                Some(Produced::LiveScan(scan)) => sending.on_live_scan(&link, scan).await,
                 Some(Produced::ScanError) => sending.report.scan_errors += 1,
                 Some(Produced::Quarantined) => sending.report.quarantined += 1,
                 Some(Produced::End) | None => {
@@ -387,6 +471,32 @@ pub async fn run(
     Ok(report)
 }
 
+/// With `[ros2_out]`, how long an edge whose source ended and whose nodes are all acked waits
+/// for the mapper's pose of its last node, so that its last transform is of the final map.
+const FINAL_CORRECTION_WAIT: Duration = Duration::from_secs(3);
+
+/// How long to wait before trying `[ros2_out]`'s session again.
+const TF_OUT_RETRY: Duration = Duration::from_secs(5);
+
+/// Opens `[ros2_out]` in the background, again every [`TF_OUT_RETRY`] while the robot's ROS 2
+/// network is out of reach (the robot maps meanwhile; only the transform waits).
+fn open_tf_out(config: RosOutConfig) -> oneshot::Receiver<TfOut> {
+    let (tx, rx) = oneshot::channel();
+    tokio::spawn(async move {
+        loop {
+            match TfOut::open(&config).await {
+                Ok(tf_out) => {
+                    let _ = tx.send(tf_out);
+                    return;
+                }
+                Err(e) => tracing::warn!("[ros2_out] not open ({e:#}); retrying"),
+            }
+            tokio::time::sleep(TF_OUT_RETRY).await;
+        }
+    });
+    rx
+}
+
 /// Sends the outbox's nodes from `from` on (at most a window), in order; returns the next
 /// node_seq to send.
 async fn send_pending(
@@ -414,6 +524,30 @@ async fn send_pending(
         next = seq + 1;
     }
     Ok(next)
+}
+
+/// Offers a scan to the node builder; when a live scan is due, it goes too (the node's own
+/// scan when the scan made one), dropped rather than waited for when the sender is behind.
+fn offer(
+    builder: &mut NodeBuilder,
+    scan: &crate::node::SensorScan,
+    live_due: bool,
+    tx: &mpsc::Sender<Produced>,
+) -> Result<Option<v1::Node>, NodeError> {
+    let offered = builder.offer(scan);
+    if live_due {
+        let live = match &offered {
+            Ok(Some(node)) => Ok(v1::LiveScan::of_node(node)),
+            _ => builder.live_scan(scan),
+        };
+        match live {
+            Ok(live) => {
+                let _ = tx.try_send(Produced::LiveScan(Box::new(live)));
+            }
+            Err(e) => tracing::debug!("live scan skipped: {e}"),
+        }
+    }
+    offered
 }
 
 /// The blocking side: paces the source, levels scans, commits nodes.
@@ -447,6 +581,9 @@ fn produce(
     let mut first_stamp = None;
     let odometry_period_ns = (1e9 / config.odometry_rate_hz.max(0.1)) as u64;
     let mut last_odometry_ns: Option<u64> = None;
+    let live_period_ns =
+        (config.live_scan_rate_hz > 0.0).then(|| (1e9 / config.live_scan_rate_hz) as u64);
+    let mut last_live_ns: Option<u64> = None;
     while let Some(event) = source.next_event() {
         let stamp = event.stamp_ns();
         let first = *first_stamp.get_or_insert(stamp);
@@ -457,6 +594,11 @@ fn produce(
                 std::thread::sleep(wait);
             }
         }
+        let live_due =
+            live_period_ns.is_some_and(|period| last_live_ns.is_none_or(|t| stamp >= t + period));
+        if live_due && matches!(event, SourceEvent::Scan(_)) {
+            last_live_ns = Some(stamp);
+        }
         let produced = match event {
             SourceEvent::Odometry(pose) => {
                 if last_odometry_ns.is_some_and(|t| pose.stamp_ns < t + odometry_period_ns) {
@@ -466,14 +608,14 @@ fn produce(
                 let header = v1::Header::new(&config.fleet, &config.robot, 0, pose.stamp_ns, 0);
                 Produced::Odometry(Box::new(wire::odometry_to_wire(&pose, header)))
             }
-            SourceEvent::Scan(scan) => match builder.offer(&scan) {
+            SourceEvent::Scan(scan) => match offer(&mut builder, &scan, live_due, &tx) {
                 Ok(None) => continue,
                 Ok(Some(node)) => {
                     if let Err(e) = outbox.push(node.node_seq, &node.encode_to_vec()) {
                         tracing::error!(robot = %config.robot, "node {} not kept: {e}", node.node_seq);
                         break;
                     }
-                    Produced::Node
+                    Produced::Node(NodeFrame::of(&node).ok())
                 }
                 Err(NodeError::Invalid { node, error }) => {
                     tracing::error!(robot = %config.robot, "node quarantined, not sent: {error}");

@@ -11,7 +11,7 @@ pub mod ros;
 mod ros2;
 pub use self::files::{FilesSource, FilesSourceConfig};
 pub use self::mcap::{McapSource, McapSourceConfig};
-pub use self::ros2::{KeyStyle, Ros2Source, Ros2SourceConfig, dds_type_name, topic_key};
+pub use self::ros2::{Ros2Source, Ros2SourceConfig};
 
 // The simulated robot: only with the `sim` feature (the lab, not a robot's build).
 #[cfg(feature = "sim")]

@@ -2,18 +2,22 @@
 //! robot is written to a ROS 2 recording by rosbags (PyPI; `sim_recording.py`: unorganized
 //! PointCloud2 with per-point time, Odometry, Imu, NavSatFix, /tf_static, in rosbags' own
 //! MCAP and CDR code), played through `[source.mcap]` and mapped with the mapper's own code;
-//! its ATE must be within 0.02 m of the same run taken straight from `[source.sim]`.
+//! its ATE must be within 0.02 m of the same run taken straight from `[source.sim]`. The
+//! same recording put live on rmw_zenoh keys by the Python Zenoh (eclipse-zenoh, the edge's
+//! `tests/zenoh_publisher.py`) must reach the same map through `[source.ros2]`.
 
 use edge::source::ros::RosStreams;
 use edge::{
-    EdgeConfig, McapSource, McapSourceConfig, NodeBuilder, SimSource, SimSourceConfig, Source,
-    SourceEvent,
+    EdgeConfig, McapSource, McapSourceConfig, NodeBuilder, Ros2Source, Ros2SourceConfig, SimSource,
+    SimSourceConfig, Source, SourceEvent,
 };
 use fleetlab::{FLEET, sim_mapping_params};
 use mapper::{FleetMap, MapperConfig};
 use sim::FleetRobot;
 use slam::Pose2;
 use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 const EPOCH_NS: u64 = 1_700_000_000_000_000_000;
 const DURATION_S: f64 = 60.0;
@@ -164,9 +168,26 @@ fn the_park_run_recorded_by_rosbags_maps_as_the_simulated_source_does() {
     .expect("the recording opens");
     let played: Vec<SourceEvent> = std::iter::from_fn(|| source.next_event()).collect();
     let counts = source.counts().expect("read to the end");
+    let live = live_events(&dir.join("rec"), columns, played.len());
+    let stamps = |events: &[SourceEvent]| -> Vec<u64> {
+        events
+            .iter()
+            .map(|e| match e {
+                SourceEvent::Odometry(p) => p.stamp_ns,
+                SourceEvent::Scan(s) => s.raw.start_stamp_ns(),
+            })
+            .collect()
+    };
+    assert_eq!(
+        stamps(&live),
+        stamps(&played),
+        "live and recorded events differ"
+    );
+    let (live_ate, live_nodes) = map(live);
     let (mcap_ate, mcap_nodes) = map(played);
+    assert_eq!((live_nodes, live_ate), (mcap_nodes, mcap_ate));
     eprintln!(
-        "sim: {sim_nodes} nodes, ATE {sim_ate:.4} m; mcap: {mcap_nodes} nodes, ATE {mcap_ate:.4} m; {counts:?}"
+        "sim: {sim_nodes} nodes, ATE {sim_ate:.4} m; mcap and live rmw_zenoh: {mcap_nodes} nodes, ATE {mcap_ate:.4} m; {counts:?}"
     );
     assert!(counts.refused.is_empty(), "{counts:?}");
     assert!(
@@ -177,4 +198,61 @@ fn the_park_run_recorded_by_rosbags_maps_as_the_simulated_source_does() {
         (mcap_ate - sim_ate).abs() <= 0.02,
         "ATE {mcap_ate:.4} m from the recording, {sim_ate:.4} m from the simulator"
     );
+}
+
+/// The recording at `rec` put live on rmw_zenoh keys by the Python Zenoh, through
+/// `[source.ros2]`: the first `wanted` events (live topics never end).
+fn live_events(rec: &Path, columns: usize, wanted: usize) -> Vec<SourceEvent> {
+    let endpoint = format!(
+        "tcp/127.0.0.1:{}",
+        std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free port")
+            .port()
+    );
+    let publisher_script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../edge/tests/zenoh_publisher.py");
+    let mut publisher = Command::new(testdata::rosbags_python())
+        .arg(publisher_script)
+        .arg(&endpoint)
+        .arg(rec)
+        .arg("rmw_zenoh")
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("the publisher starts");
+    let mut config = Ros2SourceConfig {
+        streams: RosStreams {
+            cloud_topic: "/points".into(),
+            odometry_topic: "/odom".into(),
+            imu_topic: "/imu".into(),
+            gps_topic: "/fix".into(),
+            columns,
+            ..RosStreams::default()
+        },
+        ..Ros2SourceConfig::default()
+    };
+    config.zenoh.connect = Some(vec![endpoint]);
+    let started = Instant::now();
+    // The publisher listens first; the source connects as a client.
+    let mut source = loop {
+        match Ros2Source::new(&config) {
+            Ok(s) => break s,
+            Err(e) if started.elapsed() < Duration::from_secs(20) => {
+                eprintln!("{e}; again");
+                std::thread::sleep(Duration::from_millis(300));
+            }
+            Err(e) => panic!("{e}"),
+        }
+    };
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let events: Vec<SourceEvent> = (0..wanted).map_while(|_| source.next_event()).collect();
+        let _ = tx.send((events, source.dropped()));
+    });
+    let (events, dropped) = rx
+        .recv_timeout(Duration::from_secs(120))
+        .expect("every event within two minutes");
+    assert!(publisher.wait().expect("the publisher ends").success());
+    assert_eq!(dropped, 0);
+    events
 }

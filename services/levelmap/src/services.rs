@@ -73,6 +73,7 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
                         messages = report.messages,
                         nodes = report.nodes,
                         odometry = report.odometry,
+                        live_scans = report.live_scans,
                         ignored = report.ignored,
                         solves = report.solves,
                         "{}: fed",

@@ -38,6 +38,8 @@ pub struct MapperConfig {
     pub solve_interval_ms: u64,
     /// The pose network and scan matching.
     pub mapping: Mapper2dParams,
+    /// Where each fleet's map goes to ROS 2 (`/levelmap/<fleet>/map`); unset: nowhere.
+    pub ros2_out: Option<wire::ros2::RosOutConfig>,
 }
 
 impl Default for MapperConfig {
@@ -54,6 +56,7 @@ impl Default for MapperConfig {
             max_range_m: 40.0,
             solve_interval_ms: 500,
             mapping: fleet_mapping_params(),
+            ros2_out: None,
         }
     }
 }
@@ -86,7 +89,8 @@ pub struct HttpConfig {
     /// How long a heavy request is waited for (ms) before it is answered 503. Its work runs
     /// on and keeps its place among `heavy_requests` until it ends.
     pub heavy_timeout_ms: NonZeroU64,
-    /// Event streams (`/api/v1/events`) open at once; one more is answered 503.
+    /// Event streams (`/api/v1/events`) and robots' live feeds (`…/robots/{robot}/live`)
+    /// open at once; one more is answered 503.
     pub event_streams: NonZeroUsize,
     /// Origins (`https://host[:port]`) whose pages may call the API (CORS); empty: no CORS
     /// headers, so only pages served by the mapper itself can read its answers.
@@ -98,7 +102,7 @@ impl Default for HttpConfig {
         HttpConfig {
             heavy_requests: NonZeroUsize::new(4).expect("nonzero"),
             heavy_timeout_ms: NonZeroU64::new(10_000).expect("nonzero"),
-            event_streams: NonZeroUsize::new(64).expect("nonzero"),
+            event_streams: NonZeroUsize::new(256).expect("nonzero"),
             cors_origins: Vec::new(),
         }
     }

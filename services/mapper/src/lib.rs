@@ -3,20 +3,24 @@
 //! embedded store before it is acked, and the map served over HTTP.
 //!
 //! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
-//! HTTP side reads), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
-//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`recording`] (a recording fed
-//! in as the bus's traffic), [`api`] (HTTP).
+//! HTTP side reads), [`live`] (each robot's live feed), [`tiles`] (the map's
+//! tiles for windows around robots), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
+//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`recording`] (a
+//! recording fed in as the bus's traffic), [`ros_out`] (the maps to ROS 2), [`api`] (HTTP).
 
 pub mod api;
 pub mod bus;
 pub mod config;
 pub mod fleet;
+pub mod live;
 pub mod marginals;
 pub mod odometry;
 pub mod recording;
+pub mod ros_out;
 pub mod server;
 pub mod state;
 pub mod store;
+pub mod tiles;
 pub mod worker;
 
 pub use config::{MapperConfig, fleet_mapping_params};

@@ -1,5 +1,6 @@
-//! Live odometry, handled in its Zenoh callback: the robot's latest pose for `GET …/robots`
-//! and, at most [`POSE_EVENT_PERIOD_NS`] apart per robot, a `pose` event in the map frame.
+//! Live odometry and live scans, handled in their Zenoh callbacks: the robot's latest pose for
+//! `GET …/robots`, its live feed (`crate::live`) and, at most [`POSE_EVENT_PERIOD_NS`] apart
+//! per robot, a `pose` event in the map frame.
 
 use crate::state::{LiveOdometry, Metrics, Shared};
 use serde_json::json;
@@ -37,7 +38,17 @@ pub fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]
     let stamp_ns = input.pose.stamp_ns;
     // Bounded like the fleets' robots: odometry of robots beyond that many is not kept.
     let cap = crate::fleet::MAX_ROBOTS_PER_FLEET * fleets.len();
-    if !remember(shared, cap, &input, odometry) {
+    let Some((due, previous)) = remember(shared, cap, &input, odometry) else {
+        return;
+    };
+    crate::live::on_odometry(
+        shared,
+        cap,
+        (&input.fleet, &input.robot),
+        (stamp_ns, odometry),
+        previous,
+    );
+    if !due {
         return;
     }
     let map_pose = shared
@@ -54,17 +65,23 @@ pub fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]
     }
 }
 
-/// Keeps the robot's latest odometry, unless `cap` robots are kept already; whether its
-/// `pose` event is due.
-fn remember(shared: &Shared, cap: usize, input: &wire::OdometryInput, odometry: Pose2) -> bool {
+/// Keeps the robot's latest odometry, unless `cap` robots are kept already (`None`); whether
+/// its `pose` event is due, and the odometry it replaces.
+fn remember(
+    shared: &Shared,
+    cap: usize,
+    input: &wire::OdometryInput,
+    odometry: Pose2,
+) -> Option<(bool, Option<(u64, Pose2)>)> {
     let now = now_ns();
     let stamp_ns = input.pose.stamp_ns;
     let mut live = shared.live.lock().expect("live lock");
     let key = (input.fleet.clone(), input.robot.clone());
     if !live.contains_key(&key) && live.len() >= cap {
         shared.metrics.reject("odom", "too_many_robots");
-        return false;
+        return None;
     }
+    let previous = live.get(&key).map(|p| (p.stamp_ns, p.odometry));
     let last_event = live.get(&key).map_or(0, |p| p.evented_ns);
     let due = now.saturating_sub(last_event) >= POSE_EVENT_PERIOD_NS;
     live.insert(
@@ -76,5 +93,33 @@ fn remember(shared: &Shared, cap: usize, input: &wire::OdometryInput, odometry: 
             evented_ns: if due { now } else { last_event },
         },
     );
-    due
+    Some((due, previous))
+}
+
+/// Takes one live scan of a served fleet into its robot's feed, or counts why not.
+pub fn on_live_scan(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]) {
+    let metrics = &shared.metrics;
+    let Ok(parsed) = wire::parse_robot_key(key) else {
+        metrics.reject("scan", "invalid_key");
+        return;
+    };
+    if !fleets.iter().any(|f| f == parsed.fleet) {
+        metrics.reject("scan", "unknown_fleet");
+        return;
+    }
+    let input = match wire::live_scan_input(payload) {
+        Ok(s) => s,
+        Err(e) => {
+            metrics.reject("scan", e.reason());
+            return;
+        }
+    };
+    if input.fleet != parsed.fleet || input.robot != parsed.robot {
+        metrics.reject("scan", "key_mismatch");
+        return;
+    }
+    let cap = crate::fleet::MAX_ROBOTS_PER_FLEET * fleets.len();
+    if !crate::live::on_scan(shared, cap, &input) {
+        metrics.reject("scan", "too_many_robots");
+    }
 }

@@ -2,7 +2,8 @@
 //! debugging a map offline: its nodes go to the worker as [`Work::node`]s, exactly as the
 //! Zenoh callback hands them over, in recorded order and as fast as the worker takes them
 //! (a blocking send: a file can wait, a radio link cannot); its odometry goes through
-//! [`crate::odometry::on_odometry`] like live odometry. Re-sent nodes in the recording meet
+//! [`crate::odometry::on_odometry`] like live odometry, its live scans through
+//! [`crate::odometry::on_live_scan`]. Re-sent nodes in the recording meet
 //! the worker's duplicate check as they did live. Acks are not fed.
 //!
 //! Where a node lands depends on the estimate when it came, so on when the network was
@@ -30,6 +31,8 @@ pub struct FeedReport {
     pub nodes: u64,
     /// Odometry samples taken as live odometry.
     pub odometry: u64,
+    /// Live scans taken into the robots' live feeds.
+    pub live_scans: u64,
     /// Acks, map poses and keys of no levelmap message: not fed.
     pub ignored: u64,
     /// Solves run where the recorded mapper solved, and after the last node.
@@ -108,6 +111,10 @@ fn feed_in_order(
             Ok((_, _, Topic::Odom)) => {
                 crate::odometry::on_odometry(shared, served, &message.key, &message.payload);
                 report.odometry += 1;
+            }
+            Ok((_, _, Topic::Scan)) => {
+                crate::odometry::on_live_scan(shared, served, &message.key, &message.payload);
+                report.live_scans += 1;
             }
             Ok((_, _, Topic::Ack)) | Err(_) => report.ignored += 1,
         }

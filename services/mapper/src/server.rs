@@ -114,6 +114,9 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             })?
     };
 
+    if let Some(ros) = &config.ros2_out {
+        crate::ros_out::start_when_reachable(ros.clone(), shared.clone(), config.fleets.clone());
+    }
     let listener = tokio::net::TcpListener::bind(&config.http_listen)
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
@@ -146,10 +149,11 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
 type Subscriptions = (
     zenoh::pubsub::Subscriber<()>,
     zenoh::pubsub::Subscriber<()>,
+    zenoh::pubsub::Subscriber<()>,
     zenoh::query::Queryable<()>,
 );
 
-/// Nodes to the worker, live odometry to its callback, `levelmap/{fleet}/map/*` queries to
+/// Nodes to the worker, live odometry and live scans to their callbacks, `levelmap/{fleet}/map/*` queries to
 /// the current views.
 async fn subscribe(
     session: &zenoh::Session,
@@ -186,13 +190,27 @@ async fn subscribe(
         })
         .await
         .map_err(anyhow::Error::from_boxed)?;
+    let scan_keys = format!("{}/*/robots/*/{}", wire::KEY_ROOT, Topic::Scan);
+    let (live, known) = (shared.clone(), config.fleets.clone());
+    let scans = session
+        .declare_subscriber(scan_keys)
+        .callback(move |sample| {
+            crate::odometry::on_live_scan(
+                &live,
+                &known,
+                sample.key_expr().as_str(),
+                &sample.payload().to_bytes(),
+            )
+        })
+        .await
+        .map_err(anyhow::Error::from_boxed)?;
     let views = shared.clone();
     let queries = session
         .declare_queryable(format!("{}/*/map/*", wire::KEY_ROOT))
         .callback(move |query| crate::bus::answer_map_query(&views, &query))
         .await
         .map_err(anyhow::Error::from_boxed)?;
-    Ok((nodes, odometry, queries))
+    Ok((nodes, odometry, scans, queries))
 }
 
 /// Replays the store, fleet by fleet. A fleet whose rows do not replay is quarantined (its

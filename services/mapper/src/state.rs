@@ -31,8 +31,13 @@ pub struct RobotView {
 impl RobotView {
     /// The map pose of the robot at odometry pose `odometry`.
     pub fn live_pose(&self, odometry: &Pose2) -> Pose2 {
+        self.map_from_odometry().compose(odometry)
+    }
+
+    /// The map pose of the robot's odometry frame (ROS's map→odom).
+    pub fn map_from_odometry(&self) -> Pose2 {
         self.map_pose_at_last_node
-            .compose(&self.odometry_at_last_node.between(odometry))
+            .compose(&self.odometry_at_last_node.inverse())
     }
 }
 
@@ -102,6 +107,12 @@ impl FleetView {
     pub fn robot(&self, id: &str) -> Option<&RobotView> {
         self.robots.iter().find(|r| r.id == id)
     }
+
+    /// The occupancy grid of the fleet's leveled scans at their optimized poses.
+    pub fn grid(&self, params: &slam::GridParams) -> Result<slam::OccupancyGrid, slam::GridError> {
+        let scans: Vec<slam::matching::Scan2> = self.nodes.iter().map(|n| n.scan()).collect();
+        slam::OccupancyGrid::from_scans(self.poses.iter().copied().zip(&scans), params)
+    }
 }
 
 /// A robot's latest odometry.
@@ -168,6 +179,8 @@ pub struct Shared {
     pub fleets: RwLock<HashMap<String, Arc<FleetView>>>,
     /// Each robot's (fleet, robot) latest odometry.
     pub live: Mutex<HashMap<(String, String), LiveOdometry>>,
+    /// Each robot's live feed for teleoperation.
+    pub live_feeds: crate::live::LiveFeeds,
     /// The counters of `/metrics`.
     pub metrics: Metrics,
     /// Events as JSON text (see `docs/api.md`).
@@ -195,6 +208,7 @@ impl Shared {
         Shared {
             fleets: RwLock::default(),
             live: Mutex::default(),
+            live_feeds: crate::live::LiveFeeds::default(),
             metrics: Metrics::default(),
             events: broadcast::channel(1024).0,
             token,

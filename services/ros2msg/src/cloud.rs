@@ -112,9 +112,23 @@ fn field(
     )))
 }
 
-impl CloudPoints {
-    /// The points of `cloud`; an error for a cloud without x, y, z or whose sizes do not fit.
-    pub fn from_cloud(cloud: &PointCloud2<'_>) -> Result<CloudPoints, CloudError> {
+/// A cloud's fields and sizes, checked: every point of every row lies inside the data, and
+/// every field inside its point.
+struct Layout {
+    x: Field,
+    y: Field,
+    z: Field,
+    ring: Option<Field>,
+    time: Option<Field>,
+    width: usize,
+    height: usize,
+    step: usize,
+    row_step: usize,
+    stamp_ns: i64,
+}
+
+impl Layout {
+    fn of(cloud: &PointCloud2<'_>) -> Result<Layout, CloudError> {
         let required = |names: &[&'static str]| {
             field(cloud, names, true)?.ok_or(CloudError::MissingField(names[0]))
         };
@@ -139,15 +153,70 @@ impl CloudPoints {
                 cloud.data.len()
             )));
         }
-        let stamp_ns = cloud.header.stamp.to_ns().unwrap_or(0) as i64;
-        let mut points = CloudPoints {
-            xyz: Vec::with_capacity(width * height),
-            ring: ring.map(|_| Vec::with_capacity(width * height)),
-            offset_ns: time.map(|_| Vec::with_capacity(width * height)),
+        Ok(Layout {
+            x,
+            y,
+            z,
+            ring,
+            time,
+            width,
+            height,
+            step,
+            row_step,
+            stamp_ns: cloud.header.stamp.to_ns().unwrap_or(0) as i64,
+        })
+    }
+
+    /// Each row's points, `step` bytes each. No rows when a row has no point: a cloud of
+    /// 0 × 4 billion rows (its data may be empty) is not 4 billion empty loops.
+    fn rows<'a>(&self, data: &'a [u8]) -> impl Iterator<Item = &'a [u8]> + use<'a> {
+        let (row_step, row_bytes) = (self.row_step, self.width * self.step);
+        let rows = if row_bytes == 0 { 0 } else { self.height };
+        (0..rows).map(move |row| &data[row * row_step..row * row_step + row_bytes])
+    }
+
+    fn empty_points(&self) -> CloudPoints {
+        let n = self.width * self.height;
+        CloudPoints {
+            xyz: Vec::with_capacity(n),
+            ring: self.ring.map(|_| Vec::with_capacity(n)),
+            offset_ns: self.time.map(|_| Vec::with_capacity(n)),
+        }
+    }
+
+    /// The fast loop's layout, when the cloud has one: little endian, x, y, z consecutive
+    /// f32 (every lidar driver's layout), a u16 ring or none, a u32, f32 or f64 time or none.
+    fn fast(&self, cloud: &PointCloud2<'_>) -> Option<FastLayout> {
+        let xyz_at = self.x.0;
+        let f32s = [self.x, self.y, self.z].iter().all(|f| f.1 == 7);
+        if cloud.is_bigendian || !f32s || self.y.0 != xyz_at + 4 || self.z.0 != xyz_at + 8 {
+            return None;
+        }
+        let ring_at = match self.ring {
+            None => None,
+            Some((at, 4, _)) => Some(at),
+            Some(_) => return None,
         };
-        for row in 0..height {
-            let bytes = &cloud.data[row * row_step..row * row_step + width * step];
-            for p in bytes.chunks_exact(step) {
+        let time = match self.time {
+            None => FastTime::None,
+            Some((at, 6, _)) => FastTime::U32(at),
+            Some((at, 7, _)) => FastTime::F32(at),
+            Some((at, 8, _)) => FastTime::F64(at),
+            Some(_) => return None,
+        };
+        Some(FastLayout {
+            xyz_at,
+            ring_at,
+            time,
+        })
+    }
+
+    /// Any layout: each field read as f64 by its reader.
+    fn generic_points(&self, data: &[u8]) -> CloudPoints {
+        let mut points = self.empty_points();
+        let (x, y, z, ring, time) = (self.x, self.y, self.z, self.ring, self.time);
+        for bytes in self.rows(data) {
+            for p in bytes.chunks_exact(self.step) {
                 let get = |(offset, _, read): Field| read(&p[offset..]);
                 points
                     .xyz
@@ -156,11 +225,95 @@ impl CloudPoints {
                     out.push(get(f).clamp(0.0, u16::MAX as f64) as u16);
                 }
                 if let (Some(out), Some(f)) = (points.offset_ns.as_mut(), time) {
-                    out.push(offset_ns(get(f), f.1, stamp_ns));
+                    out.push(offset_ns(get(f), f.1, self.stamp_ns));
                 }
             }
         }
-        Ok(points)
+        points
+    }
+
+    /// The common layouts ([`Layout::fast`]): the same points as [`Layout::generic_points`]
+    /// in a fifth of the time (README, "Speed"). No reader or datatype chosen per point:
+    /// each row (in cache) is read once per output, by a loop over fixed types whose
+    /// `extend` writes into the reserved space without a capacity check per point.
+    fn fast_points(&self, data: &[u8], fast: FastLayout) -> CloudPoints {
+        let mut points = self.empty_points();
+        let stamp_ns = self.stamp_ns;
+        for row in self.rows(data) {
+            let row = row.chunks_exact(self.step);
+            points.xyz.extend(row.clone().map(|p| {
+                let xyz: [u8; 12] = le_bytes(p, fast.xyz_at);
+                let f = |i: usize| f32::from_le_bytes([xyz[i], xyz[i + 1], xyz[i + 2], xyz[i + 3]]);
+                [f(0), f(4), f(8)]
+            }));
+            if let (Some(out), Some(at)) = (points.ring.as_mut(), fast.ring_at) {
+                out.extend(row.clone().map(|p| u16::from_le_bytes(le_bytes(p, at))));
+            }
+            let Some(out) = points.offset_ns.as_mut() else {
+                continue;
+            };
+            match fast.time {
+                FastTime::None => {}
+                // Integers are ns and a u32 is never past 1e18: `offset_ns` is the value.
+                FastTime::U32(at) => {
+                    out.extend(row.map(|p| i64::from(u32::from_le_bytes(le_bytes(p, at)))))
+                }
+                FastTime::F32(at) => out.extend(row.map(|p| {
+                    let t = f32::from_le_bytes(le_bytes(p, at));
+                    offset_ns(f64::from(t), 7, stamp_ns)
+                })),
+                FastTime::F64(at) => out.extend(
+                    row.map(|p| offset_ns(f64::from_le_bytes(le_bytes(p, at)), 8, stamp_ns)),
+                ),
+            }
+        }
+        points
+    }
+}
+
+/// Where the fast loop reads a point's fields (byte offsets in the point).
+#[derive(Clone, Copy, Debug)]
+struct FastLayout {
+    xyz_at: usize,
+    ring_at: Option<usize>,
+    time: FastTime,
+}
+
+/// A point's time field in the fast loop: its type and offset.
+#[derive(Clone, Copy, Debug)]
+enum FastTime {
+    None,
+    U32(usize),
+    F32(usize),
+    F64(usize),
+}
+
+/// `N` bytes of a point at `at` (checked by [`Layout::of`] to lie inside the point).
+fn le_bytes<const N: usize>(point: &[u8], at: usize) -> [u8; N] {
+    point[at..at + N].try_into().expect("N bytes")
+}
+
+impl CloudPoints {
+    /// The points of `cloud`; an error for a cloud without x, y, z or whose sizes do not fit.
+    pub fn from_cloud(cloud: &PointCloud2<'_>) -> Result<CloudPoints, CloudError> {
+        let layout = Layout::of(cloud)?;
+        Ok(match layout.fast(cloud) {
+            Some(fast) => layout.fast_points(cloud.data, fast),
+            None => layout.generic_points(cloud.data),
+        })
+    }
+
+    /// The points of `cloud` read field by field whatever its layout (what the fast loop
+    /// must match).
+    #[cfg(test)]
+    pub(crate) fn from_cloud_generic(cloud: &PointCloud2<'_>) -> Result<CloudPoints, CloudError> {
+        Ok(Layout::of(cloud)?.generic_points(cloud.data))
+    }
+
+    /// Whether `cloud` is read by the fast loop.
+    #[cfg(test)]
+    pub(crate) fn has_fast_layout(cloud: &PointCloud2<'_>) -> bool {
+        Layout::of(cloud).is_ok_and(|layout| layout.fast(cloud).is_some())
     }
 }
 

@@ -10,9 +10,11 @@
 
 pub mod cloud;
 pub mod msg;
+pub mod types;
 
 pub use cloud::{CloudError, CloudPoints};
 pub use msg::*;
+pub use types::RosType;
 
 use byteorder::{BigEndian, ByteOrder, LittleEndian};
 use serde::{Serialize, de::DeserializeOwned};

@@ -92,6 +92,15 @@ pub struct PoseWithCovariance {
     pub covariance: [f64; 36],
 }
 
+impl Default for PoseWithCovariance {
+    fn default() -> Self {
+        PoseWithCovariance {
+            pose: Pose::default(),
+            covariance: [0.0; 36],
+        }
+    }
+}
+
 /// `geometry_msgs/msg/Twist`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Twist {
@@ -111,8 +120,17 @@ pub struct TwistWithCovariance {
     pub covariance: [f64; 36],
 }
 
+impl Default for TwistWithCovariance {
+    fn default() -> Self {
+        TwistWithCovariance {
+            twist: Twist::default(),
+            covariance: [0.0; 36],
+        }
+    }
+}
+
 /// `nav_msgs/msg/Odometry`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Odometry {
     /// Stamp, and the odometry frame.
     pub header: Header,
@@ -125,7 +143,7 @@ pub struct Odometry {
 }
 
 /// `sensor_msgs/msg/Imu`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Imu {
     /// Stamp and the IMU's frame.
     pub header: Header,

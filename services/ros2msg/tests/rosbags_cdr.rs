@@ -93,3 +93,20 @@ fn messages_encoded_here_decode_in_rosbags() {
         grid
     );
 }
+
+#[test]
+fn type_hashes_are_the_ones_rosbags_computes() {
+    let dir = scratch("rosbags-hashes");
+    let names: Vec<&str> = ros2msg::types::ALL.iter().map(|t| t.name).collect();
+    std::fs::write(dir.join("types.json"), serde_json::to_vec(&names).unwrap()).unwrap();
+    rosbags("hashes", &dir);
+    let hashes: std::collections::BTreeMap<String, String> = json(&dir.join("hashes.json"));
+    for t in ros2msg::types::ALL {
+        assert_eq!(
+            hashes.get(t.name).map(String::as_str),
+            Some(t.hash),
+            "{}",
+            t.name
+        );
+    }
+}

@@ -3,6 +3,7 @@ decodes the messages with its own CDR code.
 
     python rosbags_messages.py write DIR   # NAME.{le,be}.cdr + NAME.json (the message)
     python rosbags_messages.py read DIR    # NAME.rust.cdr -> NAME.rust.json
+    python rosbags_messages.py hashes DIR  # hashes.json: each type's RIHS01 hash (Jazzy)
 """
 
 import json
@@ -132,5 +133,11 @@ def read(out):
         (out / f"{name}.rust.json").write_text(json.dumps(plain(msg)))
 
 
+def hashes(out):
+    jazzy = get_typestore(Stores.ROS2_JAZZY)
+    names = json.loads((out / "types.json").read_text())
+    (out / "hashes.json").write_text(json.dumps({n: jazzy.hash_rihs01(n) for n in names}))
+
+
 if __name__ == "__main__":
-    {"write": write, "read": read}[sys.argv[1]](Path(sys.argv[2]))
+    {"write": write, "read": read, "hashes": hashes}[sys.argv[1]](Path(sys.argv[2]))

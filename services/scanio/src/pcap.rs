@@ -129,6 +129,11 @@ impl<R: Read> PcapReader<R> {
         })
     }
 
+    /// The path the capture was opened with (for messages).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     /// The counts so far.
     pub fn counts(&self) -> &PcapCounts {
         &self.counts

@@ -19,6 +19,9 @@ pub enum Topic {
     Odom,
     /// `.../ack`: the mapper's highest durably stored node ([`crate::v1::Ack`]).
     Ack,
+    /// `.../scan`: the latest leveled scan for live views ([`crate::v1::LiveScan`]); best
+    /// effort.
+    Scan,
 }
 
 impl Topic {
@@ -28,6 +31,7 @@ impl Topic {
             Topic::Node => "node",
             Topic::Odom => "odom",
             Topic::Ack => "ack",
+            Topic::Scan => "scan",
         }
     }
 
@@ -36,6 +40,7 @@ impl Topic {
             "node" => Some(Topic::Node),
             "odom" => Some(Topic::Odom),
             "ack" => Some(Topic::Ack),
+            "scan" => Some(Topic::Scan),
             _ => None,
         }
     }
@@ -79,6 +84,11 @@ pub fn node_key(fleet: &str, robot: &str) -> Result<String, WireError> {
 /// `levelmap/{fleet}/robots/{robot}/odom`: the robot's live odometry (best effort).
 pub fn odom_key(fleet: &str, robot: &str) -> Result<String, WireError> {
     robot_key(fleet, robot, Topic::Odom)
+}
+
+/// `levelmap/{fleet}/robots/{robot}/scan`: the robot's live leveled scans (best effort).
+pub fn scan_key(fleet: &str, robot: &str) -> Result<String, WireError> {
+    robot_key(fleet, robot, Topic::Scan)
 }
 
 /// `levelmap/{fleet}/robots/{robot}/ack`: the mapper's acknowledgements to the robot.
@@ -142,7 +152,8 @@ pub fn parse_robot_key(key: &str) -> Result<RobotKey<'_>, WireError> {
 
 /// The full protobuf name of the message a concrete levelmap key carries (as in `.proto`,
 /// package `levelmap.v1`): `…/robots/{robot}/node` → `levelmap.v1.Node`, `…/odom` →
-/// `levelmap.v1.Odometry`, `…/ack` → `levelmap.v1.Ack`, `levelmap/{fleet}/map/poses` →
+/// `levelmap.v1.Odometry`, `…/ack` → `levelmap.v1.Ack`, `…/scan` → `levelmap.v1.LiveScan`,
+/// `levelmap/{fleet}/map/poses` →
 /// `levelmap.v1.MapPoses`, `…/map/summary` → `levelmap.v1.MapSummary`. `None` for any other
 /// key (recorders skip those).
 pub fn message_name_of_key(key: &str) -> Option<&'static str> {
@@ -151,6 +162,7 @@ pub fn message_name_of_key(key: &str) -> Option<&'static str> {
             Topic::Node => "levelmap.v1.Node",
             Topic::Odom => "levelmap.v1.Odometry",
             Topic::Ack => "levelmap.v1.Ack",
+            Topic::Scan => "levelmap.v1.LiveScan",
         });
     }
     let chunks: Vec<&str> = key.split('/').collect();
@@ -227,6 +239,7 @@ mod tests {
             ("levelmap/park/robots/r1/node", Some("levelmap.v1.Node")),
             ("levelmap/park/robots/r1/odom", Some("levelmap.v1.Odometry")),
             ("levelmap/park/robots/r1/ack", Some("levelmap.v1.Ack")),
+            ("levelmap/park/robots/r1/scan", Some("levelmap.v1.LiveScan")),
             ("levelmap/park/map/poses", Some("levelmap.v1.MapPoses")),
             ("levelmap/park/map/summary", Some("levelmap.v1.MapSummary")),
             ("levelmap/park/map/grid", None),

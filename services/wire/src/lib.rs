@@ -26,12 +26,14 @@ pub use convert::*;
 pub use error::{MAX_NODE_BYTES, MAX_POSITION_M, MAX_RANGE_M, MAX_SPEED_M_PER_S, WireError};
 pub use keys::{
     KEY_ROOT, RobotKey, Topic, ack_key, all_robots_key_expr, map_key, map_key_expr,
-    message_name_of_key, node_key, odom_key, parse_robot_key, robot_key, validate_id,
+    message_name_of_key, node_key, odom_key, parse_robot_key, robot_key, scan_key, validate_id,
 };
 /// Re-exported so users can encode and decode without depending on prost themselves.
 pub use prost::Message;
 #[cfg(feature = "recording")]
 pub mod recording;
+#[cfg(feature = "session")]
+pub mod ros2;
 #[cfg(feature = "session")]
 pub mod session;
 
@@ -59,6 +61,18 @@ impl v1::Node {
                 .chain(self.earlier_gps.iter_mut())
                 .filter_map(|g| g.header.as_mut()),
         )
+    }
+}
+
+impl v1::LiveScan {
+    /// A node's scan as a live scan: its header, leveled scan, odometry and scan frame.
+    pub fn of_node(node: &v1::Node) -> v1::LiveScan {
+        v1::LiveScan {
+            header: node.header.clone(),
+            scan: node.scan.clone(),
+            odometry: node.odometry.clone(),
+            scan_origin_in_robot: node.scan_origin_in_robot,
+        }
     }
 }
 

@@ -88,11 +88,12 @@ struct HeaderOnly {
     header: Option<v1::Header>,
 }
 
-/// The measurement time a message's header carries (Node, Odometry, Ack); `None` without one.
+/// The measurement time a message's header carries (Node, Odometry, Ack, LiveScan); `None`
+/// without one.
 fn header_stamp_ns(name: &str, payload: &[u8]) -> Option<u64> {
     if !matches!(
         name,
-        "levelmap.v1.Node" | "levelmap.v1.Odometry" | "levelmap.v1.Ack"
+        "levelmap.v1.Node" | "levelmap.v1.Odometry" | "levelmap.v1.Ack" | "levelmap.v1.LiveScan"
     ) {
         return None;
     }

@@ -14,15 +14,15 @@ use slam::gnss::FixStatus;
 use std::collections::{BTreeMap, VecDeque};
 
 /// The ROS 2 types each topic must have.
-pub const CLOUD_TYPE: &str = "sensor_msgs/msg/PointCloud2";
+pub const CLOUD_TYPE: &str = ros2msg::types::POINT_CLOUD2.name;
 /// See [`CLOUD_TYPE`].
-pub const ODOMETRY_TYPE: &str = "nav_msgs/msg/Odometry";
+pub const ODOMETRY_TYPE: &str = ros2msg::types::ODOMETRY.name;
 /// See [`CLOUD_TYPE`].
-pub const IMU_TYPE: &str = "sensor_msgs/msg/Imu";
+pub const IMU_TYPE: &str = ros2msg::types::IMU.name;
 /// See [`CLOUD_TYPE`].
-pub const GPS_TYPE: &str = "sensor_msgs/msg/NavSatFix";
+pub const GPS_TYPE: &str = ros2msg::types::NAV_SAT_FIX.name;
 /// See [`CLOUD_TYPE`].
-pub const TF_TYPE: &str = "tf2_msgs/msg/TFMessage";
+pub const TF_TYPE: &str = ros2msg::types::TF_MESSAGE.name;
 /// The static transforms' topic.
 pub const TF_STATIC_TOPIC: &str = "/tf_static";
 
@@ -432,3 +432,6 @@ fn gps_reading(
         odometry_at_fix,
     }
 }
+
+#[cfg(test)]
+mod tests;

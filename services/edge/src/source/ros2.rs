@@ -14,18 +14,8 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, sync_channel};
+use wire::ros2::{KeyStyle, RosKeys};
 use zenoh::Wait;
-
-/// How ROS 2 topics are laid on Zenoh keys.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum KeyStyle {
-    /// rmw_zenoh: `<domain_id>/<topic>/<dds type>/<type hash>`.
-    #[default]
-    RmwZenoh,
-    /// zenoh-bridge-ros2dds: `<namespace>/<topic>`.
-    Ros2dds,
-}
 
 /// See the module.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -48,27 +38,14 @@ pub struct Ros2SourceConfig {
     pub unknown: BTreeMap<String, toml::Value>,
 }
 
-/// The DDS name of a ROS 2 type: `sensor_msgs/msg/Imu` → `sensor_msgs::msg::dds_::Imu_`.
-pub fn dds_type_name(type_name: &str) -> String {
-    match type_name.rsplit_once('/') {
-        Some((package, name)) => format!("{}::dds_::{name}_", package.replace('/', "::")),
-        None => type_name.to_owned(),
-    }
-}
-
-/// The key expression a topic's samples come on.
-pub fn topic_key(config: &Ros2SourceConfig, topic: &str, type_name: &str) -> String {
-    let topic = topic.trim_start_matches('/');
-    match config.key_style {
-        KeyStyle::RmwZenoh => {
-            format!(
-                "{}/{topic}/{}/*",
-                config.domain_id,
-                dds_type_name(type_name)
-            )
+impl Ros2SourceConfig {
+    /// Where the robot's topics are.
+    pub fn keys(&self) -> RosKeys<'_> {
+        RosKeys {
+            style: self.key_style,
+            domain_id: self.domain_id,
+            namespace: &self.namespace,
         }
-        KeyStyle::Ros2dds if config.namespace.is_empty() => topic.to_owned(),
-        KeyStyle::Ros2dds => format!("{}/{topic}", config.namespace.trim_matches('/')),
     }
 }
 
@@ -105,7 +82,7 @@ impl Ros2Source {
         topics.extend(inputs.imu_topic.clone().map(|t| (t, IMU_TYPE)));
         topics.extend(inputs.gps_topic.clone().map(|t| (t, GPS_TYPE)));
         for (topic, type_name) in topics {
-            let key = topic_key(config, &topic, type_name);
+            let key = config.keys().subscription(&topic, type_name);
             let (tx, dropped) = (tx.clone(), Arc::clone(&dropped));
             session
                 .declare_subscriber(&key)
@@ -150,29 +127,6 @@ impl Source for Ros2Source {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn keys_are_laid_as_rmw_zenoh_and_the_bridge_lay_them() {
-        assert_eq!(
-            dds_type_name("sensor_msgs/msg/PointCloud2"),
-            "sensor_msgs::msg::dds_::PointCloud2_"
-        );
-        let mut config = Ros2SourceConfig {
-            domain_id: 3,
-            ..Ros2SourceConfig::default()
-        };
-        assert_eq!(
-            topic_key(&config, "/ouster/points", CLOUD_TYPE),
-            "3/ouster/points/sensor_msgs::msg::dds_::PointCloud2_/*"
-        );
-        config.key_style = KeyStyle::Ros2dds;
-        assert_eq!(
-            topic_key(&config, "/ouster/points", CLOUD_TYPE),
-            "ouster/points"
-        );
-        config.namespace = "/robot7/".into();
-        assert_eq!(topic_key(&config, "/odom", ODOMETRY_TYPE), "robot7/odom");
-    }
 
     #[test]
     fn unknown_keys_are_refused() {

@@ -113,11 +113,14 @@ pub(super) async fn summary(
 pub(super) struct RobotState {
     id: String,
     /// Its map pose: live odometry since its last node composed onto that node's pose.
-    pose: Pose2,
+    pub(super) pose: Pose2,
     /// Stamp of the live odometry used (0: none yet).
     stamp_ns: u64,
     /// When that odometry arrived (0: none yet).
     last_seen_ns: u64,
+    /// The map pose of the robot's odometry frame (ROS's map→odom): `pose` is this composed
+    /// with the live odometry pose. The robot's edge publishes the same on `/tf` (`[ros2_out]`).
+    map_from_odometry: Pose2,
     nodes: usize,
     /// Highest node_seq taken of its newest chain.
     last_node_seq: u64,
@@ -127,7 +130,7 @@ pub(super) struct RobotState {
 }
 
 /// The robot's pose on the map now: live odometry since its last node, or the node itself.
-fn robot_state(api: &Api, v: &FleetView, robot: &RobotView) -> RobotState {
+pub(super) fn robot_state(api: &Api, v: &FleetView, robot: &RobotView) -> RobotState {
     let live = api
         .shared
         .live
@@ -144,6 +147,7 @@ fn robot_state(api: &Api, v: &FleetView, robot: &RobotView) -> RobotState {
         pose,
         stamp_ns,
         last_seen_ns,
+        map_from_odometry: robot.map_from_odometry(),
         nodes: robot.nodes,
         last_node_seq: robot.last_node_seq,
         chains: robot.chains.clone(),
@@ -177,7 +181,7 @@ pub(super) async fn robots(
     }))
 }
 
-fn robot<'a>(v: &'a FleetView, robot: &str) -> Reply<&'a RobotView> {
+pub(super) fn robot<'a>(v: &'a FleetView, robot: &str) -> Reply<&'a RobotView> {
     v.robot(robot)
         .ok_or_else(|| ApiError::NotFound(format!("no robot {robot:?} in fleet {:?}", v.id)))
 }

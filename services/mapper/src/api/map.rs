@@ -68,7 +68,7 @@ pub(super) struct GridPlacement {
 }
 
 impl GridPlacement {
-    fn of(g: &slam::OccupancyGrid, nodes: usize) -> GridPlacement {
+    pub(super) fn of(g: &slam::OccupancyGrid, nodes: usize) -> GridPlacement {
         GridPlacement {
             resolution_m: g.resolution_m,
             origin_m: g.origin_m,
@@ -81,8 +81,7 @@ impl GridPlacement {
 
 /// The occupancy grid of the fleet's leveled scans at their optimized poses.
 fn grid(v: &FleetView, params: &slam::GridParams) -> Reply<slam::OccupancyGrid> {
-    let scans: Vec<slam::matching::Scan2> = v.nodes.iter().map(|n| n.scan()).collect();
-    slam::OccupancyGrid::from_scans(v.poses.iter().copied().zip(&scans), params)
+    v.grid(params)
         .map_err(|e| ApiError::Unprocessable(e.to_string()))
 }
 

@@ -11,10 +11,12 @@ mod faults;
 mod fleets;
 mod graph;
 mod limits;
+mod live;
 mod map;
 mod nodes;
 mod service;
 mod web;
+mod window;
 
 use crate::config::MapperConfig;
 use crate::marginals::Marginals;
@@ -47,6 +49,8 @@ struct Api {
     tokens: Arc<access::Tokens>,
     /// Heavy requests and event streams at once.
     limits: Arc<limits::Limits>,
+    /// The map's tiles, for windows around robots.
+    tiles: Arc<crate::tiles::TileCache>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -213,6 +217,7 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(fleets::summary))
         .routes(routes!(fleets::robots))
         .routes(routes!(fleets::robot_pose))
+        .routes(routes!(live::live))
         .routes(routes!(fleets::trajectory_tum))
         .routes(routes!(fleets::optimize))
         .routes(routes!(graph::graph))
@@ -223,6 +228,7 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(map::map_yaml))
         .routes(routes!(map::map_json))
         .routes(routes!(map::map_geojson))
+        .routes(routes!(window::robot_map_png))
         .routes(routes!(nodes::node_detail))
         .routes(routes!(nodes::node_cloud))
         .routes(routes!(events::events))
@@ -265,6 +271,7 @@ pub fn router(
         openapi: Arc::new(OnceLock::new()),
         tokens: Arc::new(access::Tokens::new(&config.token, &config.read_token)),
         limits: Arc::new(limits::Limits::new(&config.http)),
+        tiles: Arc::default(),
     };
     let (router, doc) = parts(Some(&api));
     let _ = api

@@ -19,6 +19,11 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
         include_str!("../../../../web/app.js"),
     ),
     (
+        "follow.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/follow.js"),
+    ),
+    (
         "cloud.js",
         "text/javascript; charset=utf-8",
         include_str!("../../../../web/cloud.js"),

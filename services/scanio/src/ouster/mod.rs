@@ -18,8 +18,9 @@ use crate::pcap::{PcapCounts, PcapReader};
 use crate::{LoadError, LoadedScan};
 use leveling::nalgebra::Isometry3;
 use leveling::{PoseTrack, Scan3d};
-use std::io::BufReader;
-use std::path::{Path, PathBuf};
+use std::fs::File;
+use std::io::{BufReader, Read};
+use std::path::Path;
 
 /// One rotation as the packets hold it (staggered): row-major, row = beam (top-down),
 /// column = measurement id.
@@ -93,10 +94,9 @@ struct Partial {
     missing: usize,
 }
 
-/// Reads a capture frame by frame.
-pub struct FrameReader {
-    pcap: PcapReader<BufReader<std::fs::File>>,
-    path: PathBuf,
+/// Reads a capture frame by frame (a file, or any bytes: [`FrameReader::new`]).
+pub struct FrameReader<R: Read = BufReader<File>> {
+    pcap: PcapReader<R>,
     meta: SensorMeta,
     layout: PacketLayout,
     current: Option<Partial>,
@@ -106,14 +106,20 @@ pub struct FrameReader {
 impl FrameReader {
     /// Opens `pcap`, to be read with `meta`.
     pub fn open(pcap: &Path, meta: SensorMeta) -> Result<FrameReader, LoadError> {
-        Ok(FrameReader {
-            pcap: PcapReader::open(pcap)?,
-            path: pcap.to_owned(),
+        Ok(FrameReader::new(PcapReader::open(pcap)?, meta))
+    }
+}
+
+impl<R: Read> FrameReader<R> {
+    /// Reads the capture `pcap` (its global header read) with `meta`.
+    pub fn new(pcap: PcapReader<R>, meta: SensorMeta) -> FrameReader<R> {
+        FrameReader {
+            pcap,
             layout: PacketLayout::of(&meta),
             meta,
             current: None,
             report: OusterReport::default(),
-        })
+        }
     }
 
     /// The metadata the capture is read with.
@@ -137,7 +143,13 @@ impl FrameReader {
                 continue;
             }
             let packet = &datagram.payload;
-            let frame_id = match self.layout.frame_id(packet) {
+            // A bad packet is dropped whole: counted once, no column of it kept, and the
+            // frame being filled goes on.
+            let checked = self.layout.frame_id(packet).and_then(|id| {
+                self.check_window(packet)?;
+                Ok(id)
+            });
+            let frame_id = match checked {
                 Ok(id) => id,
                 Err(why) => {
                     self.bad_packet(why);
@@ -153,9 +165,7 @@ impl FrameReader {
             {
                 done = self.finish();
             }
-            if let Err(why) = self.add(frame_id, packet) {
-                self.bad_packet(why);
-            }
+            self.add(frame_id, packet);
             if self.current.as_ref().is_some_and(|p| p.missing == 0) {
                 // Complete: out now (a frame left over in `done` was incomplete).
                 debug_assert!(done.is_none());
@@ -184,7 +194,22 @@ impl FrameReader {
         Some(partial.frame)
     }
 
-    fn add(&mut self, frame_id: u16, packet: &[u8]) -> Result<(), String> {
+    /// Every column of a packet (of the right size) has a measurement id in the window.
+    fn check_window(&self, packet: &[u8]) -> Result<(), String> {
+        let (first, last) = self.meta.column_window;
+        for c in 0..self.layout.columns {
+            let m = self.layout.column(packet, c).measurement_id as usize;
+            if !(first..=last).contains(&m) {
+                return Err(format!(
+                    "measurement id {m} outside the column window {first}..={last}"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds a packet checked by [`PacketLayout::frame_id`] and [`Self::check_window`].
+    fn add(&mut self, frame_id: u16, packet: &[u8]) {
         let (w, rows) = (self.meta.columns_per_frame, self.meta.pixels_per_column);
         let (first, last) = self.meta.column_window;
         let partial = self.current.get_or_insert_with(|| Partial {
@@ -200,11 +225,6 @@ impl FrameReader {
         for c in 0..self.layout.columns {
             let header = self.layout.column(packet, c);
             let m = header.measurement_id as usize;
-            if !(first..=last).contains(&m) {
-                return Err(format!(
-                    "measurement id {m} outside the column window {first}..={last}"
-                ));
-            }
             if !partial.seen[m] {
                 partial.seen[m] = true;
                 partial.missing -= 1;
@@ -216,12 +236,11 @@ impl FrameReader {
                 frame.ranges_mm[row * w + m] = self.layout.range_mm(packet, c, row);
             }
         }
-        Ok(())
     }
 
     /// The path of the capture (for messages).
     pub fn path(&self) -> &Path {
-        &self.path
+        self.pcap.path()
     }
 }
 

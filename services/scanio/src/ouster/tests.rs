@@ -1,6 +1,7 @@
 use super::packet::build_packet;
 use super::*;
 use crate::pcap::build;
+use std::path::PathBuf;
 
 /// 32 columns per frame in packets of 16, two beams: +10° and −10°, no azimuth offsets,
 /// beam origin 10 mm, sensor frame = lidar frame.
@@ -151,4 +152,45 @@ fn a_capture_without_a_complete_frame_is_an_error_naming_it() {
         e.contains("no complete frame") && e.contains("1 incomplete"),
         "{e}"
     );
+}
+
+/// Found by the `pcap_ouster` fuzz target: a packet with a column outside the window was
+/// counted both as a lidar packet and a bad one, its columns before that one were kept, and
+/// a frame id of its own ended the frame being filled.
+#[test]
+fn a_packet_outside_the_window_is_dropped_whole() {
+    let meta = meta("RNG19_RFL8_SIG16_NIR16");
+    let layout = PacketLayout::of(&meta);
+    // Columns 20 to 35 of a 32-column frame, of another frame id, with other ranges.
+    let outside = build_packet(&layout, 9, 20, |_, _| 8);
+    let mut bytes = build::header();
+    for (i, p) in [
+        build_packet(&layout, 6, 0, range),
+        outside,
+        build_packet(&layout, 6, 16, range),
+    ]
+    .iter()
+    .enumerate()
+    {
+        bytes.extend(build::record(i as u32, 7502, p));
+    }
+    let pcap = crate::pcap::PcapReader::new(&bytes[..], Path::new("t.pcap")).unwrap();
+    let mut reader = FrameReader::new(pcap, meta);
+    let frame = reader.next_frame().expect("frame 6, whole");
+    assert!(reader.next_frame().is_none());
+    for m in 0..32 {
+        for row in 0..2 {
+            assert_eq!(
+                frame.ranges_mm[row * 32 + m],
+                range(m as u16, row),
+                "{m}, {row}"
+            );
+        }
+    }
+    let report = reader.report();
+    let c = &report.counts;
+    assert_eq!((c.lidar_packets, c.bad_packets), (2, 1));
+    assert_eq!((c.frames, c.incomplete_frames), (1, 0));
+    let why = report.first_bad_packet.expect("a bad packet");
+    assert!(why.contains("measurement id 32 outside"), "{why}");
 }

@@ -157,10 +157,108 @@ pub fn odometry_input(bytes: &[u8]) -> Result<OdometryInput, WireError> {
     })
 }
 
+/// A robot's live leveled scan, checked (`live_scan.proto`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LiveScanInput {
+    /// The sender's fleet.
+    pub fleet: String,
+    /// The sender's robot.
+    pub robot: String,
+    /// The scan's start (ns since the Unix epoch).
+    pub stamp_ns: u64,
+    /// The leveled scan.
+    pub scan: LeveledScan,
+    /// Dead reckoning at the scan's start.
+    pub odometry: TimedPose,
+    /// The scan's frame in the robot's planar frame.
+    pub scan_origin: Pose2,
+}
+
+/// Decodes and checks a live scan into a [`LiveScanInput`].
+pub fn live_scan_input(bytes: &[u8]) -> Result<LiveScanInput, WireError> {
+    if bytes.len() > MAX_NODE_BYTES {
+        return Err(WireError::Implausible {
+            field: "LiveScan",
+            index: None,
+            value: bytes.len() as f64,
+            limit: MAX_NODE_BYTES as f64,
+            reason: "too_large",
+        });
+    }
+    let msg: v1::LiveScan = super::decode("LiveScan", bytes)?;
+    live_scan_from_wire(&msg)
+}
+
+/// A live scan message checked into a [`LiveScanInput`].
+pub fn live_scan_from_wire(msg: &v1::LiveScan) -> Result<LiveScanInput, WireError> {
+    let header = super::check_header(msg.header.as_ref(), "LiveScan.header")?;
+    let scan = msg.scan.as_ref().ok_or(WireError::Missing {
+        field: "LiveScan.scan",
+    })?;
+    let odometry = msg.odometry.as_ref().ok_or(WireError::Missing {
+        field: "LiveScan.odometry",
+    })?;
+    for (inner, field) in [
+        (scan.header.as_ref(), "LiveScan.scan.header"),
+        (odometry.header.as_ref(), "LiveScan.odometry.header"),
+    ] {
+        if let Some(inner) = inner {
+            super::same_sender(header, inner, field)?;
+        }
+    }
+    Ok(LiveScanInput {
+        fleet: header.fleet_id.clone(),
+        robot: header.robot_id.clone(),
+        stamp_ns: header.stamp_ns,
+        scan: leveled_scan_from_wire(scan)?,
+        odometry: odometry_from_wire(odometry)?,
+        scan_origin: msg
+            .scan_origin_in_robot
+            .as_ref()
+            .map_or(Ok(Pose2::IDENTITY), pose2_from_wire)?,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::convert::fixtures::*;
+    use prost::Message;
+
+    #[test]
+    fn a_live_scan_is_checked_like_a_nodes_scan() {
+        let wire = node();
+        let live = v1::LiveScan::of_node(&wire);
+        let input = live_scan_input(&live.encode_to_vec()).unwrap();
+        let from_node = node_input(&wire).unwrap();
+        assert_eq!(input.scan, from_node.scan);
+        assert_eq!(input.odometry, from_node.odometry);
+        assert_eq!(input.scan_origin, from_node.scan_origin);
+        let mut forged = live.clone();
+        forged
+            .odometry
+            .as_mut()
+            .unwrap()
+            .header
+            .as_mut()
+            .unwrap()
+            .robot_id = "other".into();
+        assert!(matches!(
+            live_scan_input(&forged.encode_to_vec()),
+            Err(WireError::Invalid {
+                field: "LiveScan.odometry.header",
+                ..
+            })
+        ));
+        let mut no_scan = live;
+        no_scan.scan = None;
+        assert!(matches!(
+            live_scan_input(&no_scan.encode_to_vec()),
+            Err(WireError::Missing {
+                field: "LiveScan.scan"
+            })
+        ));
+    }
 
     #[test]
     fn a_node_becomes_its_domain_input_once() {

@@ -18,7 +18,8 @@ pub use cloud::{
 };
 pub use gps::{fix_status_to_wire, gps_fix_from_wire, gps_fix_to_wire, validate_gps_fix};
 pub use input::{
-    NodeInput, OdometryInput, check_step, decode_node_input, node_input, odometry_input,
+    LiveScanInput, NodeInput, OdometryInput, check_step, decode_node_input, live_scan_from_wire,
+    live_scan_input, node_input, odometry_input,
 };
 pub use map::{MapPose, decode_map_poses, decode_map_summary, map_poses_to_wire};
 pub use node::{decode_ack, decode_node, decode_odometry, validate_ack, validate_node};
