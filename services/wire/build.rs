@@ -1,5 +1,6 @@
 //! Compiles proto/levelmap/v1/*.proto with protox (pure Rust, no system `protoc`) and
-//! generates the prost types into OUT_DIR/levelmap.v1.rs.
+//! generates the prost types into OUT_DIR/levelmap.v1.rs; the encoded FileDescriptorSet (every
+//! file and its imports) goes to OUT_DIR/levelmap.fds, for recordings that embed the schemas.
 
 use std::path::PathBuf;
 
@@ -22,6 +23,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     files.sort();
 
     let fds = protox::compile(&files, [&proto_root])?;
+    // Without the comments: a recording holds the set once per message type.
+    let mut embedded = fds.clone();
+    for file in &mut embedded.file {
+        file.source_code_info = None;
+    }
+    let out_dir = PathBuf::from(std::env::var("OUT_DIR")?);
+    std::fs::write(
+        out_dir.join("levelmap.fds"),
+        prost::Message::encode_to_vec(&embedded),
+    )?;
     prost_build::Config::new().compile_fds(fds)?;
     Ok(())
 }

@@ -12,6 +12,8 @@ mod optimize;
 #[cfg(feature = "lab")]
 mod pavilion;
 #[cfg(any(feature = "edge", feature = "mapper"))]
+mod record;
+#[cfg(any(feature = "edge", feature = "mapper"))]
 mod services;
 #[cfg(feature = "lab")]
 mod simulate;
@@ -50,6 +52,8 @@ enum Command {
     Optimize(optimize::OptimizeArgs),
     #[cfg(feature = "lab")]
     Pavilion(pavilion::PavilionArgs),
+    #[cfg(any(feature = "edge", feature = "mapper"))]
+    Record(record::RecordArgs),
     #[cfg(feature = "lab")]
     Simulate(simulate::SimulateArgs),
     #[cfg(feature = "mapper")]
@@ -76,6 +80,8 @@ fn main() -> ExitCode {
         }
         #[cfg(feature = "mapper")]
         Command::Optimize(args) => optimize::run(&args),
+        #[cfg(any(feature = "edge", feature = "mapper"))]
+        Command::Record(args) => record::run(&args),
         #[cfg(feature = "lab")]
         Command::Simulate(args) => simulate::run(&args),
         #[cfg(feature = "mapper")]

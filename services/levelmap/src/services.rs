@@ -12,6 +12,14 @@ pub struct MapperArgs {
     /// variables set keys too: LEVELMAP_HTTP_LISTEN, LEVELMAP_ZENOH__LISTEN (nested: __).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
+    /// Also feed this recording (`levelmap record`) to the map: its nodes and odometry, in
+    /// recorded order, as fast as the mapper takes them, then one solve per fleet. Zenoh
+    /// stays open for robots meanwhile.
+    #[arg(long, value_name = "FILE.mcap")]
+    pub from_recording: Option<PathBuf>,
+    /// With --from-recording: stop once it is fed and solved, instead of serving on.
+    #[arg(long, requires = "from_recording")]
+    pub exit_when_done: bool,
 }
 
 /// Run a robot's edge service: its source's scans leveled and published as nodes.
@@ -57,6 +65,31 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
             running.http_addr,
             config.store_path.display()
         );
+        if let Some(path) = &args.from_recording {
+            let fed = running.feed_recording(path).await;
+            match &fed {
+                Ok(report) => {
+                    tracing::info!(
+                        messages = report.messages,
+                        nodes = report.nodes,
+                        odometry = report.odometry,
+                        live_scans = report.live_scans,
+                        ignored = report.ignored,
+                        solves = report.solves,
+                        "{}: fed",
+                        path.display()
+                    );
+                    for (fleet, solve) in &report.last_solve {
+                        tracing::info!(fleet, "last solve: {solve}");
+                    }
+                }
+                Err(e) => tracing::error!("{e:#}"),
+            }
+            if fed.is_err() || args.exit_when_done {
+                running.stop().await?;
+                return fed.map(|_| ());
+            }
+        }
         wire::session::shutdown_signal().await;
         tracing::info!("stopping");
         running.stop().await

@@ -5,8 +5,8 @@
 //! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
 //! HTTP side reads), [`live`] (each robot's live feed), [`tiles`] (the map's
 //! tiles for windows around robots), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
-//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`ros_out`] (the
-//! maps to ROS 2), [`api`] (HTTP).
+//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`recording`] (a
+//! recording fed in as the bus's traffic), [`ros_out`] (the maps to ROS 2), [`api`] (HTTP).
 
 pub mod api;
 pub mod bus;
@@ -15,6 +15,7 @@ pub mod fleet;
 pub mod live;
 pub mod marginals;
 pub mod odometry;
+pub mod recording;
 pub mod ros_out;
 pub mod server;
 pub mod state;

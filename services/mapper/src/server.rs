@@ -8,6 +8,7 @@
 use crate::bus::Bus;
 use crate::config::MapperConfig;
 use crate::fleet::FleetMap;
+use crate::recording::FeedReport;
 use crate::state::{FleetView, Shared};
 use crate::store::Store;
 use crate::worker::{Work, Worker};
@@ -32,6 +33,7 @@ pub struct Running {
     http: tokio::task::JoinHandle<()>,
     worker: Option<std::thread::JoinHandle<()>>,
     work: mpsc::SyncSender<Work>,
+    fleets: Vec<String>,
 }
 
 impl Running {
@@ -40,6 +42,15 @@ impl Running {
         Work::optimize(&self.work, fleet)
             .await
             .map_err(|e| anyhow::anyhow!("optimizing fleet {fleet}: {e}"))
+    }
+
+    /// Feeds the recording at `path` to the worker (`crate::recording`) and waits until it
+    /// has mapped it, solving where the recorded mapper solved and after the last node.
+    pub async fn feed_recording(&self, path: &std::path::Path) -> Result<FeedReport> {
+        let (path, work) = (path.to_owned(), self.work.clone());
+        let (shared, fleets) = (self.shared.clone(), self.fleets.clone());
+        tokio::task::spawn_blocking(move || crate::recording::feed(&path, &work, &shared, &fleets))
+            .await?
     }
 
     /// Stops accepting, ends the event streams, lets the worker finish what it holds, closes
@@ -130,6 +141,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         http,
         worker: Some(worker),
         work: work_tx,
+        fleets: config.fleets.clone(),
     })
 }
 
@@ -154,10 +166,8 @@ async fn subscribe(
     let nodes = session
         .declare_subscriber(node_keys)
         .callback(move |sample| {
-            let node = Work::Node {
-                key: sample.key_expr().as_str().to_owned(),
-                payload: sample.payload().to_bytes().into_owned(),
-            };
+            let payload = sample.payload().to_bytes().into_owned();
+            let node = Work::node(sample.key_expr().as_str(), payload);
             // Behind by a full queue: the node stays in its robot's outbox and comes again
             // (the next node's gap asks for it), instead of the mapper's memory growing.
             if let Err(mpsc::TrySendError::Full(_)) = work.try_send(node) {

@@ -197,6 +197,9 @@ pub struct Shared {
     pub quarantined: RwLock<BTreeMap<String, String>>,
     /// Set when the mapper stops: open event streams end, so HTTP can shut down gracefully.
     pub stopping: tokio::sync::watch::Sender<bool>,
+    /// Set while a recording is fed (`crate::recording`): the worker solves only when the
+    /// feed asks, where the recorded mapper solved, not on its own timer.
+    pub feeding: std::sync::atomic::AtomicBool,
 }
 
 impl Shared {
@@ -213,6 +216,7 @@ impl Shared {
             store_fault: RwLock::default(),
             quarantined: RwLock::default(),
             stopping: tokio::sync::watch::Sender::new(false),
+            feeding: Default::default(),
         }
     }
 

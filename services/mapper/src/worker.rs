@@ -17,6 +17,7 @@ use commit::Unstored;
 use serde_json::json;
 use std::collections::HashMap;
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use wire::NodeInput;
@@ -73,6 +74,15 @@ pub enum OptimizeError {
 }
 
 impl Work {
+    /// A node received on `key`, as the Zenoh subscription and a recording's feed both hand
+    /// it to the worker (which decodes and checks it).
+    pub fn node(key: &str, payload: Vec<u8>) -> Work {
+        Work::Node {
+            key: key.to_owned(),
+            payload,
+        }
+    }
+
     /// Asks the worker behind `work` to re-optimize `fleet` now and waits for its report.
     pub async fn optimize(
         work: &mpsc::SyncSender<Work>,
@@ -387,7 +397,7 @@ impl Worker {
     /// Solves each fleet whose nodes call for it, at most every solve interval: nodes arriving
     /// meanwhile wait for one solve at most, not for one each. After the batch is visible.
     fn due_solves(&mut self) {
-        if self.unstored.is_some() {
+        if self.unstored.is_some() || self.shared.feeding.load(Ordering::SeqCst) {
             return;
         }
         let interval = Duration::from_millis(self.config.solve_interval_ms);

@@ -27,12 +27,20 @@ pub fn shared_data(relative: &str) -> PathBuf {
     path
 }
 
-/// What the ROS 2 cross-implementation tests check levelmap against, from PyPI: rosbags
-/// (CDR, MCAP, rosbag2) and the Python Zenoh (live rmw_zenoh keys).
-pub const ROS2_PYTHON: [&str; 3] = ["rosbags==0.11.9", "eclipse-zenoh==1.10.2", "numpy"];
+/// What the cross-implementation tests check levelmap against, from PyPI: rosbags (CDR, MCAP,
+/// rosbag2) and the Python Zenoh (live rmw_zenoh keys) for ROS 2; the MCAP reference reader
+/// with its protobuf decoder for `levelmap record`'s files.
+pub const ROS2_PYTHON: [&str; 6] = [
+    "rosbags==0.11.9",
+    "eclipse-zenoh==1.10.2",
+    "numpy",
+    "mcap==1.6.0",
+    "mcap-protobuf-support==0.6.0",
+    "protobuf==7.36.2",
+];
 
 /// A python with [`ROS2_PYTHON`]: a venv made on first use beside the build
-/// (`target/ros2-python-venv-1`; the number changes with the list). Panics, naming the step, when python3 or PyPI is missing:
+/// (`target/ros2-python-venv-2`; the number changes with the list). Panics, naming the step, when python3 or PyPI is missing:
 /// the tests that need it must fail, not skip.
 pub fn rosbags_python() -> PathBuf {
     let exe = std::env::current_exe().expect("the test's path");
@@ -41,10 +49,10 @@ pub fn rosbags_python() -> PathBuf {
         .ancestors()
         .nth(3)
         .expect("a test runs from target/<profile>/deps");
-    let venv = target.join("ros2-python-venv-1");
+    let venv = target.join("ros2-python-venv-2");
     let python = venv.join("bin/python");
     // Tests run in parallel, and in several processes: one makes the venv, the others wait.
-    let lock = std::fs::File::create(target.join("ros2-python-venv-1.lock"))
+    let lock = std::fs::File::create(target.join("ros2-python-venv-2.lock"))
         .expect("a lock file beside the build");
     lock.lock().expect("the venv's lock");
     // Written last: a venv whose install failed half-way is made again.
@@ -68,9 +76,9 @@ pub fn rosbags_python() -> PathBuf {
     python
 }
 
-/// Runs `script` with `args` in [`rosbags_python`]'s python; panics with its stderr when it
-/// fails.
-pub fn run_ros2_python<S: AsRef<std::ffi::OsStr>>(script: &std::path::Path, args: &[S]) {
+/// Runs `script` with `args` in [`rosbags_python`]'s python: its stdout. Panics with its
+/// stderr when it fails.
+pub fn run_ros2_python<S: AsRef<std::ffi::OsStr>>(script: &std::path::Path, args: &[S]) -> String {
     let out = std::process::Command::new(rosbags_python())
         .arg(script)
         .args(args)
@@ -82,6 +90,7 @@ pub fn run_ros2_python<S: AsRef<std::ffi::OsStr>>(script: &std::path::Path, args
         script.display(),
         String::from_utf8_lossy(&out.stderr)
     );
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 #[cfg(test)]

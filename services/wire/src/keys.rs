@@ -150,6 +150,33 @@ pub fn parse_robot_key(key: &str) -> Result<RobotKey<'_>, WireError> {
     })
 }
 
+/// The full protobuf name of the message a concrete levelmap key carries (as in `.proto`,
+/// package `levelmap.v1`): `…/robots/{robot}/node` → `levelmap.v1.Node`, `…/odom` →
+/// `levelmap.v1.Odometry`, `…/ack` → `levelmap.v1.Ack`, `…/scan` → `levelmap.v1.LiveScan`,
+/// `levelmap/{fleet}/map/poses` →
+/// `levelmap.v1.MapPoses`, `…/map/summary` → `levelmap.v1.MapSummary`. `None` for any other
+/// key (recorders skip those).
+pub fn message_name_of_key(key: &str) -> Option<&'static str> {
+    if let Ok(parsed) = parse_robot_key(key) {
+        return Some(match parsed.topic {
+            Topic::Node => "levelmap.v1.Node",
+            Topic::Odom => "levelmap.v1.Odometry",
+            Topic::Ack => "levelmap.v1.Ack",
+            Topic::Scan => "levelmap.v1.LiveScan",
+        });
+    }
+    let chunks: Vec<&str> = key.split('/').collect();
+    let [KEY_ROOT, fleet, "map", item] = chunks[..] else {
+        return None;
+    };
+    validate_id("fleet", fleet).ok()?;
+    match item {
+        "poses" => Some("levelmap.v1.MapPoses"),
+        "summary" => Some("levelmap.v1.MapSummary"),
+        _ => None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -204,6 +231,25 @@ mod tests {
         }
         let message = node_key("campus", "a/b").unwrap_err().to_string();
         assert!(message.contains("robot id \"a/b\""), "{message}");
+    }
+
+    #[test]
+    fn keys_name_their_message() {
+        for (key, name) in [
+            ("levelmap/park/robots/r1/node", Some("levelmap.v1.Node")),
+            ("levelmap/park/robots/r1/odom", Some("levelmap.v1.Odometry")),
+            ("levelmap/park/robots/r1/ack", Some("levelmap.v1.Ack")),
+            ("levelmap/park/robots/r1/scan", Some("levelmap.v1.LiveScan")),
+            ("levelmap/park/map/poses", Some("levelmap.v1.MapPoses")),
+            ("levelmap/park/map/summary", Some("levelmap.v1.MapSummary")),
+            ("levelmap/park/map/grid", None),
+            ("levelmap/p*/map/poses", None),
+            ("levelmap/park/robots/r1/pose", None),
+            ("other/park/map/poses", None),
+            ("levelmap/park/map/poses/x", None),
+        ] {
+            assert_eq!(message_name_of_key(key), name, "{key}");
+        }
     }
 
     #[test]

@@ -25,15 +25,22 @@ pub mod v1 {
 pub use convert::*;
 pub use error::{MAX_NODE_BYTES, MAX_POSITION_M, MAX_RANGE_M, MAX_SPEED_M_PER_S, WireError};
 pub use keys::{
-    KEY_ROOT, RobotKey, Topic, ack_key, all_robots_key_expr, map_key, map_key_expr, node_key,
-    odom_key, parse_robot_key, robot_key, scan_key, validate_id,
+    KEY_ROOT, RobotKey, Topic, ack_key, all_robots_key_expr, map_key, map_key_expr,
+    message_name_of_key, node_key, odom_key, parse_robot_key, robot_key, scan_key, validate_id,
 };
 /// Re-exported so users can encode and decode without depending on prost themselves.
 pub use prost::Message;
+#[cfg(feature = "recording")]
+pub mod recording;
 #[cfg(feature = "session")]
 pub mod ros2;
 #[cfg(feature = "session")]
 pub mod session;
+
+/// Every file of `proto/levelmap/v1` and its imports as an encoded protobuf
+/// `FileDescriptorSet` (without comments): the schema data of a recording's channels, which
+/// tools such as Foxglove decode the messages with ([`message_name_of_key`] names the type).
+pub const DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/levelmap.fds"));
 
 /// The wire version every [`v1::Header`] carries; receivers reject any other.
 pub const WIRE_VERSION: u32 = 1;
