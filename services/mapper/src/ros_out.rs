@@ -81,7 +81,7 @@ struct FleetMapOut {
 const RETRY: Duration = Duration::from_secs(5);
 
 /// Starts publishing the maps of `fleets` once the ROS 2 network is reachable (tried again
-/// every [`RETRY`]), until the mapper stops.
+/// every `RETRY`), until the mapper stops.
 pub fn start_when_reachable(config: RosOutConfig, shared: Arc<Shared>, fleets: Vec<String>) {
     tokio::spawn(async move {
         let mut stopping = shared.stopping.subscribe();
