@@ -237,10 +237,10 @@ impl PoseGraph {
         }
         // With GPS, each component must hold fixes on two different nodes (position and
         // orientation); otherwise it floats.
-        let anchored = self.gps_nodes_by_part(&components);
+        let anchored = self.gps_anchored_parts(&components);
         let floating: Vec<usize> = unreachable
             .into_iter()
-            .filter(|&i| anchored.get(&components[i]).is_none_or(|s| s.len() < 2))
+            .filter(|&i| !anchored[components[i]])
             .collect();
         match floating.first() {
             None => Ok(()),
@@ -273,24 +273,30 @@ impl PoseGraph {
     /// do not anchor, in order: where each such part's gauge is fixed when parts may float.
     pub fn unanchored_part_roots(&self) -> Vec<usize> {
         let components = self.components();
-        let fixed_nodes = self.gps_nodes_by_part(&components);
+        let anchored = self.gps_anchored_parts(&components);
         (0..self.poses.len())
-            .filter(|&i| components[i] == i)
-            .filter(|root| fixed_nodes.get(root).is_none_or(|s| s.len() < 2))
+            .filter(|&i| components[i] == i && !anchored[i])
             .collect()
     }
 
-    /// The distinct nodes with GPS fixes, by connected part (`components`' labels).
-    fn gps_nodes_by_part(
-        &self,
-        components: &[usize],
-    ) -> std::collections::HashMap<usize, std::collections::BTreeSet<usize>> {
-        let mut nodes =
-            std::collections::HashMap::<usize, std::collections::BTreeSet<usize>>::new();
+    /// Whether GPS fixes anchor each connected part (`components`' labels, indexed by
+    /// label): fixes at two or more distinct nodes of it. One pass without hashing: the
+    /// mapper asks at every node, over every fix of the map.
+    fn gps_anchored_parts(&self, components: &[usize]) -> Vec<bool> {
+        let n = self.poses.len();
+        let (mut first_fixed, mut anchored) = (vec![usize::MAX; n], vec![false; n]);
         for g in &self.gps {
-            nodes.entry(components[g.node]).or_default().insert(g.node);
+            let part = components[g.node];
+            if anchored[part] {
+                continue;
+            }
+            if first_fixed[part] == usize::MAX {
+                first_fixed[part] = g.node;
+            } else if first_fixed[part] != g.node {
+                anchored[part] = true;
+            }
         }
-        nodes
+        anchored
     }
 
     /// How many connected parts the relative edges make (GPS edges link nothing).

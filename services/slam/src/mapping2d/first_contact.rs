@@ -87,6 +87,9 @@ impl Mapper2d {
     pub(super) fn seek_first_contact(&mut self) -> usize {
         let p = self.params.first_contact.clone();
         let (mut joined, mut budget) = (0, p.pairs_per_node);
+        // The parts change only when a search joins two: most pairs are passed over, and
+        // taking the parts for each would cost the whole network per pair.
+        let mut parts = Parts::of(&self.graph);
         while p.enabled && budget > 0 && self.contact.later < self.submaps.done.len() {
             let (later, earlier) = (self.contact.later, self.contact.earlier);
             if earlier >= later {
@@ -95,9 +98,13 @@ impl Mapper2d {
             }
             self.contact.earlier += 1;
             let (a, b) = (&self.submaps.done[later], &self.submaps.done[earlier]);
-            if a.robot != b.robot && self.parts_may_meet(a.anchor, b.anchor) {
+            if a.robot != b.robot && parts.may_meet(a.anchor, b.anchor) {
                 budget -= 1;
-                joined += self.search_pair(later, earlier, &p);
+                let joined_now = self.search_pair(later, earlier, &p);
+                if joined_now > 0 {
+                    joined += joined_now;
+                    parts = Parts::of(&self.graph);
+                }
             }
         }
         joined
@@ -124,15 +131,6 @@ impl Mapper2d {
             }
         }
         0
-    }
-
-    /// Whether the parts of nodes `a` and `b` differ and one of them floats.
-    fn parts_may_meet(&self, a: usize, b: usize) -> bool {
-        let components = self.graph.components();
-        let (part_a, part_b) = (components[a], components[b]);
-        let floating = self.graph.unanchored_part_roots();
-        let floats = |c: usize| floating.binary_search(&c).is_ok();
-        part_a != part_b && (floats(part_a) || floats(part_b))
     }
 
     /// Keeps `edge` as a hypothesis; then, while two hypotheses place two parts the same
@@ -229,5 +227,27 @@ impl Mapper2d {
             kind: EdgeKind::InterRobot,
             robust: self.params.loop_robust,
         })
+    }
+}
+
+/// The network's parts at one moment: each node's part, and the parts GPS does not anchor.
+struct Parts {
+    components: Vec<usize>,
+    floating: Vec<usize>,
+}
+
+impl Parts {
+    fn of(graph: &crate::network::PoseGraph) -> Parts {
+        Parts {
+            components: graph.components(),
+            floating: graph.unanchored_part_roots(),
+        }
+    }
+
+    /// Whether the parts of nodes `a` and `b` differ and one of them floats.
+    fn may_meet(&self, a: usize, b: usize) -> bool {
+        let (part_a, part_b) = (self.components[a], self.components[b]);
+        let floats = |c: usize| self.floating.binary_search(&c).is_ok();
+        part_a != part_b && (floats(part_a) || floats(part_b))
     }
 }
