@@ -100,6 +100,18 @@ fn export(events: &[SourceEvent], dir: &Path) -> usize {
     columns
 }
 
+/// The recording's topics (`sim_recording.py`), clouds organized in `columns`.
+fn streams(columns: usize) -> RosStreams {
+    RosStreams {
+        cloud_topic: "/points".into(),
+        odometry_topic: "/odom".into(),
+        imu_topic: "/imu".into(),
+        gps_topic: "/fix".into(),
+        columns,
+        ..RosStreams::default()
+    }
+}
+
 /// The events mapped as the mapper maps them: the ATE against the truth, and the nodes.
 fn map(events: impl IntoIterator<Item = SourceEvent>) -> (f64, usize) {
     let defaults = MapperConfig::default();
@@ -155,14 +167,7 @@ fn the_park_run_recorded_by_rosbags_maps_as_the_simulated_source_does() {
     let (sim_ate, sim_nodes) = map(events);
     let mut source = McapSource::new(&McapSourceConfig {
         path: dir.join("rec"),
-        streams: RosStreams {
-            cloud_topic: "/points".into(),
-            odometry_topic: "/odom".into(),
-            imu_topic: "/imu".into(),
-            gps_topic: "/fix".into(),
-            columns,
-            ..RosStreams::default()
-        },
+        streams: streams(columns),
         ..McapSourceConfig::default()
     })
     .expect("the recording opens");
@@ -221,14 +226,7 @@ fn live_events(rec: &Path, columns: usize, wanted: usize) -> Vec<SourceEvent> {
         .spawn()
         .expect("the publisher starts");
     let mut config = Ros2SourceConfig {
-        streams: RosStreams {
-            cloud_topic: "/points".into(),
-            odometry_topic: "/odom".into(),
-            imu_topic: "/imu".into(),
-            gps_topic: "/fix".into(),
-            columns,
-            ..RosStreams::default()
-        },
+        streams: streams(columns),
         ..Ros2SourceConfig::default()
     };
     config.zenoh.connect = Some(vec![endpoint]);

@@ -176,34 +176,22 @@ async fn subscribe(
         })
         .await
         .map_err(anyhow::Error::from_boxed)?;
-    let odom_keys = format!("{}/*/robots/*/{}", wire::KEY_ROOT, Topic::Odom);
-    let (live, known) = (shared.clone(), config.fleets.clone());
-    let odometry = session
-        .declare_subscriber(odom_keys)
-        .callback(move |sample| {
-            crate::odometry::on_odometry(
-                &live,
-                &known,
-                sample.key_expr().as_str(),
-                &sample.payload().to_bytes(),
-            )
-        })
-        .await
-        .map_err(anyhow::Error::from_boxed)?;
-    let scan_keys = format!("{}/*/robots/*/{}", wire::KEY_ROOT, Topic::Scan);
-    let (live, known) = (shared.clone(), config.fleets.clone());
-    let scans = session
-        .declare_subscriber(scan_keys)
-        .callback(move |sample| {
-            crate::odometry::on_live_scan(
-                &live,
-                &known,
-                sample.key_expr().as_str(),
-                &sample.payload().to_bytes(),
-            )
-        })
-        .await
-        .map_err(anyhow::Error::from_boxed)?;
+    let odometry = declare_live(
+        session,
+        shared,
+        config,
+        Topic::Odom,
+        crate::odometry::on_odometry,
+    )
+    .await?;
+    let scans = declare_live(
+        session,
+        shared,
+        config,
+        Topic::Scan,
+        crate::odometry::on_live_scan,
+    )
+    .await?;
     let views = shared.clone();
     let queries = session
         .declare_queryable(format!("{}/*/map/*", wire::KEY_ROOT))
@@ -211,6 +199,30 @@ async fn subscribe(
         .await
         .map_err(anyhow::Error::from_boxed)?;
     Ok((nodes, odometry, scans, queries))
+}
+
+/// A subscription to one live topic of every robot (odometry, live scans), handled in its
+/// callback by `handle(shared, fleets served, key, payload)`, with no mapping work.
+async fn declare_live(
+    session: &zenoh::Session,
+    shared: &Arc<Shared>,
+    config: &MapperConfig,
+    topic: Topic,
+    handle: fn(&Shared, &[String], &str, &[u8]),
+) -> Result<zenoh::pubsub::Subscriber<()>> {
+    let (live, known) = (shared.clone(), config.fleets.clone());
+    session
+        .declare_subscriber(format!("{}/*/robots/*/{topic}", wire::KEY_ROOT))
+        .callback(move |sample| {
+            handle(
+                &live,
+                &known,
+                sample.key_expr().as_str(),
+                &sample.payload().to_bytes(),
+            )
+        })
+        .await
+        .map_err(anyhow::Error::from_boxed)
 }
 
 /// Replays the store, fleet by fleet. A fleet whose rows do not replay is quarantined (its

@@ -116,18 +116,24 @@ pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
     })
 }
 
-/// Decodes a node and parses it into its [`NodeInput`] (checked once); the message is
-/// returned too, for what is stored of it.
-pub fn decode_node_input(bytes: &[u8]) -> Result<(NodeInput, v1::Node), WireError> {
+/// A message over [`MAX_NODE_BYTES`] is refused before it is decoded.
+fn check_size(field: &'static str, bytes: &[u8]) -> Result<(), WireError> {
     if bytes.len() > MAX_NODE_BYTES {
         return Err(WireError::Implausible {
-            field: "Node",
+            field,
             index: None,
             value: bytes.len() as f64,
             limit: MAX_NODE_BYTES as f64,
             reason: "too_large",
         });
     }
+    Ok(())
+}
+
+/// Decodes a node and parses it into its [`NodeInput`] (checked once); the message is
+/// returned too, for what is stored of it.
+pub fn decode_node_input(bytes: &[u8]) -> Result<(NodeInput, v1::Node), WireError> {
+    check_size("Node", bytes)?;
     let node: v1::Node = super::decode("Node", bytes)?;
     Ok((node_input(&node)?, node))
 }
@@ -176,15 +182,7 @@ pub struct LiveScanInput {
 
 /// Decodes and checks a live scan into a [`LiveScanInput`].
 pub fn live_scan_input(bytes: &[u8]) -> Result<LiveScanInput, WireError> {
-    if bytes.len() > MAX_NODE_BYTES {
-        return Err(WireError::Implausible {
-            field: "LiveScan",
-            index: None,
-            value: bytes.len() as f64,
-            limit: MAX_NODE_BYTES as f64,
-            reason: "too_large",
-        });
-    }
+    check_size("LiveScan", bytes)?;
     let msg: v1::LiveScan = super::decode("LiveScan", bytes)?;
     live_scan_from_wire(&msg)
 }
