@@ -1,7 +1,8 @@
 //! ROS 2 out, read by another implementation: a simulated robot maps with a mapper, both with
-//! `[ros2_out]` on rmw_zenoh keys; `ros2_out_reader.py` (eclipse-zenoh and rosbags from PyPI)
-//! subscribes as an rmw_zenoh subscription would, with keys made from rosbags' own type
-//! hashes, and decodes with rosbags' CDR. The map→odom transform it read last must be the
+//! `[ros2_out]` on rmw_zenoh keys (and, in the second test, zenoh-bridge-ros2dds's);
+//! `ros2_out_reader.py` (eclipse-zenoh and rosbags from PyPI) subscribes as an rmw_zenoh
+//! subscription would, with keys made from rosbags' own type hashes (or on the bridge's plain
+//! topic keys), and decodes with rosbags' CDR. The map→odom transform it read last must be the
 //! edge's last correction and the HTTP API's `map_from_odometry`; the grid it got (published
 //! and queried as a late joiner) must be, cell for cell, what Nav2's map_server reads from the
 //! HTTP API's `map.pgm` and `map.yaml` (and publishes: trinary).
@@ -86,18 +87,36 @@ fn angle_diff(a: f64, b: f64) -> f64 {
 
 #[test]
 fn ros2_tools_read_the_transform_and_the_map_the_http_api_serves() {
+    read_back("rmw_zenoh", "");
+}
+
+/// zenoh-bridge-ros2dds's keys: plain CDR on `<namespace>/<topic>`, no attachment, no tokens.
+#[test]
+fn the_bridge_style_puts_the_same_on_plain_topic_keys() {
+    read_back("ros2dds", "site7");
+}
+
+fn read_back(style: &str, namespace: &str) {
+    let rmw_zenoh = style == "rmw_zenoh";
     let python = testdata::rosbags_python();
-    let dir = temp_dir("ros2-out");
+    let dir = temp_dir(&format!("ros2-out-{style}"));
     let zenoh = format!("tcp/127.0.0.1:{}", free_port());
     let ros_out = |node: &str| {
         format!(
-            "[ros2_out]\nnode_name = {node:?}\nmap_period_ms = 300\n[ros2_out.zenoh]\nconnect = [{zenoh:?}]\n"
+            "[ros2_out]\nkey_style = {style:?}\nnamespace = {namespace:?}\nnode_name = {node:?}\n\
+             map_period_ms = 300\n[ros2_out.zenoh]\nconnect = [{zenoh:?}]\n"
         )
     };
     let mapper = MapperProcess::start_with(&dir, zenoh.clone(), &ros_out("levelmap_mapper"));
     let mut reader = Command::new(&python)
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/ros2_out_reader.py"))
-        .args([zenoh.as_str(), dir.to_str().unwrap(), "park"])
+        .args([
+            zenoh.as_str(),
+            dir.to_str().unwrap(),
+            "park",
+            style,
+            namespace,
+        ])
         .stderr(Stdio::inherit())
         .spawn()
         .expect("the reader starts");
@@ -135,7 +154,7 @@ fn ros2_tools_read_the_transform_and_the_map_the_http_api_serves() {
     let read: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("ros2_out.json")).unwrap()).unwrap();
 
-    // The transform: every one published came, with rmw_zenoh's attachment, in order.
+    // The transform: every one published came, in order (rmw_zenoh: with its attachment).
     let transforms = read["transforms"].as_array().unwrap();
     assert_eq!(transforms.len() as u64, published, "{}", read["tf_key"]);
     for (i, t) in transforms.iter().enumerate() {
@@ -143,8 +162,12 @@ fn ros2_tools_read_the_transform_and_the_map_the_http_api_serves() {
             (t["frame_id"].as_str(), t["child_frame_id"].as_str()),
             (Some("map"), Some("odom"))
         );
-        assert_eq!(t["attachment_len"], 32);
-        assert_eq!(t["sequence"], i as u64 + 1);
+        if rmw_zenoh {
+            assert_eq!(t["attachment_len"], 32);
+            assert_eq!(t["sequence"], i as u64 + 1);
+        } else {
+            assert_eq!(t["attachment_len"], 0);
+        }
     }
     let last = transforms.last().unwrap();
     let (x, y, yaw) = (
@@ -229,6 +252,13 @@ fn ros2_tools_read_the_transform_and_the_map_the_http_api_serves() {
             .to_owned()
     };
     let tokens: Vec<String> = serde_json::from_value(read["tokens"].clone()).unwrap();
+    if !rmw_zenoh {
+        assert!(tokens.is_empty(), "{tokens:?}");
+        assert_eq!(read["tf_key"], format!("{namespace}/tf"));
+        drop(mapper);
+        std::fs::remove_dir_all(&dir).ok();
+        return;
+    }
     for wanted in [
         "/NN/%/%/levelmap_edge".to_owned(),
         "/NN/%/%/levelmap_mapper".to_owned(),

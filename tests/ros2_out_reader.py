@@ -1,10 +1,11 @@
 """The ROS 2 side of tests/e2e_ros2_out.rs: what levelmap gives back to ROS 2, read with the
 Python Zenoh (eclipse-zenoh) and decoded by rosbags' own CDR code (PyPI; none of levelmap's).
 
-    python ros2_out_reader.py ENDPOINT DIR FLEET
+    python ros2_out_reader.py ENDPOINT DIR FLEET rmw_zenoh|ros2dds [NAMESPACE]
 
-Connects to ENDPOINT as a client and subscribes, as an rmw_zenoh subscription would, to the
-keys made from rosbags' own type hashes (Jazzy): `/tf` and `/levelmap/FLEET/map`. Every
+Connects to ENDPOINT as a client and subscribes to `/tf` and `/levelmap/FLEET/map`: as an
+rmw_zenoh subscription would, on the keys made from rosbags' own type hashes (Jazzy), or as
+zenoh-bridge-ros2dds lays them, on `[NAMESPACE/]topic`. Every
 transform is kept with its rmw_zenoh attachment, and every liveliness token (rmw_zenoh's graph)
 seen. When DIR/stop appears, it queries the map key (a late joiner) and writes
 DIR/ros2_out.json.
@@ -27,7 +28,9 @@ def dds_type(name):
     return f"{package.replace('/', '::')}::dds_::{msg}_"
 
 
-def key(topic, msgtype):
+def key(topic, msgtype, style, namespace):
+    if style == "ros2dds":
+        return f"{namespace}/{topic.lstrip('/')}" if namespace else topic.lstrip("/")
     return f"0/{topic.lstrip('/')}/{dds_type(msgtype)}/{ts.hash_rihs01(msgtype)}"
 
 
@@ -43,7 +46,7 @@ def grid(raw):
     }
 
 
-def main(endpoint, out, fleet):
+def main(endpoint, out, fleet, style, namespace=""):
     out = Path(out)
     config = zenoh.Config()
     config.insert_json5("mode", '"client"')
@@ -70,8 +73,8 @@ def main(endpoint, out, fleet):
                 "source_ns": source_ns,
             })
 
-    tf_key = key("/tf", "tf2_msgs/msg/TFMessage")
-    map_key = key(f"/levelmap/{fleet}/map", "nav_msgs/msg/OccupancyGrid")
+    tf_key = key("/tf", "tf2_msgs/msg/TFMessage", style, namespace)
+    map_key = key(f"/levelmap/{fleet}/map", "nav_msgs/msg/OccupancyGrid", style, namespace)
     with zenoh.open(config) as session:
         session.declare_subscriber(tf_key, on_tf)
         session.declare_subscriber(map_key, lambda s: grids.append(grid(s.payload.to_bytes())))
@@ -96,4 +99,4 @@ def main(endpoint, out, fleet):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2], sys.argv[3])
+    main(*sys.argv[1:])
