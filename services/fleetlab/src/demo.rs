@@ -192,14 +192,18 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
     } else {
         slam::position_rmse(pairs)
     };
+    // Seconds of simulation and mapping (minutes in a debug build): on the blocking pool, so
+    // that the mapper's HTTP API, on this runtime, goes on answering meanwhile.
     let baseline = if args.no_gps || args.scatter_starts {
         None
     } else {
-        Some(crate::fixed2d::map_fixed2d(
-            usize::from(args.robots),
-            args.duration,
-            args.seed,
-        )?)
+        let (robots, duration, seed) = (usize::from(args.robots), args.duration, args.seed);
+        Some(
+            tokio::task::spawn_blocking(move || {
+                crate::fixed2d::map_fixed2d(robots, duration, seed)
+            })
+            .await??,
+        )
     };
     let report = DemoReport {
         api: api.clone(),
