@@ -68,11 +68,7 @@ fn an_ouster_capture_maps_at_its_poses() {
         })
         .collect();
     // The mapper's solved graph once all three nodes are in.
-    let graph = wait_for(Duration::from_secs(30), || {
-        get_json(&mapper.http, "/api/v1/fleets/park/graph")
-            .filter(|g| g["nodes"].as_array().is_some_and(|n| n.len() == 3))
-    })
-    .expect("a graph of 3 nodes");
+    let graph = graph_of(&mapper.http, 3);
     let mut worst = 0f64;
     for node in graph["nodes"].as_array().unwrap() {
         let seq = node["node_seq"].as_u64().unwrap() as usize;
@@ -121,11 +117,7 @@ fn a_kitti_folder_maps_with_its_poses_as_odometry() {
     let report = edge_report(edge, Duration::from_secs(180));
     assert_eq!(report["nodes"], 6, "{report}");
     assert_eq!(report["outbox_pending"], 0, "{report}");
-    let graph = wait_for(Duration::from_secs(30), || {
-        get_json(&mapper.http, "/api/v1/fleets/park/graph")
-            .filter(|g| g["nodes"].as_array().is_some_and(|n| n.len() == 6))
-    })
-    .expect("a graph of 6 nodes");
+    let graph = graph_of(&mapper.http, 6);
     let mut nodes: Vec<&serde_json::Value> = graph["nodes"].as_array().unwrap().iter().collect();
     nodes.sort_by_key(|n| n["node_seq"].as_u64());
     let xy = |n: &serde_json::Value| {
@@ -153,4 +145,13 @@ fn a_kitti_folder_maps_with_its_poses_as_odometry() {
     assert!(heading_change < 0.1, "{heading_change} rad: {graph}");
     drop(mapper);
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The mapper's solved graph once it holds `nodes` nodes.
+fn graph_of(http: &str, nodes: usize) -> serde_json::Value {
+    wait_for(Duration::from_secs(30), || {
+        get_json(http, "/api/v1/fleets/park/graph")
+            .filter(|g| g["nodes"].as_array().is_some_and(|n| n.len() == nodes))
+    })
+    .unwrap_or_else(|| panic!("a graph of {nodes} nodes"))
 }

@@ -1,16 +1,15 @@
 //! The edge service: source → nodes → outbox → Zenoh, until the mapper acks.
 //!
-//! Measurements are paced in (scaled) real time on a blocking thread, which also levels the
-//! scans and commits each node to the outbox before it is sent. The async loop publishes new
+//! Measurements are paced in (scaled) real time on a blocking thread (`service/produce.rs`),
+//! which also levels the scans and commits each node to the outbox before it is sent. The async loop publishes new
 //! nodes in order, live odometry best effort, takes the mapper's acks, and re-sends every
 //! unacked node, in order, when no ack progress was seen for `resend_after_ms` (a put made
 //! before the mapper's subscription reached us, a radio outage, a mapper restart).
 
 use crate::config::EdgeConfig;
-use crate::node::{NodeBuilder, NodeError};
 use crate::outbox::Outbox;
 use crate::ros_out::{MapCorrection, NodeFrame, TfOut};
-use crate::source::{Source, SourceEvent};
+use crate::source::Source;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::future::Future;
@@ -61,7 +60,8 @@ pub struct EdgeReport {
     pub tf_published: u64,
 }
 
-enum Produced {
+/// What the blocking side hands the sending loop.
+pub(super) enum Produced {
     /// A node is in the outbox; its frame when it has one for corrections.
     Node(Option<NodeFrame>),
     Odometry(Box<v1::Odometry>),
@@ -71,6 +71,9 @@ enum Produced {
     Quarantined,
     End,
 }
+
+mod produce;
+use produce::produce;
 
 /// The robot's side of the bus: its publishers and subscriptions.
 struct Link {
@@ -524,115 +527,4 @@ async fn send_pending(
         next = seq + 1;
     }
     Ok(next)
-}
-
-/// Offers a scan to the node builder; when a live scan is due, it goes too (the node's own
-/// scan when the scan made one), dropped rather than waited for when the sender is behind.
-fn offer(
-    builder: &mut NodeBuilder,
-    scan: &crate::node::SensorScan,
-    live_due: bool,
-    tx: &mpsc::Sender<Produced>,
-) -> Result<Option<v1::Node>, NodeError> {
-    let offered = builder.offer(scan);
-    if live_due {
-        let live = match &offered {
-            Ok(Some(node)) => Ok(v1::LiveScan::of_node(node)),
-            _ => builder.live_scan(scan),
-        };
-        match live {
-            Ok(live) => {
-                let _ = tx.try_send(Produced::LiveScan(Box::new(live)));
-            }
-            Err(e) => tracing::debug!("live scan skipped: {e}"),
-        }
-    }
-    offered
-}
-
-/// The blocking side: paces the source, levels scans, commits nodes.
-fn produce(
-    config: EdgeConfig,
-    mut source: Box<dyn Source>,
-    outbox: Arc<Outbox>,
-    tx: mpsc::Sender<Produced>,
-) {
-    let numbering = outbox
-        .next_node_seq()
-        .and_then(|seq| Ok((seq, outbox.chain_id()?)));
-    let (first_seq, chain_id) = match numbering {
-        Ok(s) => s,
-        Err(e) => {
-            tracing::error!("{e}");
-            let _ = tx.blocking_send(Produced::End);
-            return;
-        }
-    };
-    let mut builder = NodeBuilder::new(
-        &config.fleet,
-        &config.robot,
-        config.node.clone(),
-        config.leveling,
-        first_seq,
-    )
-    .in_chain(chain_id)
-    .with_cloud(&config.cloud);
-    let started = Instant::now();
-    let mut first_stamp = None;
-    let odometry_period_ns = (1e9 / config.odometry_rate_hz.max(0.1)) as u64;
-    let mut last_odometry_ns: Option<u64> = None;
-    let live_period_ns =
-        (config.live_scan_rate_hz > 0.0).then(|| (1e9 / config.live_scan_rate_hz) as u64);
-    let mut last_live_ns: Option<u64> = None;
-    while let Some(event) = source.next_event() {
-        let stamp = event.stamp_ns();
-        let first = *first_stamp.get_or_insert(stamp);
-        if config.speed > 0.0 {
-            let due =
-                Duration::from_secs_f64(stamp.saturating_sub(first) as f64 * 1e-9 / config.speed);
-            if let Some(wait) = due.checked_sub(started.elapsed()) {
-                std::thread::sleep(wait);
-            }
-        }
-        let live_due =
-            live_period_ns.is_some_and(|period| last_live_ns.is_none_or(|t| stamp >= t + period));
-        if live_due && matches!(event, SourceEvent::Scan(_)) {
-            last_live_ns = Some(stamp);
-        }
-        let produced = match event {
-            SourceEvent::Odometry(pose) => {
-                if last_odometry_ns.is_some_and(|t| pose.stamp_ns < t + odometry_period_ns) {
-                    continue;
-                }
-                last_odometry_ns = Some(pose.stamp_ns);
-                let header = v1::Header::new(&config.fleet, &config.robot, 0, pose.stamp_ns, 0);
-                Produced::Odometry(Box::new(wire::odometry_to_wire(&pose, header)))
-            }
-            SourceEvent::Scan(scan) => match offer(&mut builder, &scan, live_due, &tx) {
-                Ok(None) => continue,
-                Ok(Some(node)) => {
-                    if let Err(e) = outbox.push(node.node_seq, &node.encode_to_vec()) {
-                        tracing::error!(robot = %config.robot, "node {} not kept: {e}", node.node_seq);
-                        break;
-                    }
-                    Produced::Node(NodeFrame::of(&node).ok())
-                }
-                Err(NodeError::Invalid { node, error }) => {
-                    tracing::error!(robot = %config.robot, "node quarantined, not sent: {error}");
-                    if let Err(e) = outbox.quarantine(error.reason(), &node.encode_to_vec()) {
-                        tracing::error!(robot = %config.robot, "quarantine not kept: {e}");
-                    }
-                    Produced::Quarantined
-                }
-                Err(e) => {
-                    tracing::warn!(robot = %config.robot, "scan skipped: {e}");
-                    Produced::ScanError
-                }
-            },
-        };
-        if tx.blocking_send(produced).is_err() {
-            return;
-        }
-    }
-    let _ = tx.blocking_send(Produced::End);
 }
