@@ -50,8 +50,9 @@ impl Bus {
         }
     }
 
-    /// Every robot's last node, corrected, on `levelmap/{fleet}/map/poses`.
-    pub fn publish_poses(&self, map: &FleetMap) {
+    /// Every robot's last node, corrected, on `levelmap/{fleet}/map/poses`, with where the
+    /// solve was taken (`solved_from`: each robot's last node_seq then).
+    pub fn publish_poses(&self, map: &FleetMap, solved_from: &[(String, u64)]) {
         let poses: Vec<MapPose> = map
             .robots()
             .iter()
@@ -64,7 +65,15 @@ impl Bus {
                 })
             })
             .collect();
-        let body = wire::map_poses_to_wire(map.id(), &poses, now_ns()).encode_to_vec();
+        let mut message = wire::map_poses_to_wire(map.id(), &poses, now_ns());
+        message.solved_from = solved_from
+            .iter()
+            .map(|(robot, node_seq)| v1::NodeRef {
+                robot_id: robot.clone(),
+                node_seq: *node_seq,
+            })
+            .collect();
+        let body = message.encode_to_vec();
         if let Ok(key) = wire::map_key(map.id(), "poses")
             && let Err(e) = self.session.put(key, body).wait()
         {

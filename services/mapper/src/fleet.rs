@@ -10,7 +10,10 @@ use leveling::ClassCounts;
 use serde::Serialize;
 use slam::geodesy::GeoDatum;
 use slam::matching::Scan2;
-use slam::{GpsObservation, Mapper2d, Mapper2dParams, MapperStats, OptimizeReport, Pose2};
+use slam::{
+    BackgroundSolve, GpsObservation, Mapper2d, Mapper2dParams, MapperStats, OptimizeReport, Pose2,
+    SolvedInBackground,
+};
 use std::collections::HashMap;
 use std::sync::Arc;
 use wire::NodeInput;
@@ -95,6 +98,17 @@ pub struct ChainRecord {
     last_node: usize,
 }
 
+/// Where a solve of a fleet's network was taken and where it was applied.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SolvePoint {
+    /// Its number in the fleet, from 0.
+    pub seq: u64,
+    /// The arrival index of the fleet's last node when the solve was taken.
+    pub taken_after: u64,
+    /// The arrival index of the fleet's last node when it was applied.
+    pub applied_after: u64,
+}
+
 /// A robot of the fleet.
 #[derive(Clone, Debug, Serialize)]
 pub struct RobotRecord {
@@ -165,6 +179,8 @@ pub struct FleetMap {
     nodes: Vec<Arc<NodeRecord>>,
     /// Odometry chains in the network, over every robot.
     network_chains: usize,
+    /// Solves applied and numbered ([`SolvePoint`]).
+    solve_points: u64,
 }
 
 impl FleetMap {
@@ -192,6 +208,7 @@ impl FleetMap {
             by_id: HashMap::new(),
             nodes: Vec::new(),
             network_chains: 0,
+            solve_points: 0,
         }
     }
 
@@ -425,6 +442,55 @@ impl FleetMap {
     /// returns whether it ran (not while a part of the network is unanchored).
     pub fn optimize_now(&mut self) -> Result<bool, IngestError> {
         Ok(self.mapper.optimize_now()?)
+    }
+
+    /// The solve of the whole network that the nodes since the last one called for (a loop
+    /// closure, a GPS fix), taken out to run in the background; `None` when none is due or
+    /// the last one is still out.
+    pub fn take_solve(&mut self) -> Option<BackgroundSolve> {
+        self.mapper.take_solve()
+    }
+
+    /// The background solve of the network as it is, due or not (an operator's request, a
+    /// replay at a recorded point); `None` while the last one is out.
+    pub fn take_solve_now(&mut self) -> Option<BackgroundSolve> {
+        self.mapper.take_solve_now()
+    }
+
+    /// Gives back a background solve and applies it (the nodes added since move with their
+    /// chains); whether it was applied (not while a part of the network is unanchored).
+    pub fn finish_solve(&mut self, done: SolvedInBackground) -> Result<bool, IngestError> {
+        Ok(self.mapper.finish_solve(done)?)
+    }
+
+    /// The next solve's point: taken after the node of arrival index `taken_after`, applied
+    /// now (after the map's last node).
+    pub fn next_solve_point(&mut self, taken_after: u64) -> SolvePoint {
+        let point = SolvePoint {
+            seq: self.solve_points,
+            taken_after,
+            applied_after: self.nodes.len() as u64 - 1,
+        };
+        self.solve_points += 1;
+        point
+    }
+
+    /// A replayed solve's point: the next one is numbered after it.
+    pub fn count_solve(&mut self, point: &SolvePoint) {
+        self.solve_points = point.seq + 1;
+    }
+
+    /// Each robot's last node among the map's first `nodes` (robot id, node_seq): where a
+    /// solve taken then stood.
+    pub fn last_nodes_before(&self, nodes: usize) -> Vec<(String, u64)> {
+        self.robots
+            .iter()
+            .filter_map(|r| {
+                let before = r.nodes.partition_point(|&n| n < nodes);
+                let last = *r.nodes[..before].last()?;
+                Some((r.id.clone(), self.nodes[last].node_seq))
+            })
+            .collect()
     }
 }
 

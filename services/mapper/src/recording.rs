@@ -13,7 +13,7 @@
 //! map; nodes after the last recorded solve get one more at the end.
 
 use crate::state::Shared;
-use crate::worker::Work;
+use crate::worker::{OptimizeError, Work};
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::path::Path;
@@ -41,8 +41,18 @@ pub struct FeedReport {
     pub last_solve: BTreeMap<String, serde_json::Value>,
 }
 
-/// A recorded solve: each robot's last node_seq then.
-type SolvePoint = BTreeMap<String, u64>;
+/// Each robot's last node_seq at a point of the recording.
+type NodePoint = BTreeMap<String, u64>;
+
+/// A recorded solve: where it was taken (empty when the recording does not say: it is
+/// solved where it was applied) and where it was applied.
+#[derive(Debug, Default)]
+struct SolvePoint {
+    taken: NodePoint,
+    applied: NodePoint,
+    /// Taken already by the feed.
+    is_taken: bool,
+}
 
 /// Feeds every message of the recording at `path` in order, solving where the recorded
 /// mapper solved and once after the last node of each fleet, and waits for each solve. A file
@@ -92,17 +102,29 @@ fn feed_in_order(
                 }
                 unsolved.insert(fleet.clone());
                 let queue = points.entry(fleet.clone()).or_default();
-                while let Some(point) = queue.front() {
-                    let reached = point.iter().all(|(robot, seq)| {
+                let reached = |point: &NodePoint| {
+                    point.iter().all(|(robot, seq)| {
                         progress
                             .get(&(fleet.clone(), robot.clone()))
                             .is_some_and(|fed| fed >= seq)
-                    });
-                    if !reached {
+                    })
+                };
+                while let Some(point) = queue.front_mut() {
+                    let taking = !point.is_taken && !point.taken.is_empty();
+                    if taking && reached(&point.taken) {
+                        take(work, &fleet)?;
+                        point.is_taken = true;
+                    }
+                    if (taking && !point.is_taken) || !reached(&point.applied) {
                         break;
                     }
+                    let taken = point.is_taken;
                     queue.pop_front();
-                    let solved = solve(work, &fleet)?;
+                    let solved = if taken {
+                        apply(work, &fleet)?
+                    } else {
+                        solve(work, &fleet)?
+                    };
                     report.last_solve.insert(fleet.clone(), solved);
                     report.solves += 1;
                     unsolved.remove(&fleet);
@@ -138,9 +160,36 @@ fn solve(work: &mpsc::SyncSender<Work>, fleet: &str) -> anyhow::Result<serde_jso
     let (reply, answer) = tokio::sync::oneshot::channel();
     let fleet = fleet.to_owned();
     send(work, Work::Optimize { fleet, reply })?;
-    let answer = answer
-        .blocking_recv()
-        .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
+    report_of(answer.blocking_recv())
+}
+
+/// Asks the worker to take `fleet`'s solve once the nodes sent before are mapped, and waits.
+fn take(work: &mpsc::SyncSender<Work>, fleet: &str) -> anyhow::Result<()> {
+    let (reply, answer) = tokio::sync::oneshot::channel();
+    let fleet = fleet.to_owned();
+    send(work, Work::TakeSolve { fleet, reply })?;
+    match answer.blocking_recv() {
+        Ok(taken) => Ok(taken?),
+        Err(_) => anyhow::bail!("the mapping worker stopped"),
+    }
+}
+
+/// Asks the worker to apply the solve of `fleet` it took, and waits: the report, or why not.
+fn apply(work: &mpsc::SyncSender<Work>, fleet: &str) -> anyhow::Result<serde_json::Value> {
+    let (reply, answer) = tokio::sync::oneshot::channel();
+    let fleet = fleet.to_owned();
+    send(work, Work::ApplySolve { fleet, reply })?;
+    report_of(answer.blocking_recv())
+}
+
+/// A solve request's answer: the report, or why it did not run, as JSON.
+fn report_of(
+    answer: Result<
+        Result<serde_json::Value, OptimizeError>,
+        tokio::sync::oneshot::error::RecvError,
+    >,
+) -> anyhow::Result<serde_json::Value> {
+    let answer = answer.map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
     Ok(answer.unwrap_or_else(|e| serde_json::Value::String(e.to_string())))
 }
 
@@ -157,8 +206,20 @@ fn recorded_solves(path: &Path) -> anyhow::Result<HashMap<String, VecDeque<Solve
             continue;
         };
         let fleet = message.key.split('/').nth(1).unwrap_or_default().to_owned();
-        let point = poses.poses.into_iter().map(|p| (p.robot_id, p.node_seq));
-        points.entry(fleet).or_default().push_back(point.collect());
+        let point = SolvePoint {
+            taken: poses
+                .solved_from
+                .into_iter()
+                .map(|p| (p.robot_id, p.node_seq))
+                .collect(),
+            applied: poses
+                .poses
+                .into_iter()
+                .map(|p| (p.robot_id, p.node_seq))
+                .collect(),
+            is_taken: false,
+        };
+        points.entry(fleet).or_default().push_back(point);
     }
     Ok(points)
 }

@@ -258,16 +258,41 @@ fn replay(config: &MapperConfig, store: &Store, id: &str) -> Result<FleetMap> {
     let started = Instant::now();
     let stored = store.load_fleet(id)?;
     let mut map = config.new_fleet(id);
-    let mut solves = stored.solves.iter().peekable();
+    let mut legacy = stored.legacy_solves.iter().peekable();
+    let mut points = stored.solve_points.iter().peekable();
+    // The solve taken and not applied yet.
+    let mut out = None;
     for (arrival, bytes) in stored.nodes.iter().enumerate() {
+        let arrival = arrival as u64;
         let (node, _) = wire::decode_node_input(bytes)
             .with_context(|| format!("store: node {arrival} of fleet {id} is unreadable"))?;
         map.ingest(&node)
             .with_context(|| format!("store: replaying node {arrival} of fleet {id}"))?;
-        if solves.next_if_eq(&&(arrival as u64)).is_some() {
+        if legacy.next_if_eq(&&arrival).is_some() {
             map.optimize_now()?;
         }
+        while let Some(point) = points.peek() {
+            if out.is_none() && point.taken_after == arrival {
+                out = map.take_solve_now();
+                anyhow::ensure!(
+                    out.is_some(),
+                    "store: fleet {id}: solve {} taken twice",
+                    point.seq
+                );
+            }
+            if out.is_none() || point.applied_after != arrival {
+                break;
+            }
+            let solved = out.take().expect("taken above").run();
+            map.finish_solve(solved)?;
+            map.count_solve(point);
+            points.next();
+        }
     }
+    anyhow::ensure!(
+        points.peek().is_none(),
+        "store: fleet {id}: solves stored beyond its nodes"
+    );
     let rebuilt = crate::store::encode_edges(&map.graph().edges);
     anyhow::ensure!(
         rebuilt == stored.edges,

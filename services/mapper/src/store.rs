@@ -9,6 +9,7 @@
 //! opened again, which the next commit does. Each fleet is read on its own, so a fleet whose
 //! rows are damaged does not keep the others from being restored.
 
+pub use crate::fleet::SolvePoint;
 use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition, TableHandle};
 use std::ops::Bound;
 use std::path::Path;
@@ -19,9 +20,13 @@ use wire::{Message, v1};
 const NODES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("nodes");
 /// (fleet, edge index) → the edge as JSON (`slam::RelativeEdge`).
 const EDGES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("edges");
-/// (fleet, arrival index) of each node after which the network was optimized: a replay
-/// optimizes at the same points, so it finds the same loop closures.
+/// (fleet, arrival index) of each node after which the network was optimized, by stores
+/// before solves ran in the background: read, no longer written.
 const SOLVES: TableDefinition<(&str, u64), ()> = TableDefinition::new("solves");
+/// (fleet, solve number) → (arrival index of the last node when the solve was taken, of the
+/// last node when it was applied): a replay takes and applies each solve at the same points,
+/// so it finds the same loop closures.
+const SOLVE_POINTS: TableDefinition<(&str, u64), (u64, u64)> = TableDefinition::new("solve_points");
 /// (fleet, node index) → the node's encoded `v1::SegmentedCloud` (`Node.cloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
 
@@ -75,8 +80,11 @@ pub struct StoredFleet {
     pub nodes: Vec<Vec<u8>>,
     /// Edges as JSON, in order.
     pub edges: Vec<Vec<u8>>,
-    /// Arrival indices after which the network was optimized, ascending.
-    pub solves: Vec<u64>,
+    /// Arrival indices after which the network was optimized at once (stores before
+    /// background solves), ascending.
+    pub legacy_solves: Vec<u64>,
+    /// The solves, in order.
+    pub solve_points: Vec<SolvePoint>,
 }
 
 /// What one batch of work adds to a fleet.
@@ -92,8 +100,8 @@ pub struct FleetBatch<'a> {
     pub first_edge: u64,
     /// The new edges, as JSON ([`encode_edges`]).
     pub edges: Vec<Vec<u8>>,
-    /// The network was optimized after the node of this arrival index.
-    pub solved_after: Option<u64>,
+    /// A solve applied with this batch.
+    pub solved: Option<SolvePoint>,
 }
 
 /// Edges as the store keeps them: one JSON document each.
@@ -194,8 +202,23 @@ impl Store {
                 rows.push(v.value().to_vec());
             }
         }
-        for entry in txn.open_table(SOLVES)?.range(fleet)? {
-            stored.solves.push(entry?.0.value().1);
+        for entry in txn.open_table(SOLVES)?.range(fleet.clone())? {
+            stored.legacy_solves.push(entry?.0.value().1);
+        }
+        for entry in txn.open_table(SOLVE_POINTS)?.range(fleet)? {
+            let (k, v) = entry?;
+            let ((_, seq), (taken_after, applied_after)) = (k.value(), v.value());
+            if seq != stored.solve_points.len() as u64 {
+                return Err(StoreError::Damaged(format!(
+                    "fleet {id}: solve {seq} where {} was due",
+                    stored.solve_points.len()
+                )));
+            }
+            stored.solve_points.push(SolvePoint {
+                seq,
+                taken_after,
+                applied_after,
+            });
         }
         Ok(stored)
     }
@@ -207,6 +230,7 @@ fn with_tables(db: Database) -> Result<Database, StoreError> {
     txn.open_table(NODES)?;
     txn.open_table(EDGES)?;
     txn.open_table(SOLVES)?;
+    txn.open_table(SOLVE_POINTS)?;
     txn.open_table(CLOUDS)?;
     txn.commit()?;
     Ok(db)
@@ -217,7 +241,7 @@ fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
     {
         let mut nodes = txn.open_table(NODES)?;
         let mut edges = txn.open_table(EDGES)?;
-        let mut solves = txn.open_table(SOLVES)?;
+        let mut solves = txn.open_table(SOLVE_POINTS)?;
         let mut clouds = txn.open_table(CLOUDS)?;
         for batch in batches {
             for &(arrival, bytes) in &batch.nodes {
@@ -229,8 +253,9 @@ fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
             for (k, edge) in batch.edges.iter().enumerate() {
                 edges.insert((batch.fleet, batch.first_edge + k as u64), edge.as_slice())?;
             }
-            if let Some(arrival) = batch.solved_after {
-                solves.insert((batch.fleet, arrival), ())?;
+            if let Some(point) = batch.solved {
+                let at = (point.taken_after, point.applied_after);
+                solves.insert((batch.fleet, point.seq), at)?;
             }
         }
     }

@@ -12,18 +12,19 @@ use crate::bus::Bus;
 use crate::config::MapperConfig;
 use crate::fleet::{FleetMap, IngestError, Sequence};
 use crate::state::{FleetView, Metrics, Shared};
-use crate::store::{Store, StoreError};
+use crate::store::Store;
 use commit::Unstored;
 use serde_json::json;
+use solving::{SolveRequest, Solving};
 use std::collections::HashMap;
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use wire::NodeInput;
 use wire::session::now_ns;
 
 mod commit;
+mod solving;
 
 /// Most messages taken into one batch (one solve, one store commit).
 const MAX_BATCH: usize = 512;
@@ -49,6 +50,21 @@ pub enum Work {
     Stop,
     /// Re-optimize a fleet now.
     Optimize {
+        /// The fleet.
+        fleet: String,
+        /// Where the report goes.
+        reply: OptimizeReply,
+    },
+    /// A recording's feed: take a fleet's solve here (the recorded mapper took it here) and
+    /// run it; it is applied at [`Work::ApplySolve`].
+    TakeSolve {
+        /// The fleet.
+        fleet: String,
+        /// Whether it was taken.
+        reply: tokio::sync::oneshot::Sender<Result<(), OptimizeError>>,
+    },
+    /// A recording's feed: apply the fleet's solve taken before, here.
+    ApplySolve {
         /// The fleet.
         fleet: String,
         /// Where the report goes.
@@ -136,7 +152,7 @@ struct Reack {
 struct Batch {
     accepted: Vec<Accepted>,
     reacks: Vec<Reack>,
-    requests: Vec<(String, OptimizeReply)>,
+    requests: Vec<(String, SolveRequest)>,
     /// A stop was asked for: this is the last turn.
     stop: bool,
 }
@@ -150,7 +166,8 @@ pub struct Worker {
     bus: Bus,
     /// Per fleet, how many of its edges are stored.
     edges_stored: HashMap<String, usize>,
-    last_solve: HashMap<String, Instant>,
+    /// The solver thread and the solves out on it.
+    solving: Solving,
     /// Set by a failed commit, until it is committed: no node is taken meanwhile.
     unstored: Option<Unstored>,
     /// When to try the failed commit again.
@@ -177,7 +194,7 @@ impl Worker {
             shared,
             bus,
             edges_stored,
-            last_solve: HashMap::new(),
+            solving: Solving::start(),
             unstored: None,
             retry_at: Instant::now(),
         }
@@ -185,8 +202,8 @@ impl Worker {
 
     /// Runs until every sender of `work` is gone.
     pub fn run(mut self, work: mpsc::Receiver<Work>) {
-        let wake = Duration::from_millis(self.config.solve_interval_ms.max(10));
-        while let Some(jobs) = take_batch(&work, wake) {
+        let interval = Duration::from_millis(self.config.solve_interval_ms.max(10));
+        while let Some(jobs) = take_batch(&work, self.solving.wake(interval)) {
             let started = Instant::now();
             self.retry_store();
             let mut batch = self.check_and_map(jobs);
@@ -198,11 +215,12 @@ impl Worker {
                 },
                 started,
             );
-            self.operator_requests(requests);
+            self.solve_requests(requests);
             if stop {
                 break;
             }
         }
+        self.solving.stop();
         if let Some(unstored) = &self.unstored {
             let nodes = unstored.batch.accepted.len();
             tracing::warn!(
@@ -231,7 +249,15 @@ impl Worker {
                             .extend(self.map(&key, checked, &mut batch.reacks));
                     }
                 }
-                Work::Optimize { fleet, reply } => batch.requests.push((fleet, reply)),
+                Work::Optimize { fleet, reply } => {
+                    batch.requests.push((fleet, SolveRequest::Optimize(reply)))
+                }
+                Work::TakeSolve { fleet, reply } => {
+                    batch.requests.push((fleet, SolveRequest::Take(reply)))
+                }
+                Work::ApplySolve { fleet, reply } => {
+                    batch.requests.push((fleet, SolveRequest::Apply(reply)))
+                }
                 Work::Stop => batch.stop = true,
             }
         }
@@ -392,94 +418,6 @@ impl Worker {
                 "pose": map.poses()[a.node],
             }));
         }
-    }
-
-    /// Solves each fleet whose nodes call for it, at most every solve interval: nodes arriving
-    /// meanwhile wait for one solve at most, not for one each. After the batch is visible.
-    fn due_solves(&mut self) {
-        if self.unstored.is_some() || self.shared.feeding.load(Ordering::SeqCst) {
-            return;
-        }
-        let interval = Duration::from_millis(self.config.solve_interval_ms);
-        let mut ids: Vec<String> = self.fleets.keys().cloned().collect();
-        ids.sort_unstable();
-        for id in ids {
-            if self
-                .last_solve
-                .get(&id)
-                .is_some_and(|t| t.elapsed() < interval)
-            {
-                continue;
-            }
-            let started = Instant::now();
-            match self.fleets.get_mut(&id).expect("listed").optimize_pending() {
-                Ok(false) => continue,
-                Ok(true) => {}
-                Err(e) => {
-                    tracing::error!(fleet = %id, "optimization failed: {e}");
-                    continue;
-                }
-            }
-            self.last_solve.insert(id.clone(), Instant::now());
-            if self.solved(&id, started).is_err() {
-                break;
-            }
-        }
-    }
-
-    /// After a solve: its point committed, then the new view and the corrected poses.
-    fn solved(&mut self, fleet: &str, started: Instant) -> Result<(), StoreError> {
-        Metrics::bump(&self.shared.metrics.optimizations);
-        // A replay solves after the same node, so it finds the same loop closures.
-        let work = Unstored {
-            solves: vec![(
-                fleet.to_owned(),
-                self.fleets[fleet].nodes().len() as u64 - 1,
-            )],
-            ..Unstored::default()
-        };
-        if let Err(e) = self.commit(&work) {
-            self.store_failed(work);
-            return Err(e);
-        }
-        self.publish_solve(fleet, started);
-        Ok(())
-    }
-
-    /// A solve's new view, the corrected poses on the bus, the `optimized` event.
-    fn publish_solve(&self, fleet: &str, started: Instant) {
-        let map = &self.fleets[fleet];
-        let ms = started.elapsed().as_secs_f64() * 1e3;
-        self.shared.publish_view(FleetView::of(map, ms, now_ns()));
-        self.bus.publish_poses(map);
-        self.shared
-            .event(&json!({"type": "optimized", "fleet": map.id()}));
-    }
-
-    /// Operators' optimize requests: solved now, pending or not.
-    fn operator_requests(&mut self, requests: Vec<(String, OptimizeReply)>) {
-        for (fleet, reply) in requests {
-            let _ = reply.send(self.optimize_now(&fleet));
-        }
-    }
-
-    fn optimize_now(&mut self, fleet: &str) -> Result<serde_json::Value, OptimizeError> {
-        // Before solving: a solve whose point is not stored would not be replayed.
-        if let Some(fault) = self.shared.store_fault() {
-            return Err(OptimizeError::StoreFailed(fault));
-        }
-        let refused = |e: String| OptimizeError::Refused(e);
-        let map = self
-            .fleets
-            .get_mut(fleet)
-            .ok_or_else(|| refused(format!("no fleet {fleet}")))?;
-        if !map.optimize_now().map_err(|e| refused(e.to_string()))? {
-            return Err(refused("part of the network is not anchored yet".into()));
-        }
-        self.solved(fleet, Instant::now())
-            .map_err(|e| OptimizeError::StoreFailed(e.to_string()))?;
-        let report = self.fleets[fleet].last_optimization();
-        Ok(serde_json::to_value(report).expect("report serializes"))
     }
 
     fn reject(&self, reason: &'static str, key: &str, detail: &dyn std::fmt::Display) {

@@ -14,6 +14,7 @@ pub mod gnss;
 pub mod grid;
 pub mod matching;
 pub mod network;
+pub mod parts;
 pub mod robust;
 pub mod se2;
 
@@ -21,10 +22,13 @@ pub use gnss::GpsObservation;
 pub use grid::{CellState, GridError, GridParams, OccupancyGrid};
 pub use nalgebra;
 pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
+pub use parts::PartTracker;
 pub use robust::Robust;
 pub use se2::{Pose2, aligned_position_rmse, position_rmse, rigid_fit, wrap_angle};
 
 // The solver: faer's sparse Cholesky and everything built on it.
+#[cfg(feature = "solver")]
+pub mod incremental;
 #[cfg(feature = "solver")]
 pub mod init;
 #[cfg(feature = "solver")]
@@ -38,8 +42,8 @@ pub mod optimize;
 pub use init::{Init, InitError, initialize};
 #[cfg(feature = "solver")]
 pub use mapping2d::{
-    ConsistencyParams, FirstContactParams, Mapper2d, Mapper2dParams, MapperStats, Placed,
-    SubmapSearchParams, WrongClosures,
+    BackgroundSolve, ConsistencyParams, FirstContactParams, Mapper2d, Mapper2dParams, MapperStats,
+    Placed, SolvedInBackground, SubmapSearchParams, WrongClosures,
 };
 #[cfg(feature = "solver")]
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

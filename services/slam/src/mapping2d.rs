@@ -34,6 +34,7 @@ mod wrong_closures;
 
 pub use first_contact::FirstContactParams;
 pub use params::{ConsistencyParams, Mapper2dParams};
+pub use solve::{BackgroundSolve, SolvedInBackground};
 pub use submap_params::SubmapSearchParams;
 pub use wrong_closures::WrongClosures;
 
@@ -102,6 +103,8 @@ pub struct MapperStats {
     /// Parts of the network (robots that had not met, without GPS) moved onto the map by
     /// their first closure with it.
     pub parts_joined: usize,
+    /// Windows of a chain re-solved at once (with `defer_optimization`).
+    pub window_solves: usize,
 }
 
 pub use crate::gnss::GpsObservation;
@@ -136,6 +139,10 @@ pub struct Mapper2d {
     optimization_pending: bool,
     submaps: submaps::Submaps,
     contact: first_contact::ContactSearch,
+    /// The network's parts, kept up to date by [`Self::sync_parts`].
+    parts: crate::parts::PartTracker,
+    /// The solves of a deferred mapper: windows now, the whole network in the background.
+    background: solve::Background,
 }
 
 impl Mapper2d {
@@ -218,7 +225,7 @@ impl Mapper2d {
             let closed = self.close_loops(node);
             let closed = closed + self.search_submaps(node, closed) + self.seek_first_contact() > 0;
             if self.add_gps(node, gps) || closed {
-                self.optimize_when_anchored()?;
+                self.optimize_when_anchored(node)?;
             }
             return Ok(Placed::Node(node));
         };
@@ -270,7 +277,7 @@ impl Mapper2d {
         let closed =
             expired + closed + self.search_submaps(node, closed) + self.seek_first_contact() > 0;
         if self.add_gps(node, gps) || closed {
-            self.optimize_when_anchored()?;
+            self.optimize_when_anchored(node)?;
         }
         Ok(Placed::Node(node))
     }

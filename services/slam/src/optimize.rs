@@ -97,7 +97,19 @@ pub struct OptimizeReport {
 #[derive(Debug, Default)]
 pub struct Optimizer {
     structure: Option<Structure>,
-    floating_parts: bool,
+    gauge: Gauge,
+}
+
+/// Which nodes stay where they are.
+#[derive(Clone, Debug, Default, PartialEq)]
+enum Gauge {
+    /// Node 0 without GPS; none with it (the fixes anchor the network).
+    #[default]
+    FirstNode,
+    /// The first node of each part that GPS does not anchor.
+    FloatingParts,
+    /// These nodes (sorted): a window of a network, the rest of it held.
+    Nodes(Vec<usize>),
 }
 
 #[derive(Debug)]
@@ -112,16 +124,14 @@ struct Structure {
 type Block = SMatrix<f64, 3, 3>;
 
 impl Structure {
-    fn build(graph: &PoseGraph, floating_parts: bool) -> Structure {
+    fn build(graph: &PoseGraph, gauge: &Gauge) -> Structure {
         let n = graph.poses.len();
-        // Without GPS the network floats: fix node 0 (the gauge); with floating parts, the
-        // first node of each part that GPS does not anchor.
-        let fixed = if floating_parts {
-            graph.unanchored_part_roots()
-        } else if graph.gps.is_empty() {
-            vec![0]
-        } else {
-            Vec::new()
+        let fixed = match gauge {
+            Gauge::FloatingParts => graph.unanchored_part_roots(),
+            Gauge::Nodes(nodes) => nodes.clone(),
+            // Without GPS the network floats: node 0 fixes it.
+            Gauge::FirstNode if graph.gps.is_empty() => vec![0],
+            Gauge::FirstNode => Vec::new(),
         };
         let mut var_of = vec![None; n];
         let mut next = 0;
@@ -227,16 +237,28 @@ impl Optimizer {
     /// where it is (its own gauge), instead of the network being refused as disconnected.
     pub fn for_parts() -> Optimizer {
         Optimizer {
-            floating_parts: true,
+            gauge: Gauge::FloatingParts,
+            ..Optimizer::default()
+        }
+    }
+
+    /// An optimizer that keeps `fixed` nodes where they are (a window of a larger network,
+    /// its boundary held); every other node must be linked to one of them or to GPS.
+    pub fn holding(mut fixed: Vec<usize>) -> Optimizer {
+        fixed.sort_unstable();
+        fixed.dedup();
+        Optimizer {
+            gauge: Gauge::Nodes(fixed),
             ..Optimizer::default()
         }
     }
 
     fn validate(&self, graph: &PoseGraph) -> Result<(), GraphError> {
-        if self.floating_parts {
-            graph.validate_parts()
-        } else {
-            graph.validate()
+        match self.gauge {
+            Gauge::FirstNode => graph.validate(),
+            // A part linked to no held node makes the system singular, which the
+            // factorization reports.
+            Gauge::FloatingParts | Gauge::Nodes(_) => graph.validate_parts(),
         }
     }
 
@@ -250,7 +272,7 @@ impl Optimizer {
         let key = structure_key(graph);
         let reused_symbolic = self.structure.as_ref().is_some_and(|s| s.key == key);
         if !reused_symbolic {
-            self.structure = Some(Structure::build(graph, self.floating_parts));
+            self.structure = Some(Structure::build(graph, &self.gauge));
         }
         let structure = self.structure.as_mut().expect("built above");
         let (mut lin, mut candidate) = (Linearization::default(), Linearization::default());
@@ -397,7 +419,7 @@ impl Optimizer {
             .as_ref()
             .is_none_or(|s| s.key != structure_key(graph))
         {
-            self.structure = Some(Structure::build(graph, self.floating_parts));
+            self.structure = Some(Structure::build(graph, &self.gauge));
         }
         let structure = self.structure.as_mut().expect("built above");
         let vars: Vec<Option<usize>> = nodes.iter().map(|&n| structure.var_of[n]).collect();

@@ -3,7 +3,7 @@
 //! again every second until that succeeds. No node is taken meanwhile.
 
 use super::{Batch, Worker, fleets_of};
-use crate::store::{FleetBatch, StoreError};
+use crate::store::{FleetBatch, SolvePoint, StoreError};
 use std::time::{Duration, Instant};
 
 /// How often a commit that failed is tried again.
@@ -16,8 +16,8 @@ const STORE_RETRY: Duration = Duration::from_secs(1);
 pub(super) struct Unstored {
     /// Nodes mapped, and robots to re-ack.
     pub(super) batch: Batch,
-    /// (fleet, arrival index) of solves whose point is not stored.
-    pub(super) solves: Vec<(String, u64)>,
+    /// Solves applied whose point is not stored.
+    pub(super) solves: Vec<(String, SolvePoint)>,
 }
 
 impl Worker {
@@ -30,8 +30,8 @@ impl Worker {
         }
         self.ack(&work.batch);
         self.publish(&work.batch.accepted, started);
-        for (fleet, _) in &work.solves {
-            self.publish_solve(fleet, started);
+        for (fleet, point) in &work.solves {
+            self.publish_solve(fleet, started, point);
         }
         self.due_solves();
     }
@@ -61,7 +61,7 @@ impl Worker {
                 let of_fleet = || accepted.iter().filter(move |a| a.fleet == fleet);
                 FleetBatch {
                     fleet,
-                    solved_after: None,
+                    solved: None,
                     nodes: of_fleet()
                         .map(|a| (a.arrival, a.payload.as_slice()))
                         .collect(),
@@ -73,9 +73,9 @@ impl Worker {
                 }
             })
             .collect();
-        batches.extend(work.solves.iter().map(|(fleet, arrival)| FleetBatch {
+        batches.extend(work.solves.iter().map(|(fleet, point)| FleetBatch {
             fleet,
-            solved_after: Some(*arrival),
+            solved: Some(*point),
             ..Default::default()
         }));
         let result = self.store.commit(&batches);

@@ -108,7 +108,7 @@ impl Mapper2d {
         self.stats.external_closures += 1;
         let added = self.submit_and_verify(from, to, measurement, information);
         if added > 0 {
-            self.optimize_when_anchored()?;
+            self.optimize_when_anchored(to)?;
         }
         Ok(added)
     }

@@ -75,13 +75,9 @@ impl Mapper2d {
         let p = self.params.clone();
         let here = self.graph.poses[node];
         let (robot, place) = self.node_robot[node];
-        let components = self.graph.components();
-        let floating = self.graph.unanchored_part_roots();
-        let floats = |part: usize| floating.binary_search(&part).is_ok();
-        let shared_frame = |j: usize| {
-            let (a, b) = (components[node], components[j]);
-            a == b || !(floats(a) || floats(b))
-        };
+        self.sync_parts();
+        let parts = &self.parts;
+        let shared_frame = |j: usize| !parts.may_meet(node, j);
         let mut candidates: Vec<(f64, usize)> = (0..node)
             .filter_map(|j| {
                 let d = (self.graph.poses[j].x - here.x).hypot(self.graph.poses[j].y - here.y);

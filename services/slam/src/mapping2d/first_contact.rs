@@ -87,9 +87,7 @@ impl Mapper2d {
     pub(super) fn seek_first_contact(&mut self) -> usize {
         let p = self.params.first_contact.clone();
         let (mut joined, mut budget) = (0, p.pairs_per_node);
-        // The parts change only when a search joins two: most pairs are passed over, and
-        // taking the parts for each would cost the whole network per pair.
-        let mut parts = Parts::of(&self.graph);
+        self.sync_parts();
         while p.enabled && budget > 0 && self.contact.later < self.submaps.done.len() {
             let (later, earlier) = (self.contact.later, self.contact.earlier);
             if earlier >= later {
@@ -98,13 +96,10 @@ impl Mapper2d {
             }
             self.contact.earlier += 1;
             let (a, b) = (&self.submaps.done[later], &self.submaps.done[earlier]);
-            if a.robot != b.robot && parts.may_meet(a.anchor, b.anchor) {
+            if a.robot != b.robot && self.parts.may_meet(a.anchor, b.anchor) {
                 budget -= 1;
                 let joined_now = self.search_pair(later, earlier, &p);
-                if joined_now > 0 {
-                    joined += joined_now;
-                    parts = Parts::of(&self.graph);
-                }
+                joined += joined_now;
             }
         }
         joined
@@ -143,6 +138,7 @@ impl Mapper2d {
         }
         hypotheses.push(Hypothesis { edge });
         let mut joined = 0;
+        self.sync_parts();
         while let Some((i, j)) = self.agreeing_hypotheses(p) {
             let hypotheses = &mut self.contact.hypotheses;
             let second = hypotheses.remove(j).edge;
@@ -155,10 +151,11 @@ impl Mapper2d {
             self.stats.first_contacts += 1;
             joined += 1;
             // Hypotheses within one part now say nothing the searches will not find.
-            let components = self.graph.components();
+            self.sync_parts();
+            let parts = &self.parts;
             self.contact
                 .hypotheses
-                .retain(|h| components[h.edge.from] != components[h.edge.to]);
+                .retain(|h| !parts.same_part(h.edge.from, h.edge.to));
         }
         joined
     }
@@ -166,7 +163,7 @@ impl Mapper2d {
     /// Two hypotheses (`i < j`) that place the same two parts the same way, at today's
     /// estimates, from four distinct nodes.
     fn agreeing_hypotheses(&self, p: &FirstContactParams) -> Option<(usize, usize)> {
-        let components = self.graph.components();
+        let parts = &self.parts;
         let (poses, path) = (&self.graph.poses, &self.node_path_m);
         // Moves the part of `to` onto the part of `from`.
         let motion = |e: &RelativeEdge| {
@@ -175,7 +172,7 @@ impl Mapper2d {
                 .compose(&poses[e.to].inverse())
         };
         let agree = |a: &RelativeEdge, b: &RelativeEdge| {
-            let ends = |e: &RelativeEdge| (components[e.from], components[e.to]);
+            let ends = |e: &RelativeEdge| (parts.part(e.from), parts.part(e.to));
             // The same two ends, or swapped; and how far apart (path) the two matches'
             // nodes lie on each part, over which the estimates drift apart.
             let (d, apart_m) = if ends(a) == ends(b) {
@@ -227,27 +224,5 @@ impl Mapper2d {
             kind: EdgeKind::InterRobot,
             robust: self.params.loop_robust,
         })
-    }
-}
-
-/// The network's parts at one moment: each node's part, and the parts GPS does not anchor.
-struct Parts {
-    components: Vec<usize>,
-    floating: Vec<usize>,
-}
-
-impl Parts {
-    fn of(graph: &crate::network::PoseGraph) -> Parts {
-        Parts {
-            components: graph.components(),
-            floating: graph.unanchored_part_roots(),
-        }
-    }
-
-    /// Whether the parts of nodes `a` and `b` differ and one of them floats.
-    fn may_meet(&self, a: usize, b: usize) -> bool {
-        let (part_a, part_b) = (self.components[a], self.components[b]);
-        let floats = |c: usize| self.floating.binary_search(&c).is_ok();
-        part_a != part_b && (floats(part_a) || floats(part_b))
     }
 }

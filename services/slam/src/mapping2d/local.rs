@@ -34,11 +34,8 @@ impl Mapper2d {
     /// robot's chain, at their current estimates in `last`'s frame.
     fn submap(&self, last: usize) -> Vec<Reference<'_>> {
         let here = self.graph.poses[last];
-        let robot = self.node_robot[last].0;
-        let earlier = (0..last)
-            .rev()
-            .filter(|&j| self.node_robot[j].0 == robot)
-            .take(self.params.refine.submap_extra_nodes);
+        let extra = self.params.refine.submap_extra_nodes as isize;
+        let earlier = (1..=extra).map_while(|k| self.chain_neighbour(last, -k));
         std::iter::once(last)
             .chain(earlier)
             .map(|j| Reference {

@@ -34,10 +34,16 @@ pub struct Mapper2dParams {
     /// Keep the odometry edge beside an accepted match between successive nodes (odometry
     /// and scan matching fused), rather than the match alone.
     pub fuse_odometry: bool,
-    /// Do not optimize while adding scans; the caller runs
+    /// Do not optimize the whole network while adding scans: the caller runs
     /// [`Mapper2d::optimize_pending`](super::Mapper2d::optimize_pending) (a server batching
-    /// the nodes that arrived together into one solve).
+    /// the nodes that arrived together into one solve), or takes the solve to run in the
+    /// background ([`Mapper2d::take_solve`](super::Mapper2d::take_solve)). Meanwhile each
+    /// node that brings a closure or a fix re-solves a window of its chain at once
+    /// (`local_window_nodes`).
     pub defer_optimization: bool,
+    /// With `defer_optimization`: the newest nodes of a chain re-solved at a node that
+    /// brings a closure or a fix, every other node held (0: none).
+    pub local_window_nodes: usize,
     /// Loop-closure candidates: earlier nodes within this distance (m) of the new node, plus
     /// `loop_search_growth` times the path travelled between them (drift grows with it)…
     pub loop_search_radius_m: f64,
@@ -84,6 +90,7 @@ impl Default for Mapper2dParams {
             match_odometry_max_chi2: f64::INFINITY,
             fuse_odometry: false,
             defer_optimization: false,
+            local_window_nodes: 30,
             loop_search_radius_m: 3.0,
             loop_search_growth: 0.2,
             loop_min_node_gap: 20,

@@ -7,19 +7,23 @@ use super::Mapper2d;
 use crate::se2::Pose2;
 
 impl Mapper2d {
+    /// Takes the edges and fixes added since the last call into [`Self::parts`].
+    pub(super) fn sync_parts(&mut self) {
+        self.parts.sync(&self.graph);
+    }
+
     /// Before a closure `from → to` measuring `measurement` is added: when the two nodes
     /// are in different parts, moves one part so that the closure holds exactly. The part
     /// that moves is the one GPS does not anchor or, if neither or both are anchored, the
     /// one whose first node is later (the map keeps the frame of its first node).
     pub(super) fn join_parts(&mut self, from: usize, to: usize, measurement: &Pose2) {
-        let components = self.graph.components();
-        let (part_from, part_to) = (components[from], components[to]);
-        if part_from == part_to {
+        self.sync_parts();
+        let parts = &self.parts;
+        if parts.same_part(from, to) {
             return;
         }
-        let anchored = self.graph.unanchored_part_roots();
-        let floats = |part: usize| anchored.binary_search(&part).is_ok();
-        let move_to_part = match (floats(part_from), floats(part_to)) {
+        let (part_from, part_to) = (parts.part(from), parts.part(to));
+        let move_to_part = match (parts.floats(from), parts.floats(to)) {
             (false, true) => true,
             (true, false) => false,
             _ => part_to > part_from,
@@ -32,14 +36,10 @@ impl Mapper2d {
             let target = poses[to].compose(&measurement.inverse());
             (part_from, target.compose(&poses[from].inverse()))
         };
-        for (pose, _) in self
-            .graph
-            .poses
-            .iter_mut()
-            .zip(&components)
-            .filter(|(_, c)| **c == part)
-        {
-            *pose = motion.compose(pose);
+        for (node, pose) in self.graph.poses.iter_mut().enumerate() {
+            if parts.part(node) == part {
+                *pose = motion.compose(pose);
+            }
         }
         self.stats.parts_joined += 1;
     }

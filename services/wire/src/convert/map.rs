@@ -30,6 +30,7 @@ pub fn map_poses_to_wire(fleet: &str, poses: &[MapPose], sent_ns: u64) -> v1::Ma
                 pose: Some(pose2_to_wire(&p.pose)),
             })
             .collect(),
+        solved_from: Vec::new(),
     }
 }
 

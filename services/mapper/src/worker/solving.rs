@@ -1,0 +1,299 @@
+//! The worker's solves. Each fleet's network is solved whole on one solver thread while the
+//! worker goes on mapping nodes (a node that brings a closure or a fix has its chain's
+//! window re-solved at once, in `slam`); the solve comes back as a correction, and its points
+//! (the last node when it was taken, the last when it was applied) are committed before
+//! it is shown, so a replay takes and applies it at the same nodes. An operator's request
+//! waits for the fleet's solve that is out, then solves on the worker itself. A recording's
+//! feed takes and applies each solve where the recorded mapper did.
+
+use super::{OptimizeError, OptimizeReply, Worker};
+use crate::fleet::SolvePoint;
+use crate::state::{FleetView, Metrics};
+use crate::store::StoreError;
+use serde_json::json;
+use slam::{BackgroundSolve, SolvedInBackground};
+use std::collections::HashMap;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use wire::session::now_ns;
+
+/// A request about a fleet's solve, answered after the batch it came in.
+pub(super) enum SolveRequest {
+    /// Solve now (an operator, or a recording's solve without its taking point).
+    Optimize(OptimizeReply),
+    /// A recording's feed: take the solve here and run it; it waits for its `Apply`.
+    Take(tokio::sync::oneshot::Sender<Result<(), OptimizeError>>),
+    /// A recording's feed: apply the solve taken before.
+    Apply(OptimizeReply),
+}
+
+/// A solve on its way to the solver thread.
+struct Job {
+    fleet: String,
+    taken_after: u64,
+    solve: BackgroundSolve,
+}
+
+/// A solve that ran.
+pub(super) struct Done {
+    fleet: String,
+    taken_after: u64,
+    solved: SolvedInBackground,
+}
+
+/// The solver thread and the solves that are out.
+pub(super) struct Solving {
+    jobs: Option<mpsc::Sender<Job>>,
+    done: mpsc::Receiver<Done>,
+    thread: Option<JoinHandle<()>>,
+    /// Fleets with a solve on the solver thread.
+    out: HashMap<String, Instant>,
+    /// When each fleet's last solve was taken.
+    last_taken: HashMap<String, Instant>,
+    /// A recording's feed: solves taken and run, waiting for their applying point.
+    held: HashMap<String, Done>,
+}
+
+impl Solving {
+    /// Starts the solver thread.
+    pub(super) fn start() -> Solving {
+        let (jobs, taken) = mpsc::channel::<Job>();
+        let (finished, done) = mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("levelmap-solver".into())
+            .spawn(move || {
+                for job in taken {
+                    let solved = job.solve.run();
+                    let done = Done {
+                        fleet: job.fleet,
+                        taken_after: job.taken_after,
+                        solved,
+                    };
+                    if finished.send(done).is_err() {
+                        break;
+                    }
+                }
+            })
+            .expect("the solver thread starts");
+        Solving {
+            jobs: Some(jobs),
+            done,
+            thread: Some(thread),
+            out: HashMap::new(),
+            last_taken: HashMap::new(),
+            held: HashMap::new(),
+        }
+    }
+
+    /// How long the worker may wait for work: briefly while a solve is out, so that it is
+    /// applied soon after it is done.
+    pub(super) fn wake(&self, interval: Duration) -> Duration {
+        if self.out.is_empty() {
+            interval
+        } else {
+            Duration::from_millis(5)
+        }
+    }
+
+    /// Lets the solver thread finish its solve and stop.
+    pub(super) fn stop(&mut self) {
+        self.jobs = None;
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl Worker {
+    /// Applies the solves that came back; takes the solves that are due (at most one per
+    /// fleet every solve interval, one out per fleet). Not while a commit failed, and no
+    /// timed solves while a recording is fed (it says where to solve).
+    pub(super) fn due_solves(&mut self) {
+        if self.unstored.is_some() {
+            return;
+        }
+        while let Ok(done) = self.solving.done.try_recv() {
+            if self.apply_solve(done).is_err() {
+                return;
+            }
+        }
+        if self.shared.feeding.load(Ordering::SeqCst) {
+            return;
+        }
+        let interval = Duration::from_millis(self.config.solve_interval_ms);
+        let mut ids: Vec<String> = self.fleets.keys().cloned().collect();
+        ids.sort_unstable();
+        for id in ids {
+            let solving = &self.solving;
+            let recent = solving
+                .last_taken
+                .get(&id)
+                .is_some_and(|t| t.elapsed() < interval);
+            if recent || solving.out.contains_key(&id) {
+                continue;
+            }
+            let Some(solve) = self.fleets.get_mut(&id).expect("listed").take_solve() else {
+                continue;
+            };
+            let taken_after = solve.nodes() as u64 - 1;
+            let job = Job {
+                fleet: id.clone(),
+                taken_after,
+                solve,
+            };
+            let sent = self
+                .solving
+                .jobs
+                .as_ref()
+                .is_some_and(|jobs| jobs.send(job).is_ok());
+            if !sent {
+                tracing::error!(fleet = %id, "the solver thread is gone: no more solves");
+                return;
+            }
+            let now = Instant::now();
+            self.solving.out.insert(id.clone(), now);
+            self.solving.last_taken.insert(id, now);
+        }
+    }
+
+    /// Applies a solve that ran: its point committed, then the new view and the corrected
+    /// poses. Whether it was applied (not while a part of the network is unanchored); an
+    /// error when its point could not be committed (it is kept to be committed again).
+    fn apply_solve(&mut self, done: Done) -> Result<bool, StoreError> {
+        let Done {
+            fleet,
+            taken_after,
+            solved,
+        } = done;
+        let started = self.solving.out.remove(&fleet).unwrap_or_else(Instant::now);
+        let map = self
+            .fleets
+            .get_mut(&fleet)
+            .expect("a solve of a known fleet");
+        match map.finish_solve(solved) {
+            Ok(true) => {}
+            Ok(false) => return Ok(false),
+            Err(e) => {
+                tracing::error!(fleet = %fleet, "optimization failed: {e}");
+                return Ok(false);
+            }
+        }
+        Metrics::bump(&self.shared.metrics.optimizations);
+        let point = map.next_solve_point(taken_after);
+        let work = super::Unstored {
+            solves: vec![(fleet.clone(), point)],
+            ..Default::default()
+        };
+        if let Err(e) = self.commit(&work) {
+            self.store_failed(work);
+            return Err(e);
+        }
+        self.publish_solve(&fleet, started, &point);
+        Ok(true)
+    }
+
+    /// A solve's new view, the corrected poses on the bus (with where the solve was taken),
+    /// the `optimized` event.
+    pub(super) fn publish_solve(&self, fleet: &str, started: Instant, point: &SolvePoint) {
+        let map = &self.fleets[fleet];
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        self.shared.publish_view(FleetView::of(map, ms, now_ns()));
+        let solved_from = map.last_nodes_before(point.taken_after as usize + 1);
+        self.bus.publish_poses(map, &solved_from);
+        self.shared
+            .event(&json!({"type": "optimized", "fleet": map.id()}));
+    }
+
+    /// Requests about solves, in the order they came.
+    pub(super) fn solve_requests(&mut self, requests: Vec<(String, SolveRequest)>) {
+        for (fleet, request) in requests {
+            match request {
+                SolveRequest::Optimize(reply) => {
+                    let _ = reply.send(self.optimize_now(&fleet));
+                }
+                SolveRequest::Take(reply) => {
+                    let _ = reply.send(self.take_held(&fleet));
+                }
+                SolveRequest::Apply(reply) => {
+                    let held = self.solving.held.remove(&fleet);
+                    let refused = || OptimizeError::Refused(format!("no solve of {fleet} taken"));
+                    let _ = reply.send(held.ok_or_else(refused).and_then(|d| self.applied(d)));
+                }
+            }
+        }
+    }
+
+    /// Solves `fleet` now, on the worker: after its solve that is out comes back.
+    fn optimize_now(&mut self, fleet: &str) -> Result<serde_json::Value, OptimizeError> {
+        let solve = self.take_now(fleet)?;
+        let taken_after = solve.nodes() as u64 - 1;
+        let done = Done {
+            fleet: fleet.to_owned(),
+            taken_after,
+            solved: solve.run(),
+        };
+        self.applied(done)
+    }
+
+    /// A recording's feed: takes `fleet`'s solve here and runs it, to apply at its point.
+    fn take_held(&mut self, fleet: &str) -> Result<(), OptimizeError> {
+        if self.solving.held.contains_key(fleet) {
+            return Err(OptimizeError::Refused(format!(
+                "a solve of {fleet} is held"
+            )));
+        }
+        let solve = self.take_now(fleet)?;
+        let done = Done {
+            fleet: fleet.to_owned(),
+            taken_after: solve.nodes() as u64 - 1,
+            solved: solve.run(),
+        };
+        self.solving.held.insert(fleet.to_owned(), done);
+        Ok(())
+    }
+
+    /// `fleet`'s solve, taken now: once the one out comes back (applied as usual), or the
+    /// one a feed holds is applied.
+    fn take_now(&mut self, fleet: &str) -> Result<BackgroundSolve, OptimizeError> {
+        // Before solving: a solve whose point is not stored would not be replayed.
+        if let Some(fault) = self.shared.store_fault() {
+            return Err(OptimizeError::StoreFailed(fault));
+        }
+        if !self.fleets.contains_key(fleet) {
+            return Err(OptimizeError::Refused(format!("no fleet {fleet}")));
+        }
+        if let Some(done) = self.solving.held.remove(fleet) {
+            self.apply_solve(done)
+                .map_err(|e| OptimizeError::StoreFailed(e.to_string()))?;
+        }
+        while self.solving.out.contains_key(fleet) {
+            let done = self
+                .solving
+                .done
+                .recv()
+                .map_err(|_| OptimizeError::Stopped)?;
+            self.apply_solve(done)
+                .map_err(|e| OptimizeError::StoreFailed(e.to_string()))?;
+        }
+        let map = self.fleets.get_mut(fleet).expect("checked above");
+        map.take_solve_now()
+            .ok_or_else(|| OptimizeError::Refused(format!("a solve of {fleet} is held")))
+    }
+
+    /// Applies a solve run for a request; its report, or why not.
+    fn applied(&mut self, done: Done) -> Result<serde_json::Value, OptimizeError> {
+        let fleet = done.fleet.clone();
+        match self.apply_solve(done) {
+            Ok(true) => {}
+            Ok(false) => {
+                let why = "part of the network is not anchored yet";
+                return Err(OptimizeError::Refused(why.into()));
+            }
+            Err(e) => return Err(OptimizeError::StoreFailed(e.to_string())),
+        }
+        let report = self.fleets[&fleet].last_optimization();
+        Ok(serde_json::to_value(report).expect("report serializes"))
+    }
+}
