@@ -70,17 +70,18 @@ pub struct BenchFleetArgs {
     pub live_clients: usize,
 }
 
+/// Percentiles of a sample (named in ms, the unit of most uses).
 #[derive(Serialize, Default)]
-struct Percentiles {
-    count: usize,
-    p50_ms: f64,
-    p90_ms: f64,
-    p99_ms: f64,
-    max_ms: f64,
+pub(crate) struct Percentiles {
+    pub count: usize,
+    pub p50_ms: f64,
+    pub p90_ms: f64,
+    pub p99_ms: f64,
+    pub max_ms: f64,
 }
 
 impl Percentiles {
-    fn of(mut ms: Vec<f64>) -> Percentiles {
+    pub(crate) fn of(mut ms: Vec<f64>) -> Percentiles {
         if ms.is_empty() {
             return Percentiles::default();
         }

@@ -217,7 +217,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         ate_aligned,
         components: slam::PoseGraph {
             poses: view.poses.clone(),
-            edges: view.edges.clone(),
+            edges: view.edges.to_vec(),
             gps: Vec::new(),
         }
         .component_count(),

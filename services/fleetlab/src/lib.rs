@@ -6,10 +6,12 @@
 //! robot's build has none of it.
 
 pub mod bench_fleet;
+pub mod bench_incremental;
 pub mod demo;
 pub mod fixed2d;
 
 pub use bench_fleet::BenchFleetArgs;
+pub use bench_incremental::BenchIncrementalArgs;
 pub use demo::DemoArgs;
 
 /// The fleet (site) every lab run maps.

@@ -38,6 +38,8 @@ enum Command {
     #[cfg(feature = "lab")]
     BenchFleet(fleetlab::BenchFleetArgs),
     #[cfg(feature = "lab")]
+    BenchIncremental(fleetlab::BenchIncrementalArgs),
+    #[cfg(feature = "lab")]
     Demo(fleetlab::DemoArgs),
     #[cfg(feature = "edge")]
     Edge(services::EdgeArgs),
@@ -64,6 +66,8 @@ fn main() -> ExitCode {
     let result = match Cli::parse().command {
         #[cfg(feature = "lab")]
         Command::BenchFleet(args) => fleetlab::bench_fleet::run(&args),
+        #[cfg(feature = "lab")]
+        Command::BenchIncremental(args) => fleetlab::bench_incremental::run(&args),
         #[cfg(feature = "lab")]
         Command::Demo(args) => fleetlab::demo::run(&args),
         #[cfg(feature = "edge")]

@@ -18,6 +18,7 @@ pub mod odometry;
 pub mod recording;
 pub mod ros_out;
 pub mod server;
+pub mod shared_log;
 pub mod state;
 pub mod store;
 pub mod tiles;

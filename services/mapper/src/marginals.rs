@@ -22,8 +22,8 @@ impl Marginals {
     ) -> Result<Vec<Option<Matrix3<f64>>>, slam::GraphError> {
         let graph = slam::PoseGraph {
             poses: view.poses.clone(),
-            edges: view.edges.clone(),
-            gps: view.gps.clone(),
+            edges: view.edges.to_vec(),
+            gps: view.gps.to_vec(),
         };
         let mut optimizers = self.optimizers.lock().expect("marginals lock");
         // The mapper's parts float until they meet: each has its own gauge.

@@ -9,7 +9,7 @@ use crate::bus::Bus;
 use crate::config::MapperConfig;
 use crate::fleet::FleetMap;
 use crate::recording::FeedReport;
-use crate::state::{FleetView, Shared};
+use crate::state::Shared;
 use crate::store::Store;
 use crate::worker::{Work, Worker};
 use anyhow::{Context, Result};
@@ -236,7 +236,7 @@ fn restore(
     for id in store.fleet_ids()? {
         match replay(config, store, &id) {
             Ok(map) => {
-                shared.publish_view(FleetView::of(&map, 0.0, now_ns()));
+                shared.publish_map(&map, 0.0);
                 fleets.insert(id, map);
             }
             Err(e) => {

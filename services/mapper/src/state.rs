@@ -2,6 +2,7 @@
 //! (readers never wait on the mapping), live odometry, counters and the event stream.
 
 use crate::fleet::{FleetMap, NodeRecord};
+use crate::shared_log::SharedLog;
 use serde::Serialize;
 use slam::geodesy::GeoDatum;
 use slam::{GpsEdge, MapperStats, OptimizeReport, Pose2, RelativeEdge};
@@ -9,6 +10,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, RwLock};
 use tokio::sync::broadcast;
+use wire::session::now_ns;
 
 /// A robot as the map knows it.
 #[derive(Clone, Debug, Serialize)]
@@ -55,9 +57,9 @@ pub struct FleetView {
     /// The nodes' poses in the map frame.
     pub poses: Vec<Pose2>,
     /// The network's relative edges.
-    pub edges: Vec<RelativeEdge>,
+    pub edges: SharedLog<RelativeEdge>,
     /// The network's GPS edges.
-    pub gps: Vec<GpsEdge>,
+    pub gps: SharedLog<GpsEdge>,
     /// What the mapping did so far.
     pub stats: MapperStats,
     /// The last solve's report.
@@ -69,8 +71,13 @@ pub struct FleetView {
 }
 
 impl FleetView {
-    /// A copy of `map` now, for readers.
-    pub fn of(map: &FleetMap, last_ingest_ms: f64, updated_ns: u64) -> FleetView {
+    /// A copy of `map` now, for readers, sharing the edges of the fleet's `previous` view.
+    pub fn of(
+        map: &FleetMap,
+        previous: Option<&FleetView>,
+        last_ingest_ms: f64,
+        updated_ns: u64,
+    ) -> FleetView {
         let poses = map.poses().to_vec();
         let robots = map
             .robots()
@@ -94,8 +101,14 @@ impl FleetView {
             robots,
             nodes: map.nodes().to_vec(),
             poses,
-            edges: map.graph().edges.clone(),
-            gps: map.graph().gps.clone(),
+            edges: SharedLog::extend(
+                previous.map_or(&SharedLog::default(), |v| &v.edges),
+                &map.graph().edges,
+            ),
+            gps: SharedLog::extend(
+                previous.map_or(&SharedLog::default(), |v| &v.gps),
+                &map.graph().gps,
+            ),
             stats: map.stats(),
             last_optimization: map.last_optimization().copied(),
             last_ingest_ms,
@@ -237,6 +250,13 @@ impl Shared {
             .expect("quarantine lock")
             .get(fleet)
             .cloned()
+    }
+
+    /// Makes and publishes the view of `map` now, sharing what it can with the last one.
+    pub fn publish_map(&self, map: &FleetMap, last_ingest_ms: f64) {
+        let previous = self.fleet(map.id());
+        let view = FleetView::of(map, previous.as_deref(), last_ingest_ms, now_ns());
+        self.publish_view(view);
     }
 
     /// Replaces the fleet's view: readers see the new one from now on.

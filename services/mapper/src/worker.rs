@@ -11,7 +11,7 @@
 use crate::bus::Bus;
 use crate::config::MapperConfig;
 use crate::fleet::{FleetMap, IngestError, Sequence};
-use crate::state::{FleetView, Metrics, Shared};
+use crate::state::{Metrics, Shared};
 use crate::store::Store;
 use commit::Unstored;
 use serde_json::json;
@@ -21,7 +21,6 @@ use std::sync::Arc;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use wire::NodeInput;
-use wire::session::now_ns;
 
 mod commit;
 mod solving;
@@ -404,8 +403,7 @@ impl Worker {
     fn publish(&self, accepted: &[Accepted], started: Instant) {
         let ms = started.elapsed().as_secs_f64() * 1e3;
         for fleet in fleets_of(accepted) {
-            self.shared
-                .publish_view(FleetView::of(&self.fleets[fleet], ms, now_ns()));
+            self.shared.publish_map(&self.fleets[fleet], ms);
         }
         for a in accepted {
             let map = &self.fleets[&a.fleet];

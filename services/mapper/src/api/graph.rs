@@ -240,7 +240,7 @@ pub(super) async fn graph_g2o(State(api): State<Api>, Path(fleet): Path<String>)
         .heavy(move || {
             let graph = slam::PoseGraph {
                 poses: v.poses.clone(),
-                edges: v.edges.clone(),
+                edges: v.edges.to_vec(),
                 gps: Vec::new(),
             };
             let ids: Vec<i64> = (0..v.poses.len() as i64).collect();

@@ -8,7 +8,7 @@
 
 use super::{OptimizeError, OptimizeReply, Worker};
 use crate::fleet::SolvePoint;
-use crate::state::{FleetView, Metrics};
+use crate::state::Metrics;
 use crate::store::StoreError;
 use serde_json::json;
 use slam::{BackgroundSolve, SolvedInBackground};
@@ -17,7 +17,6 @@ use std::sync::atomic::Ordering;
 use std::sync::mpsc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-use wire::session::now_ns;
 
 /// A request about a fleet's solve, answered after the batch it came in.
 pub(super) enum SolveRequest {
@@ -199,7 +198,7 @@ impl Worker {
     pub(super) fn publish_solve(&self, fleet: &str, started: Instant, point: &SolvePoint) {
         let map = &self.fleets[fleet];
         let ms = started.elapsed().as_secs_f64() * 1e3;
-        self.shared.publish_view(FleetView::of(map, ms, now_ns()));
+        self.shared.publish_map(map, ms);
         let solved_from = map.last_nodes_before(point.taken_after as usize + 1);
         self.bus.publish_poses(map, &solved_from);
         self.shared

@@ -158,7 +158,8 @@ impl Mapper2d {
         min_score: f64,
     ) -> Option<CorrelativeMatch> {
         let p = &self.params.submaps;
-        let (grids, scan) = (&self.submaps.done[k].grids, &self.node_scans[node]);
+        let (grids, scan) = (self.pooled_grids(k), &self.node_scans[node]);
+        let grids = grids.as_ref();
         let found = search(grids, scan, initial, window, min_score, &p.grid)?;
         let excluded = Exclusion {
             pose: found.pose,

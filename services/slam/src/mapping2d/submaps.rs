@@ -4,7 +4,13 @@
 
 use super::Mapper2d;
 use crate::Pose2;
-use crate::matching::correlative::{PrecomputedGrids, precompute};
+use crate::matching::correlative::{PrecomputedGrids, ProbabilityGrid, precompute};
+use std::sync::{Arc, Mutex};
+
+/// Pooled grids kept at once: a submap's grid is made when it is first searched and kept
+/// while it is among the most recently searched. Made for every submap and kept for good,
+/// they took most of the mapper's time on a fleet and grew its memory with the time driven.
+const POOLED_GRIDS_KEPT: usize = 32;
 
 /// A finished submap.
 #[derive(Debug)]
@@ -12,18 +18,19 @@ pub(super) struct Submap {
     pub robot: usize,
     /// The first node: the grid is in its frame.
     pub anchor: usize,
-    /// Each node and its pose in the anchor's frame when the grid was built.
+    /// Each node and its pose in the anchor's frame when the submap was finished.
     pub nodes: Vec<(usize, Pose2)>,
     /// Place in the robot's chain, and path (m), of the last node.
     pub last_place: usize,
     pub last_path_m: f64,
-    pub grids: PrecomputedGrids,
+    /// The grid's extent in the anchor's frame (m).
+    bounds: ([f64; 2], [f64; 2]),
 }
 
 impl Submap {
     /// Distance (m) from a point of the anchor's frame to the grid's extent (0 inside).
     pub fn distance_to(&self, p: [f64; 2]) -> f64 {
-        let (lo, hi) = self.grids.grid().bounds();
+        let (lo, hi) = self.bounds;
         let dx = (lo[0] - p[0]).max(p[0] - hi[0]).max(0.0);
         let dy = (lo[1] - p[1]).max(p[1] - hi[1]).max(0.0);
         dx.hypot(dy)
@@ -31,16 +38,24 @@ impl Submap {
 
     /// The grid's centre in the anchor's frame, and half its larger side (m).
     pub fn centre_and_reach(&self) -> ([f64; 2], f64) {
-        let (lo, hi) = self.grids.grid().bounds();
+        let (lo, hi) = self.bounds;
         let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
         (centre, (hi[0] - lo[0]).max(hi[1] - lo[1]) / 2.0)
     }
+}
+
+/// The pooled grids made last, by submap, with when each was last used.
+#[derive(Debug, Default)]
+struct PooledGrids {
+    kept: Vec<(usize, Arc<PrecomputedGrids>, u64)>,
+    clock: u64,
 }
 
 /// Every robot's submaps, and how long each robot has gone without a closure.
 #[derive(Debug, Default)]
 pub(super) struct Submaps {
     pub done: Vec<Submap>,
+    pooled: Mutex<PooledGrids>,
     /// By robot.
     pub robots: Vec<RobotSubmaps>,
 }
@@ -85,8 +100,7 @@ impl Mapper2d {
             .iter()
             .map(|&n| (n, origin.between(&self.graph.poses[n])))
             .collect();
-        let scans = placed.iter().map(|&(n, pose)| (pose, &self.node_scans[n]));
-        let Some(grids) = precompute(scans, &self.params.submaps.grid) else {
+        let Some(grid) = self.rasterize(&placed) else {
             return;
         };
         self.submaps.done.push(Submap {
@@ -95,7 +109,42 @@ impl Mapper2d {
             nodes: placed,
             last_place: self.node_robot[last].1,
             last_path_m: self.node_path_m[last],
-            grids,
+            bounds: grid.bounds(),
         });
+    }
+
+    /// The submap's nodes' scans at their poses, as one grid; `None` when empty or too large.
+    fn rasterize(&self, placed: &[(usize, Pose2)]) -> Option<ProbabilityGrid> {
+        let scans = placed
+            .iter()
+            .map(|&(n, pose)| (pose, self.node_scans[n].points()));
+        ProbabilityGrid::from_scans(scans, &self.params.submaps.grid)
+    }
+
+    /// Submap `k`'s grid pooled for the correlative search: made on first use, kept while it
+    /// is among the [`POOLED_GRIDS_KEPT`] used last.
+    pub(super) fn pooled_grids(&self, k: usize) -> Arc<PrecomputedGrids> {
+        let mut pooled = self.submaps.pooled.lock().expect("pooled grids lock");
+        pooled.clock += 1;
+        let now = pooled.clock;
+        if let Some(entry) = pooled.kept.iter_mut().find(|e| e.0 == k) {
+            entry.2 = now;
+            return entry.1.clone();
+        }
+        let submap = &self.submaps.done[k];
+        let scans = submap
+            .nodes
+            .iter()
+            .map(|&(n, pose)| (pose, &self.node_scans[n]));
+        let grids = Arc::new(
+            precompute(scans, &self.params.submaps.grid).expect("it was rasterized when finished"),
+        );
+        if pooled.kept.len() >= POOLED_GRIDS_KEPT
+            && let Some(oldest) = (0..pooled.kept.len()).min_by_key(|&i| pooled.kept[i].2)
+        {
+            pooled.kept.swap_remove(oldest);
+        }
+        pooled.kept.push((k, grids.clone(), now));
+        grids
     }
 }
