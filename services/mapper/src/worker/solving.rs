@@ -63,6 +63,7 @@ impl Solving {
         let thread = std::thread::Builder::new()
             .name("levelmap-solver".into())
             .spawn(move || {
+                lower_priority();
                 for job in taken {
                     let solved = job.solve.run();
                     let done = Done {
@@ -104,6 +105,21 @@ impl Solving {
         }
     }
 }
+
+/// The solver thread yields to the mapping thread and the network when the cores are busy:
+/// nodes are shown and acked first, the whole network is solved with the time left.
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    {
+        let thread = rustix::thread::gettid();
+        if let Err(e) = rustix::process::setpriority_process(Some(thread), SOLVER_NICE) {
+            tracing::warn!("the solver thread keeps its priority: {e}");
+        }
+    }
+}
+
+/// The solver thread's nice value.
+const SOLVER_NICE: i32 = 10;
 
 impl Worker {
     /// Applies the solves that came back; takes the solves that are due (at most one per
