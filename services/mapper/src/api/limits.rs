@@ -71,6 +71,27 @@ impl Limits {
         }
     }
 
+    /// Heavy work whose outcome must be told (a write): bounded in number as [`Self::heavy`],
+    /// but waited for to its end, since a 503 after the timeout would hide a write that still
+    /// happens.
+    pub(super) async fn heavy_write<T: Send + 'static>(
+        &self,
+        work: impl FnOnce() -> Reply<T> + Send + 'static,
+    ) -> Reply<T> {
+        let Ok(slot) = self.heavy.clone().try_acquire_owned() else {
+            self.refused_busy.fetch_add(1, Ordering::Relaxed);
+            return Err(ApiError::Busy(format!(
+                "busy: {} heavy requests are being worked on, the most this mapper takes",
+                self.heavy_max
+            )));
+        };
+        let task = tokio::task::spawn_blocking(move || {
+            let _slot = slot;
+            work()
+        });
+        task.await.map_err(ApiError::internal)?
+    }
+
     /// A place for one event stream, held as long as the stream is open.
     pub(super) fn stream_slot(&self) -> Reply<OwnedSemaphorePermit> {
         self.streams.clone().try_acquire_owned().map_err(|_| {
