@@ -165,7 +165,10 @@ pub(super) fn document_guard(doc: &mut utoipa::openapi::OpenApi, guarded: &[Stri
         if !guarded.contains(path) {
             continue;
         }
-        for op in [&mut item.get, &mut item.post].into_iter().flatten() {
+        for op in [&mut item.get, &mut item.post, &mut item.delete]
+            .into_iter()
+            .flatten()
+        {
             op.security.get_or_insert_with(|| {
                 vec![
                     SecurityRequirement::default(),
