@@ -245,10 +245,10 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(window::robot_map_png))
         .routes(routes!(nodes::node_detail))
         .routes(routes!(nodes::node_cloud))
-        .routes(routes!(versions::list, versions::freeze))
-        .routes(routes!(versions::import))
-        .routes(routes!(versions::summary, versions::delete))
-        .routes(routes!(versions::file))
+        .routes(routes!(versions::version_list, versions::version_freeze))
+        .routes(routes!(versions::version_import))
+        .routes(routes!(versions::version_summary, versions::version_delete))
+        .routes(routes!(versions::version_file))
         .routes(routes!(events::events))
 }
 

@@ -90,7 +90,7 @@ fn created(summary: VersionSummary) -> Response {
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
-pub(super) async fn freeze(
+pub(super) async fn version_freeze(
     State(api): State<Api>,
     Path(fleet): Path<String>,
     headers: HeaderMap,
@@ -136,7 +136,7 @@ pub(super) async fn freeze(
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
-pub(super) async fn import(
+pub(super) async fn version_import(
     State(api): State<Api>,
     Path(fleet): Path<String>,
     headers: HeaderMap,
@@ -179,7 +179,7 @@ pub(super) async fn import(
         (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
-pub(super) async fn list(
+pub(super) async fn version_list(
     State(api): State<Api>,
     Path(fleet): Path<String>,
 ) -> Reply<Json<VersionList>> {
@@ -215,7 +215,7 @@ pub(super) async fn list(
         (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
-pub(super) async fn summary(
+pub(super) async fn version_summary(
     State(api): State<Api>,
     Path((fleet, version)): Path<(String, u64)>,
 ) -> Reply<Json<VersionSummary>> {
@@ -247,7 +247,7 @@ pub(super) async fn summary(
         (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
-pub(super) async fn file(
+pub(super) async fn version_file(
     State(api): State<Api>,
     Path((fleet, version)): Path<(String, u64)>,
 ) -> Reply {
@@ -284,7 +284,7 @@ pub(super) async fn file(
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
-pub(super) async fn delete(
+pub(super) async fn version_delete(
     State(api): State<Api>,
     Path((fleet, version)): Path<(String, u64)>,
     headers: HeaderMap,
