@@ -188,6 +188,25 @@ mod tests {
         assert_eq!(l.refused_timeout.load(Ordering::Relaxed), 1);
     }
 
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_write_is_waited_for_past_the_timeout_and_holds_a_slot() {
+        let l = Arc::new(limits(1, 20, 1));
+        let (work, release) = held(7);
+        let write = tokio::spawn({
+            let l = l.clone();
+            async move { l.heavy_write(work).await }
+        });
+        while l.heavy_running() == 0 {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        assert!(is_busy(&l.heavy(|| Ok(8)).await, "busy: 1 heavy"));
+        // Past the 20 ms a read would be answered in: the write's outcome still comes.
+        tokio::time::sleep(Duration::from_millis(60)).await;
+        release.send(()).unwrap();
+        assert_eq!(write.await.unwrap().unwrap(), 7);
+        assert_eq!(l.refused_timeout.load(Ordering::Relaxed), 0);
+    }
+
     #[test]
     fn stream_slots_are_counted_and_given_back() {
         let l = limits(1, 1, 2);

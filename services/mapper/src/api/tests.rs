@@ -24,7 +24,10 @@ fn the_document_lists_every_route_with_its_parameters() {
     for (path, item) in paths {
         for (method, op) in item.as_object().unwrap() {
             let id = op["operationId"].as_str().unwrap_or_default();
-            assert!(ids.insert(id.to_owned()), "{method} {path}: operationId {id} twice");
+            assert!(
+                ids.insert(id.to_owned()),
+                "{method} {path}: operationId {id} twice"
+            );
             // Each {param} of the path is a documented path parameter.
             for name in path.split('{').skip(1).map(|s| &s[..s.find('}').unwrap()]) {
                 let declared = op["parameters"]
