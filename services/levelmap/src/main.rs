@@ -8,6 +8,8 @@
 mod level;
 mod level_ouster;
 #[cfg(feature = "mapper")]
+mod map_versions;
+#[cfg(feature = "mapper")]
 mod optimize;
 #[cfg(feature = "lab")]
 mod pavilion;
@@ -45,6 +47,8 @@ enum Command {
     Edge(services::EdgeArgs),
     Level(level::LevelArgs),
     #[cfg(feature = "mapper")]
+    Map(map_versions::MapArgs),
+    #[cfg(feature = "mapper")]
     Mapper(services::MapperArgs),
     /// Print the mapping server's OpenAPI document (JSON), as it serves it at
     /// /api/v1/openapi.json: made from its routes.
@@ -72,6 +76,8 @@ fn main() -> ExitCode {
         Command::Demo(args) => fleetlab::demo::run(&args),
         #[cfg(feature = "edge")]
         Command::Edge(args) => services::run_edge(&args),
+        #[cfg(feature = "mapper")]
+        Command::Map(args) => map_versions::run(&args),
         #[cfg(feature = "mapper")]
         Command::Mapper(args) => services::run_mapper(&args),
         #[cfg(feature = "lab")]

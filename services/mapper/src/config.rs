@@ -40,6 +40,8 @@ pub struct MapperConfig {
     pub mapping: Mapper2dParams,
     /// Where each fleet's map goes to ROS 2 (`/levelmap/<fleet>/map`); unset: nowhere.
     pub ros2_out: Option<wire::ros2::RosOutConfig>,
+    /// Map versions: frozen maps kept in the store (`[versions]`).
+    pub versions: VersionsConfig,
 }
 
 impl Default for MapperConfig {
@@ -57,6 +59,7 @@ impl Default for MapperConfig {
             solve_interval_ms: 500,
             mapping: fleet_mapping_params(),
             ros2_out: None,
+            versions: VersionsConfig::default(),
         }
     }
 }
@@ -104,6 +107,24 @@ impl Default for HttpConfig {
             heavy_timeout_ms: NonZeroU64::new(10_000).expect("nonzero"),
             event_streams: NonZeroUsize::new(256).expect("nonzero"),
             cors_origins: Vec::new(),
+        }
+    }
+}
+
+/// Map versions (`[versions]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VersionsConfig {
+    /// Versions a fleet keeps at most; one more is refused (409) until one is deleted. Each
+    /// is the whole map: 8 bytes a beam of every node's scan (2–3 KB a simulated node), a
+    /// byte a grid cell (0.6 MB for 80 m × 80 m).
+    pub max_versions: NonZeroUsize,
+}
+
+impl Default for VersionsConfig {
+    fn default() -> Self {
+        VersionsConfig {
+            max_versions: NonZeroUsize::new(20).expect("nonzero"),
         }
     }
 }

@@ -4,7 +4,7 @@
 //!
 //! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
 //! HTTP side reads), [`live`] (each robot's live feed), [`tiles`] (the map's
-//! tiles for windows around robots), [`marginals`]. The disk: [`store`]. The shells: [`server`] (wiring),
+//! tiles for windows around robots), [`marginals`], [`versions`] (frozen maps). The disk: [`store`]. The shells: [`server`] (wiring),
 //! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`recording`] (a
 //! recording fed in as the bus's traffic), [`ros_out`] (the maps to ROS 2), [`api`] (HTTP).
 
@@ -22,6 +22,7 @@ pub mod shared_log;
 pub mod state;
 pub mod store;
 pub mod tiles;
+pub mod versions;
 pub mod worker;
 
 pub use config::{MapperConfig, fleet_mapping_params};

@@ -8,13 +8,20 @@
 //! A failed commit (a full disk) closes the file: redb wants a database that met an I/O error
 //! opened again, which the next commit does. Each fleet is read on its own, so a fleet whose
 //! rows are damaged does not keep the others from being restored.
+//!
+//! Map versions (`versions`) are kept in tables of their own, written from the HTTP side's
+//! blocking pool: redb runs one write transaction at a time, so they interleave with the
+//! worker's commits without touching its rows.
 
 pub use crate::fleet::SolvePoint;
 use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition, TableHandle};
 use std::ops::Bound;
 use std::path::Path;
-use std::sync::RwLock;
+use std::sync::{Mutex, RwLock};
 use wire::{Message, v1};
+
+mod versions;
+pub use versions::{AddVersionError, VersionRows};
 
 /// (fleet, arrival index) → encoded `v1::Node`, without `Node.cloud`.
 const NODES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("nodes");
@@ -69,6 +76,9 @@ pub struct Store {
     open: Opener,
     /// `None` after a failed commit, until the next one opens the file again.
     db: RwLock<Option<Database>>,
+    /// Held while a version is numbered and written, or deleted: one at a time, so a
+    /// number is given once and a fleet's count is what the next one sees.
+    versions: Mutex<()>,
 }
 
 /// One fleet as stored.
@@ -130,7 +140,11 @@ impl Store {
 
     fn with_opener(open: Opener) -> Result<Store, StoreError> {
         let db = RwLock::new(Some(with_tables(open()?)?));
-        Ok(Store { open, db })
+        Ok(Store {
+            open,
+            db,
+            versions: Mutex::new(()),
+        })
     }
 
     /// Commits a batch (nodes, their clouds, the edges they added, the solve after them) in
@@ -232,6 +246,7 @@ fn with_tables(db: Database) -> Result<Database, StoreError> {
     txn.open_table(SOLVES)?;
     txn.open_table(SOLVE_POINTS)?;
     txn.open_table(CLOUDS)?;
+    versions::open_tables(&txn)?;
     txn.commit()?;
     Ok(db)
 }

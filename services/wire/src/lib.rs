@@ -9,7 +9,9 @@
 //! a missing header, a foreign wire version and out-of-domain numbers with a [`WireError`]
 //! naming the field; [`leveled_scan_from_wire`] and [`pose3d_from_wire`] then give the
 //! algorithm types. A node may carry its segmented 3D cloud ([`cloud_to_wire`],
-//! [`cloud_from_wire`], checked by [`validate_cloud`]).
+//! [`cloud_from_wire`], checked by [`validate_cloud`]). A map version, the mapper's frozen map
+//! as one file, is written by [`encode_map_version_file`] and read back, checked, by
+//! [`decode_map_version_file`].
 
 mod convert;
 mod error;

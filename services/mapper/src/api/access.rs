@@ -165,7 +165,10 @@ pub(super) fn document_guard(doc: &mut utoipa::openapi::OpenApi, guarded: &[Stri
         if !guarded.contains(path) {
             continue;
         }
-        for op in [&mut item.get, &mut item.post].into_iter().flatten() {
+        for op in [&mut item.get, &mut item.post, &mut item.delete]
+            .into_iter()
+            .flatten()
+        {
             op.security.get_or_insert_with(|| {
                 vec![
                     SecurityRequirement::default(),
@@ -201,13 +204,16 @@ pub(super) fn cors(origins: &[CorsOrigin]) -> Option<CorsLayer> {
     Some(
         CorsLayer::new()
             .allow_origin(AllowOrigin::list(origins))
-            .allow_methods([Method::GET, Method::POST])
-            .allow_headers([header::AUTHORIZATION])
+            // DELETE and a Content-Type: a map version's delete and import.
+            .allow_methods([Method::GET, Method::POST, Method::DELETE])
+            .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE])
             // What a page of another origin may read besides the simple headers.
             .expose_headers([
                 HeaderName::from_static("levelmap-grid"),
                 header::RETRY_AFTER,
                 header::WWW_AUTHENTICATE,
+                header::LOCATION,
+                header::CONTENT_DISPOSITION,
             ])
             .max_age(Duration::from_secs(600)),
     )

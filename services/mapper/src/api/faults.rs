@@ -58,7 +58,10 @@ pub fn document(doc: &mut OpenApi) {
         if !path.contains("{fleet}") {
             continue;
         }
-        for op in [&mut item.get, &mut item.post].into_iter().flatten() {
+        for op in [&mut item.get, &mut item.post, &mut item.delete]
+            .into_iter()
+            .flatten()
+        {
             let faults = "the fleet is quarantined (its stored map did not replay), or the \
                           store cannot commit (`Retry-After`)";
             let json = ContentBuilder::new()

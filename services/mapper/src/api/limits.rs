@@ -71,6 +71,27 @@ impl Limits {
         }
     }
 
+    /// Heavy work whose outcome must be told (a write): bounded in number as [`Self::heavy`],
+    /// but waited for to its end, since a 503 after the timeout would hide a write that still
+    /// happens.
+    pub(super) async fn heavy_write<T: Send + 'static>(
+        &self,
+        work: impl FnOnce() -> Reply<T> + Send + 'static,
+    ) -> Reply<T> {
+        let Ok(slot) = self.heavy.clone().try_acquire_owned() else {
+            self.refused_busy.fetch_add(1, Ordering::Relaxed);
+            return Err(ApiError::Busy(format!(
+                "busy: {} heavy requests are being worked on, the most this mapper takes",
+                self.heavy_max
+            )));
+        };
+        let task = tokio::task::spawn_blocking(move || {
+            let _slot = slot;
+            work()
+        });
+        task.await.map_err(ApiError::internal)?
+    }
+
     /// A place for one event stream, held as long as the stream is open.
     pub(super) fn stream_slot(&self) -> Reply<OwnedSemaphorePermit> {
         self.streams.clone().try_acquire_owned().map_err(|_| {
@@ -165,6 +186,25 @@ mod tests {
         }
         assert_eq!(l.heavy(|| Ok(9)).await.unwrap(), 9);
         assert_eq!(l.refused_timeout.load(Ordering::Relaxed), 1);
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_write_is_waited_for_past_the_timeout_and_holds_a_slot() {
+        let l = Arc::new(limits(1, 20, 1));
+        let (work, release) = held(7);
+        let write = tokio::spawn({
+            let l = l.clone();
+            async move { l.heavy_write(work).await }
+        });
+        while l.heavy_running() == 0 {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        assert!(is_busy(&l.heavy(|| Ok(8)).await, "busy: 1 heavy"));
+        // Past the 20 ms a read would be answered in: the write's outcome still comes.
+        tokio::time::sleep(Duration::from_millis(60)).await;
+        release.send(()).unwrap();
+        assert_eq!(write.await.unwrap().unwrap(), 7);
+        assert_eq!(l.refused_timeout.load(Ordering::Relaxed), 0);
     }
 
     #[test]

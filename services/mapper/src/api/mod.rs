@@ -15,6 +15,7 @@ mod live;
 mod map;
 mod nodes;
 mod service;
+mod versions;
 mod web;
 mod window;
 
@@ -51,6 +52,10 @@ struct Api {
     limits: Arc<limits::Limits>,
     /// The map's tiles, for windows around robots.
     tiles: Arc<crate::tiles::TileCache>,
+    /// The fleets this mapper serves.
+    served: Arc<[String]>,
+    /// Versions a fleet keeps at most (`[versions] max_versions`).
+    max_versions: usize,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -62,8 +67,12 @@ pub enum ApiError {
     Unauthorized(String),
     /// 403: write routes are off (no token configured), or the token only reads.
     Forbidden(String),
-    /// 404: no such fleet, robot, node or file.
+    /// 404: no such fleet, robot, node, version or file.
     NotFound(String),
+    /// 409: the request conflicts with what is stored (a fleet keeping its most versions).
+    Conflict(String),
+    /// 413: a body over its bound.
+    TooLarge(String),
     /// 422: the map cannot answer this (a grid too large, a network that cannot be solved).
     Unprocessable(String),
     /// 503: the mapper is stopping.
@@ -87,6 +96,8 @@ impl ApiError {
             ApiError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
             ApiError::Forbidden(_) => StatusCode::FORBIDDEN,
             ApiError::NotFound(_) => StatusCode::NOT_FOUND,
+            ApiError::Conflict(_) => StatusCode::CONFLICT,
+            ApiError::TooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::Unprocessable(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::Unavailable(_) | ApiError::Degraded(_) | ApiError::Busy(_) => {
                 StatusCode::SERVICE_UNAVAILABLE
@@ -101,6 +112,8 @@ impl ApiError {
             | ApiError::Unauthorized(r)
             | ApiError::Forbidden(r)
             | ApiError::NotFound(r)
+            | ApiError::Conflict(r)
+            | ApiError::TooLarge(r)
             | ApiError::Unprocessable(r)
             | ApiError::Unavailable(r)
             | ApiError::Busy(r)
@@ -178,6 +191,7 @@ impl Api {
         (name = "graph", description = "The pose network"),
         (name = "map", description = "The occupancy grid and map products"),
         (name = "nodes", description = "One node of the network"),
+        (name = "versions", description = "Map versions: the map frozen, as one file"),
         (name = "events", description = "The event stream"),
         (name = "web", description = "The dashboard"),
     )
@@ -231,6 +245,10 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(window::robot_map_png))
         .routes(routes!(nodes::node_detail))
         .routes(routes!(nodes::node_cloud))
+        .routes(routes!(versions::version_list, versions::version_freeze))
+        .routes(routes!(versions::version_import))
+        .routes(routes!(versions::version_summary, versions::version_delete))
+        .routes(routes!(versions::version_file))
         .routes(routes!(events::events))
 }
 
@@ -272,6 +290,8 @@ pub fn router(
         tokens: Arc::new(access::Tokens::new(&config.token, &config.read_token)),
         limits: Arc::new(limits::Limits::new(&config.http)),
         tiles: Arc::default(),
+        served: config.fleets.clone().into(),
+        max_versions: config.versions.max_versions.get(),
     };
     let (router, doc) = parts(Some(&api));
     let _ = api

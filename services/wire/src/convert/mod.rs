@@ -11,6 +11,7 @@ mod node;
 mod odometry;
 mod pose;
 mod scan;
+mod version;
 
 pub use cloud::{
     CLOUD_MAX_COORD_CM, CLOUD_MAX_POINTS, ClassifiedCloud, cloud_from_wire, cloud_to_wire,
@@ -29,6 +30,11 @@ pub use pose::{
     pose3d_to_wire,
 };
 pub use scan::{counts_from_wire, counts_to_wire, leveled_scan_from_wire, leveled_scan_to_wire};
+pub use version::{
+    MAP_VERSION_FORMAT, MAP_VERSION_MESSAGE, MAX_MAP_VERSION_BYTES, MAX_MAP_VERSION_CELLS,
+    MAX_MAP_VERSION_NODES, MapVersion, VersionNode, VersionOrigin, crc32, decode_map_version_file,
+    encode_map_version_file, map_version_from_wire, map_version_to_wire,
+};
 
 use crate::{Message, WIRE_VERSION, WireError, v1, validate_id};
 
