@@ -231,7 +231,7 @@ mod tests {
         for seq in 0..nodes {
             map.ingest(&node(seq)).unwrap();
         }
-        FleetView::of(&map, 0.0, 1)
+        FleetView::of(&map, None, 0.0, 1)
     }
 
     #[test]
