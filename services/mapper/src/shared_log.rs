@@ -1,6 +1,6 @@
 //! An append-only list that successive snapshots share: full chunks are kept behind an `Arc`,
 //! so a new snapshot of a list that only grew copies at most one chunk. The fleet views hold
-//! the network's edges this way: copied whole at every batch, they cost the worker tens of
+//! the nodes and the network's edges this way: copied whole at every batch, they cost the worker tens of
 //! MB per batch on a large map.
 
 use std::sync::Arc;
@@ -61,9 +61,22 @@ impl<T: Clone> SharedLog<T> {
         self.len == 0
     }
 
+    /// The item at `index`, if there is one.
+    pub fn get(&self, index: usize) -> Option<&T> {
+        self.chunks.get(index / CHUNK)?.get(index % CHUNK)
+    }
+
     /// A copy as one vector.
     pub fn to_vec(&self) -> Vec<T> {
         self.iter().cloned().collect()
+    }
+}
+
+impl<T: Clone> std::ops::Index<usize> for SharedLog<T> {
+    type Output = T;
+
+    fn index(&self, index: usize) -> &T {
+        self.get(index).expect("index within the log")
     }
 }
 
@@ -79,6 +92,10 @@ mod tests {
         let second = SharedLog::extend(&first, &items);
         assert_eq!(second.to_vec(), items);
         assert_eq!(second.len(), items.len());
+        assert_eq!(
+            (second[CHUNK + 3], second.get(items.len())),
+            (CHUNK as u32 + 3, None)
+        );
         assert!(Arc::ptr_eq(&first.chunks[0], &second.chunks[0]), "shared");
         assert!(
             !Arc::ptr_eq(&first.chunks[1], &second.chunks[1]),

@@ -53,7 +53,7 @@ pub struct FleetView {
     /// The robots, as in [`FleetMap::robots`].
     pub robots: Vec<RobotView>,
     /// Every node with what it came with, in map order.
-    pub nodes: Vec<Arc<NodeRecord>>,
+    pub nodes: SharedLog<Arc<NodeRecord>>,
     /// The nodes' poses in the map frame.
     pub poses: Vec<Pose2>,
     /// The network's relative edges.
@@ -99,7 +99,10 @@ impl FleetView {
             id: map.id().to_owned(),
             datum: map.datum().copied(),
             robots,
-            nodes: map.nodes().to_vec(),
+            nodes: SharedLog::extend(
+                previous.map_or(&SharedLog::default(), |v| &v.nodes),
+                map.nodes(),
+            ),
             poses,
             edges: SharedLog::extend(
                 previous.map_or(&SharedLog::default(), |v| &v.edges),

@@ -23,6 +23,7 @@ pub mod consistency;
 mod edges;
 mod first_contact;
 mod local;
+mod near;
 mod params;
 mod parts;
 mod solve;
@@ -143,6 +144,8 @@ pub struct Mapper2d {
     parts: crate::parts::PartTracker,
     /// The solves of a deferred mapper: windows now, the whole network in the background.
     background: solve::Background,
+    /// The nodes filed by their estimates.
+    near: near::NodeGrid,
 }
 
 impl Mapper2d {
@@ -307,6 +310,7 @@ impl Mapper2d {
         self.node_robot.push((robot, length));
         self.node_path_m.push(path_m);
         self.graph.poses.push(estimate);
+        self.near.refile(&self.graph.poses, &[]);
         self.node_scans.push(scan);
         self.stats.nodes += 1;
         node

@@ -130,6 +130,11 @@ impl ChainPaths {
         self.sums[chain].push(sum + a * step.covariance * a.transpose());
     }
 
+    /// The nodes of chain `chain` so far, in order.
+    pub fn chain_nodes(&self, chain: usize) -> &[usize] {
+        self.nodes.get(chain).map_or(&[], Vec::as_slice)
+    }
+
     /// Nodes in chain `chain` so far.
     pub fn chain_len(&self, chain: usize) -> usize {
         self.poses.get(chain).map_or(0, Vec::len)

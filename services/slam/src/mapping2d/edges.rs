@@ -78,23 +78,29 @@ impl Mapper2d {
         self.sync_parts();
         let parts = &self.parts;
         let shared_frame = |j: usize| !parts.may_meet(node, j);
-        let mut candidates: Vec<(f64, usize)> = (0..node)
-            .filter_map(|j| {
-                let d = (self.graph.poses[j].x - here.x).hypot(self.graph.poses[j].y - here.y);
-                let (other, other_place) = self.node_robot[j];
-                let near = if other == robot {
-                    place >= other_place + p.loop_min_node_gap
-                        && d <= p.loop_search_radius_m
-                            + p.loop_search_growth * (self.node_path_m[node] - self.node_path_m[j])
-                } else {
-                    // Another robot's estimate is comparable only in a shared frame: the
-                    // same part, or two parts both anchored by GPS.
-                    d <= p.inter_robot_search_radius_m && shared_frame(j)
-                };
-                near.then_some((d, j))
-            })
-            .collect();
-        candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let distance = |j: usize| {
+            let pose = &self.graph.poses[j];
+            (pose.x - here.x).hypot(pose.y - here.y)
+        };
+        // Its own robot's earlier nodes, along its chain; the others' from the nodes filed
+        // near it.
+        let own = self.book.paths.chain_nodes(robot).iter().copied();
+        let own = own.take_while(|&j| self.node_robot[j].1 + p.loop_min_node_gap <= place);
+        let own = own.filter_map(|j| {
+            let growth = p.loop_search_growth * (self.node_path_m[node] - self.node_path_m[j]);
+            let d = distance(j);
+            (d <= p.loop_search_radius_m + growth).then_some((d, j))
+        });
+        let radius = p.inter_robot_search_radius_m;
+        let others = self.near.near(&here, radius).filter_map(|j| {
+            // Another robot's estimate is comparable only in a shared frame: the same part,
+            // or two parts both anchored by GPS.
+            let d = distance(j);
+            (j < node && self.node_robot[j].0 != robot && d <= radius && shared_frame(j))
+                .then_some((d, j))
+        });
+        let mut candidates: Vec<(f64, usize)> = own.chain(others).collect();
+        candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         // Spread the candidates along the chains: the nearest one, then others at least
         // loop_min_node_gap nodes from those taken on the same chain.
         let mut taken: Vec<usize> = Vec::new();

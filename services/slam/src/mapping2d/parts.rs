@@ -41,6 +41,7 @@ impl Mapper2d {
                 *pose = motion.compose(pose);
             }
         }
+        self.near.rebuild(&self.graph.poses);
         self.stats.parts_joined += 1;
     }
 }

@@ -100,6 +100,7 @@ impl Mapper2d {
         let params = &self.params.optimize;
         if solve_window(&mut self.graph, &background.adjacency, &variables, params).is_ok() {
             self.stats.window_solves += 1;
+            self.near.refile(&self.graph.poses, &variables);
         }
     }
 
@@ -143,6 +144,7 @@ impl Mapper2d {
             Ok(report) => {
                 self.stats.optimizations += 1;
                 self.last_optimization = Some(report);
+                self.near.rebuild(&self.graph.poses);
                 Ok(true)
             }
             Err(GraphError::Disconnected { .. } | GraphError::Singular) => {
@@ -187,7 +189,10 @@ impl Mapper2d {
         self.background.generation += 1;
         let report = self
             .optimizer
-            .optimize(&mut self.graph, &self.params.optimize)?;
+            .optimize(&mut self.graph, &self.params.optimize);
+        // A failed solve may have moved the poses too.
+        self.near.rebuild(&self.graph.poses);
+        let report = report?;
         self.stats.optimizations += 1;
         self.last_optimization = Some(report);
         Ok(report)

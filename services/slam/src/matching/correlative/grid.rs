@@ -148,6 +148,35 @@ struct Level {
 }
 
 impl Level {
+    /// The next level: cell `n` (along each axis, in this level's padded indices) is the max
+    /// of this level's cells `n − half` and `n`, where they exist; `half` more cells of
+    /// padding below.
+    fn pooled(&self, half: usize) -> Level {
+        let (width, height) = (self.width + half, self.height + half);
+        let mut rows = vec![0u8; width * self.height];
+        for (row, out) in self.cells.chunks(self.width).zip(rows.chunks_mut(width)) {
+            max_of_shifted(row, out, half);
+        }
+        let mut cells = vec![0u8; width * height];
+        let mut column = vec![0u8; self.height];
+        let mut pooled = vec![0u8; height];
+        for x in 0..width {
+            for (y, c) in column.iter_mut().enumerate() {
+                *c = rows[y * width + x];
+            }
+            max_of_shifted(&column, &mut pooled, half);
+            for (y, &v) in pooled.iter().enumerate() {
+                cells[y * width + x] = v;
+            }
+        }
+        Level {
+            pad: self.pad + half as i64,
+            width,
+            height,
+            cells,
+        }
+    }
+
     fn get(&self, i: i64, j: i64) -> u8 {
         let (i, j) = (i + self.pad, j + self.pad);
         if i < 0 || j < 0 || i >= self.width as i64 || j >= self.height as i64 {
@@ -155,6 +184,26 @@ impl Level {
         }
         self.cells[j as usize * self.width + i as usize]
     }
+}
+
+/// `out[n] = max(line[n − half], line[n])`, a missing cell counting 0; `out` is `half` longer.
+fn max_of_shifted(line: &[u8], out: &mut [u8], half: usize) {
+    let n = line.len();
+    debug_assert_eq!(out.len(), n + half);
+    let overlap = n.saturating_sub(half);
+    out[..n.min(half)].copy_from_slice(&line[..n.min(half)]);
+    // A line shorter than the shift leaves cells that neither copy reaches.
+    out[n.min(half)..half].fill(0);
+    for ((o, &a), &b) in out[half..half + overlap]
+        .iter_mut()
+        .zip(&line[..overlap])
+        .zip(&line[half..])
+    {
+        *o = a.max(b);
+    }
+    // Past the line's end only the shifted copy remains (all of it when the line is short).
+    let tail = half.max(n);
+    out[tail..].copy_from_slice(&line[tail - half..]);
 }
 
 /// A grid with its max-pooled levels 0..=depth (level 0 is the grid itself).
@@ -175,7 +224,8 @@ impl std::fmt::Debug for PrecomputedGrids {
 
 impl PrecomputedGrids {
     /// Pools `grid` up to level `depth` (windows of 2^depth cells). Each level comes from the
-    /// one below by a max over 4 shifted copies, so the stack costs O(cells · depth).
+    /// one below by a max over 2 shifted copies along x, then 2 along y, so the stack costs
+    /// O(cells · depth), in slices the compiler vectorizes.
     pub fn new(grid: ProbabilityGrid, depth: u32) -> PrecomputedGrids {
         let base = Level {
             pad: 0,
@@ -186,26 +236,7 @@ impl PrecomputedGrids {
         let mut levels = vec![base];
         for h in 1..=depth {
             let below = &levels[h as usize - 1];
-            let half = 1i64 << (h - 1);
-            let pad = (1i64 << h) - 1;
-            let (width, height) = (grid.width + pad as usize, grid.height + pad as usize);
-            let mut cells = vec![0u8; width * height];
-            for j in 0..height {
-                for i in 0..width {
-                    let (gi, gj) = (i as i64 - pad, j as i64 - pad);
-                    cells[j * width + i] = below
-                        .get(gi, gj)
-                        .max(below.get(gi + half, gj))
-                        .max(below.get(gi, gj + half))
-                        .max(below.get(gi + half, gj + half));
-                }
-            }
-            levels.push(Level {
-                pad,
-                width,
-                height,
-                cells,
-            });
+            levels.push(below.pooled(1 << (h - 1)));
         }
         PrecomputedGrids { grid, levels }
     }
@@ -240,8 +271,11 @@ mod tests {
         let points = [[0.0, 0.0], [0.73, 0.21], [1.4, -0.5], [0.2, 0.9]];
         let grid =
             ProbabilityGrid::from_scans([(Pose2::IDENTITY, &points[..])], &params).expect("points");
-        let stack = PrecomputedGrids::new(grid.clone(), 3);
-        for h in 0..=3u32 {
+        // Deep enough that the windows outgrow the grid.
+        let depth = 6;
+        assert!(grid.width < 1 << (depth - 1) && grid.height < 1 << (depth - 1));
+        let stack = PrecomputedGrids::new(grid.clone(), depth);
+        for h in 0..=depth {
             let w = 1i64 << h;
             for j in -w..grid.height as i64 + 1 {
                 for i in -w..grid.width as i64 + 1 {
