@@ -140,3 +140,38 @@ fn init_from_file_needs_vertices() {
         "{stderr}"
     );
 }
+
+/// `levelmap bench-incremental`: intel node by node through the window and the background
+/// solve ends at the batch optimum, every node timed and the graph checked as it grew.
+#[test]
+fn an_incremental_replay_ends_at_the_batch_optimum() {
+    let path = testdata::shared_data("pose_graph_2d/se-sync/intel.g2o");
+    let result = levelmap(&[
+        "bench-incremental",
+        path.to_str().unwrap(),
+        "--json",
+        "--sizes",
+        "1000",
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let r: serde_json::Value = serde_json::from_slice(&result.stdout).expect("JSON");
+    assert_eq!(
+        (r["nodes"].as_u64(), r["edges"].as_u64()),
+        (Some(1728), Some(2512))
+    );
+    assert_eq!(r["per_node"]["count"], 1727, "{r}");
+    assert_eq!(r["at_sizes"][0]["nodes"], 1000, "{r}");
+    // Every 500 nodes and the last.
+    assert_eq!(r["checks"], 4, "{r}");
+    assert!(r["background_solves"].as_u64().unwrap() >= 1, "{r}");
+    let relative = r["relative_chi2"].as_f64().unwrap();
+    assert!(relative.abs() <= 1e-4, "{r}");
+    assert!(
+        (r["batch_chi2"].as_f64().unwrap() - 45.004696).abs() < 1e-3,
+        "{r}"
+    );
+}
