@@ -69,6 +69,8 @@ struct Report {
     /// node of the graph then.
     newest_vs_batch_p50_m: f64,
     newest_vs_batch_max_m: f64,
+    /// Share of the checks where the newest node was within 1 cm of the batch solve.
+    newest_within_1cm: f64,
     any_node_vs_batch_max_m: f64,
     checks: usize,
     /// After the last node and the background's last solve.
@@ -233,8 +235,8 @@ fn report(
         let worst = ours.iter().zip(&reference).map(|(a, b)| distance(a, b));
         any_node = worst.fold(any_node, f64::max);
     }
-    let newest_ms: Vec<f64> = newest.clone();
-    let newest_p = Percentiles::of(newest_ms);
+    let within = newest.iter().filter(|&&d| d <= 0.01).count() as f64 / newest.len() as f64;
+    let newest_p = Percentiles::of(newest);
     let mut optimum = full.clone();
     initialize(&mut optimum, Init::Chordal)?;
     let batch_chi2 = Optimizer::new()
@@ -252,6 +254,7 @@ fn report(
         background_solves,
         newest_vs_batch_p50_m: newest_p.p50_ms,
         newest_vs_batch_max_m: newest_p.max_ms,
+        newest_within_1cm: within,
         any_node_vs_batch_max_m: any_node,
         checks: checks.len(),
         final_chi2,
@@ -276,8 +279,12 @@ fn print_text(r: &Report) {
         );
     }
     println!(
-        "  newest node vs batch: p50 {:.4} m, max {:.4} m ({} checks); any node {:.4} m",
-        r.newest_vs_batch_p50_m, r.newest_vs_batch_max_m, r.checks, r.any_node_vs_batch_max_m
+        "  newest node vs batch: p50 {:.4} m, max {:.4} m, {:.0} % within 1 cm ({} checks); any node {:.4} m",
+        r.newest_vs_batch_p50_m,
+        r.newest_vs_batch_max_m,
+        100.0 * r.newest_within_1cm,
+        r.checks,
+        r.any_node_vs_batch_max_m
     );
     println!(
         "  chi2 {:.6} vs batch {:.6} ({:+.2e}), {} background solves",
