@@ -54,6 +54,14 @@ fn far(a: &[Pose2], b: &[Pose2]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// Solves the window of `variables`, the rest of `graph` held.
+fn window(graph: &mut PoseGraph, variables: std::ops::Range<usize>) {
+    let mut adjacency = Adjacency::default();
+    adjacency.sync(graph);
+    let variables: Vec<usize> = variables.collect();
+    solve_window(graph, &adjacency, &variables, &OptimizeParams::default()).expect("window");
+}
+
 #[test]
 fn a_window_of_every_node_but_the_first_is_the_full_solve() {
     let (mut graph, edges) = square(40);
@@ -62,16 +70,7 @@ fn a_window_of_every_node_but_the_first_is_the_full_solve() {
     Optimizer::new()
         .optimize(&mut full, &OptimizeParams::default())
         .expect("full");
-    let mut adjacency = Adjacency::default();
-    adjacency.sync(&graph);
-    let variables: Vec<usize> = (1..40).collect();
-    solve_window(
-        &mut graph,
-        &adjacency,
-        &variables,
-        &OptimizeParams::default(),
-    )
-    .expect("window");
+    window(&mut graph, 1..40);
     assert!(far(&graph.poses, &full.poses) < 1e-9);
 }
 
@@ -80,16 +79,7 @@ fn a_window_moves_only_its_variables_and_pulls_them_toward_the_closure() {
     let (mut graph, edges) = square(40);
     graph.edges.push(edges[39].clone());
     let before = graph.clone();
-    let mut adjacency = Adjacency::default();
-    adjacency.sync(&graph);
-    let variables: Vec<usize> = (30..40).collect();
-    solve_window(
-        &mut graph,
-        &adjacency,
-        &variables,
-        &OptimizeParams::default(),
-    )
-    .expect("window");
+    window(&mut graph, 30..40);
     assert_eq!(graph.poses[..30], before.poses[..30], "held");
     let closure = &graph.edges[39];
     assert!(closure.chi2(&graph.poses) < 0.01 * closure.chi2(&before.poses));

@@ -47,17 +47,7 @@ impl Limits {
         &self,
         work: impl FnOnce() -> Reply<T> + Send + 'static,
     ) -> Reply<T> {
-        let Ok(slot) = self.heavy.clone().try_acquire_owned() else {
-            self.refused_busy.fetch_add(1, Ordering::Relaxed);
-            return Err(ApiError::Busy(format!(
-                "busy: {} heavy requests are being worked on, the most this mapper takes",
-                self.heavy_max
-            )));
-        };
-        let task = tokio::task::spawn_blocking(move || {
-            let _slot = slot;
-            work()
-        });
+        let task = self.in_heavy_slot(work)?;
         match tokio::time::timeout(self.heavy_timeout, task).await {
             Ok(done) => done.map_err(ApiError::internal)?,
             // Dropping the handle detaches the task: it runs on, holding its slot.
@@ -78,6 +68,16 @@ impl Limits {
         &self,
         work: impl FnOnce() -> Reply<T> + Send + 'static,
     ) -> Reply<T> {
+        let task = self.in_heavy_slot(work)?;
+        task.await.map_err(ApiError::internal)?
+    }
+
+    /// `work` started on the blocking pool in a free heavy slot, which goes with it; busy
+    /// when every slot is taken.
+    fn in_heavy_slot<T: Send + 'static>(
+        &self,
+        work: impl FnOnce() -> Reply<T> + Send + 'static,
+    ) -> Reply<tokio::task::JoinHandle<Reply<T>>> {
         let Ok(slot) = self.heavy.clone().try_acquire_owned() else {
             self.refused_busy.fetch_add(1, Ordering::Relaxed);
             return Err(ApiError::Busy(format!(
@@ -85,11 +85,10 @@ impl Limits {
                 self.heavy_max
             )));
         };
-        let task = tokio::task::spawn_blocking(move || {
+        Ok(tokio::task::spawn_blocking(move || {
             let _slot = slot;
             work()
-        });
-        task.await.map_err(ApiError::internal)?
+        }))
     }
 
     /// A place for one event stream, held as long as the stream is open.

@@ -98,22 +98,10 @@ pub(super) async fn version_freeze(
     authorized(&api, &headers)?;
     api.versions_of(&fleet)?;
     let view = api.view(&fleet)?;
-    let summary = api
-        .limits
-        .heavy_write({
-            let api = api.clone();
-            move || {
-                let version = crate::versions::freeze(&view, now_ns())
-                    .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
-                api.added(crate::versions::store(
-                    &api.store,
-                    api.max_versions,
-                    version,
-                ))
-            }
-        })
-        .await?;
-    Ok(created(summary))
+    store_new(&api, move || {
+        crate::versions::freeze(&view, now_ns()).map_err(|e| ApiError::Unprocessable(e.to_string()))
+    })
+    .await
 }
 
 /// Takes a version file (`levelmap map export`, or `GET …/versions/{version}/file` of another
@@ -151,14 +139,26 @@ pub(super) async fn version_import(
                 "the file was not read whole within {MAX_MAP_VERSION_BYTES} bytes: {e}"
             ))
         })?;
+    store_new(&api, move || {
+        crate::versions::import(&fleet, &file, now_ns()).map_err(|e| {
+            ApiError::BadRequest(format!("not a map version file: {e}; nothing stored"))
+        })
+    })
+    .await
+}
+
+/// A version made by `make` and stored as the fleet's next, on the blocking pool: 201 with
+/// its summary.
+async fn store_new(
+    api: &Api,
+    make: impl FnOnce() -> Reply<wire::MapVersion> + Send + 'static,
+) -> Reply {
     let summary = api
         .limits
         .heavy_write({
             let api = api.clone();
             move || {
-                let version = crate::versions::import(&fleet, &file, now_ns()).map_err(|e| {
-                    ApiError::BadRequest(format!("not a map version file: {e}; nothing stored"))
-                })?;
+                let version = make()?;
                 api.added(crate::versions::store(
                     &api.store,
                     api.max_versions,
