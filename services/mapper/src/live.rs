@@ -22,9 +22,12 @@ pub struct LiveScan {
     pub stamp_ns: u64,
     /// The scan's frame in the robot's frame.
     pub origin_in_robot: Pose2,
-    /// The scan's frame in the map, as the correction of its arrival placed it (unset before
-    /// the robot's first node is mapped).
+    /// The scan's frame in the map, as the first correction since its arrival placed it
+    /// (unset until the robot's first node is mapped).
     pub origin_in_map: Option<Pose2>,
+    /// The robot's odometry at the scan: places it once a correction comes.
+    #[serde(skip)]
+    pub odometry: Pose2,
     /// Beam bearings in the scan's frame (rad).
     pub bearing_rad: Vec<f32>,
     /// Beam ranges (m; 0: no return).
@@ -132,6 +135,16 @@ pub fn on_odometry(
     shared
         .live_feeds
         .with_feed(fleet, robot, cap, |feed| {
+            // A scan that came before the robot's first node is placed by the first correction.
+            if let (Some(scan), Some((c, _))) = (&feed.scan, corrected)
+                && scan.origin_in_map.is_none()
+            {
+                let origin = c.compose(&scan.odometry).compose(&scan.origin_in_robot);
+                feed.scan = Some(Arc::new(LiveScan {
+                    origin_in_map: Some(origin),
+                    ..(**scan).clone()
+                }));
+            }
             let sample = LiveSample {
                 stamp_ns,
                 received_ns: now,
@@ -166,6 +179,7 @@ pub fn on_scan(shared: &Shared, cap: usize, input: &wire::LiveScanInput) -> bool
                 origin_in_robot: input.scan_origin,
                 origin_in_map: corrected
                     .map(|(c, _)| c.compose(&odometry).compose(&input.scan_origin)),
+                odometry,
                 bearing_rad,
                 range_m,
             }));
