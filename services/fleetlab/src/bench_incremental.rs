@@ -9,7 +9,7 @@
 use crate::bench_fleet::Percentiles;
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use graphio::posegraph::{self, GraphFormat};
+use graphio::posegraph;
 use serde::Serialize;
 use slam::incremental::{
     Adjacency, GlobalSolver, JobSource, SolveResult, apply_solve, solve_window,
@@ -23,8 +23,11 @@ use std::time::{Duration, Instant};
 /// whole graph in the background) and measure it against batch solves.
 #[derive(Args, Debug)]
 pub struct BenchIncrementalArgs {
-    /// The pose-graph file (g2o or TORO, told by the extension).
+    /// The pose-graph file.
     pub file: PathBuf,
+    /// File format; guessed from the extension (.g2o, .graph) when omitted.
+    #[arg(long, value_name = "g2o|toro")]
+    pub format: Option<String>,
     /// Nodes re-solved at a node that brings a closure.
     #[arg(long, default_value_t = 30)]
     pub window: usize,
@@ -81,9 +84,7 @@ struct Report {
 
 /// Runs the replay and prints the report.
 pub fn run(args: &BenchIncrementalArgs) -> Result<()> {
-    let format = GraphFormat::from_extension(&args.file)
-        .with_context(|| format!("{}: not a .g2o or .graph file", args.file.display()))?;
-    let file = posegraph::read(&args.file, format)?;
+    let file = posegraph::read_named(&args.file, args.format.as_deref())?;
     let full = file.graph;
     let n = full.poses.len();
     if n < 2 {

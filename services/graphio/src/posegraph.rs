@@ -44,6 +44,28 @@ pub struct GraphFile {
     pub edge_lines: Vec<usize>,
 }
 
+/// Reads a g2o or TORO file, its format named (`g2o`, `toro`) or, without a name, told by
+/// its extension (as a command line's `--format` works).
+pub fn read_named(path: &Path, format: Option<&str>) -> Result<GraphFile, FileError> {
+    let invalid = |message: String| FileError::Invalid {
+        path: path.to_owned(),
+        message,
+    };
+    let format = match format {
+        Some("g2o") => GraphFormat::G2o,
+        Some("toro") => GraphFormat::Toro,
+        Some(other) => {
+            return Err(invalid(format!(
+                "unknown format {other:?} (expected g2o or toro)"
+            )));
+        }
+        None => GraphFormat::from_extension(path).ok_or_else(|| {
+            invalid("cannot tell the format from the extension; pass --format g2o|toro".into())
+        })?,
+    };
+    read(path, format)
+}
+
 /// Reads a g2o or TORO file.
 pub fn read(path: &Path, format: GraphFormat) -> Result<GraphFile, FileError> {
     let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {

@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
-use graphio::posegraph::{self, GraphFormat};
+use graphio::posegraph;
 use serde::Serialize;
 use slam::{
     GraphError, Init, InitError, Method, OptimizeParams, OptimizeReport, Optimizer, initialize,
@@ -76,7 +76,7 @@ struct Report {
 }
 
 pub fn run(args: &OptimizeArgs) -> Result<()> {
-    let mut file = read_graph(&args.file, args.format.as_deref())?;
+    let mut file = posegraph::read_named(&args.file, args.format.as_deref())?;
     let init = match args.init {
         InitArg::File if !file.has_vertices => {
             bail!(
@@ -142,25 +142,6 @@ pub fn run(args: &OptimizeArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// Reads a pose-graph file, its format given (`g2o`, `toro`) or told by its extension.
-pub fn read_graph(path: &std::path::Path, format: Option<&str>) -> Result<posegraph::GraphFile> {
-    let format = match format {
-        Some("g2o") => GraphFormat::G2o,
-        Some("toro") => GraphFormat::Toro,
-        Some(other) => bail!(
-            "{}: unknown format {other:?} (expected g2o or toro)",
-            path.display()
-        ),
-        None => GraphFormat::from_extension(path).with_context(|| {
-            format!(
-                "{}: cannot tell the format from the extension; pass --format g2o|toro",
-                path.display()
-            )
-        })?,
-    };
-    Ok(posegraph::read(path, format)?)
 }
 
 /// A graph error in the file's terms: the line of the edge it names, the vertex ids.

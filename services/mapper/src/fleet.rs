@@ -192,7 +192,7 @@ impl FleetMap {
         max_range_m: f32,
     ) -> FleetMap {
         // Robots decide where nodes are: every node sent becomes a network node. The owner
-        // decides when to solve (`optimize_pending`).
+        // decides when to solve (`take_solve` for the background, `optimize_pending` here).
         let params = Mapper2dParams {
             node_distance_m: 0.0,
             node_rotation_rad: 0.0,
@@ -496,4 +496,4 @@ impl FleetMap {
 
 #[cfg(test)]
 #[path = "fleet_tests.rs"]
-mod tests;
+pub(crate) mod tests;

@@ -7,7 +7,7 @@ use nalgebra::{Isometry3, Translation3};
 const S: u64 = 1_000_000_000;
 
 /// Node `seq` of `robot`'s chain `chain`, the robot `x` m along, at `seq` s.
-fn node(robot: &str, chain: u64, seq: u64, held_from: u64, x: f64) -> NodeInput {
+pub(crate) fn node(robot: &str, chain: u64, seq: u64, held_from: u64, x: f64) -> NodeInput {
     let beams = (0..90)
         .map(|k| Beam {
             bearing_rad: k as f32 * 0.07,

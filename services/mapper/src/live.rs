@@ -186,3 +186,55 @@ pub fn on_scan(shared: &Shared, cap: usize, input: &wire::LiveScanInput) -> bool
         })
         .is_some()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fleet::FleetMap;
+    use leveling::{Beam, LeveledScan, TimedPose};
+    use slam::nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+    #[test]
+    fn a_scan_before_the_robots_first_node_is_placed_by_the_first_correction() {
+        let shared = Shared::new(String::new(), 0);
+        let at = Pose2::new(2.0, 1.0, 0.5);
+        let scan = wire::LiveScanInput {
+            fleet: "site".into(),
+            robot: "r0".into(),
+            stamp_ns: 1,
+            scan: LeveledScan {
+                stamp_ns: 1,
+                beams: vec![Beam {
+                    bearing_rad: 0.0,
+                    range_m: Some(3.0),
+                }],
+            },
+            odometry: TimedPose {
+                stamp_ns: 1,
+                pose: Isometry3::from_parts(
+                    Translation3::new(at.x, at.y, 0.0),
+                    UnitQuaternion::from_euler_angles(0.0, 0.0, at.theta),
+                ),
+            },
+            scan_origin: Pose2::new(0.3, 0.0, 0.0),
+        };
+        assert!(on_scan(&shared, 8, &scan));
+        let feed = shared.live_feeds.subscribe("site", "r0").expect("a feed");
+        // The robot's first node, then its odometry: the view's correction is there now.
+        let mut map = FleetMap::new("site", slam::Mapper2dParams::default(), None, 40.0);
+        map.ingest(&crate::fleet::tests::node("r0", 1, 0, 0, 0.0))
+            .expect("the first node");
+        shared.publish_map(&map, 0.0);
+        assert!(on_odometry(&shared, 8, ("site", "r0"), (2, at), None));
+        let sample = feed.borrow().clone().expect("a sample");
+        let placed = sample.scan.as_ref().and_then(|s| s.origin_in_map);
+        // The first node sits at its odometry: the correction is the identity.
+        let expected = at.compose(&scan.scan_origin);
+        let got = placed.expect("placed by the first correction");
+        assert!(
+            (got.x - expected.x).hypot(got.y - expected.y) < 1e-9
+                && (got.theta - expected.theta).abs() < 1e-9,
+            "{got:?} vs {expected:?}"
+        );
+    }
+}

@@ -1,8 +1,9 @@
 //! The mapping worker: one thread owns every fleet's map and the store's writer.
 //!
 //! Each turn: take a batch → check each node → map it → commit the batch → ack → publish
-//! views and events → run the solves that are due → answer operator requests. Under load,
-//! nodes batch up (one commit, one solve per fleet) instead of queueing behind one solve each.
+//! views and events → apply the solves the solver thread finished and send out the due ones
+//! (`worker/solving.rs`) → answer operator requests. Under load, nodes batch up (one commit
+//! per batch) and the whole network is solved beside them, not between them.
 //! A node is acked only once it is committed. A failed commit (a full disk) keeps what the
 //! maps took but the store did not (`Unstored`): no node is taken meanwhile, the commit is
 //! tried again every second, and its nodes are acked once it succeeds; the robots keep

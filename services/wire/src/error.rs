@@ -194,6 +194,20 @@ pub(crate) fn bounded(
     Ok(value)
 }
 
+/// `value` if finite and within ±`limit` (a latitude, a longitude in degrees).
+pub(crate) fn within(field: &'static str, value: f64, limit: f64) -> Result<f64, WireError> {
+    finite(field, None, value)?;
+    if value.abs() > limit {
+        return Err(WireError::InvalidValue {
+            field,
+            index: None,
+            value,
+            problem: "out of range",
+        });
+    }
+    Ok(value)
+}
+
 /// `value` if finite.
 pub(crate) fn finite(
     field: &'static str,

@@ -158,3 +158,41 @@ fn a_gap_in_one_fleets_rows_leaves_the_others_readable() {
     drop(store);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn solve_points_read_back_in_order_and_a_missing_one_is_damage() {
+    let dir = std::env::temp_dir().join(format!("levelmap-solves-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("solves.redb");
+    let _ = std::fs::remove_file(&path);
+    let store = Store::open(&path).unwrap();
+    let point = |seq, taken_after, applied_after| SolvePoint {
+        seq,
+        taken_after,
+        applied_after,
+    };
+    let solved = |fleet, point| FleetBatch {
+        fleet,
+        solved: Some(point),
+        ..Default::default()
+    };
+    store
+        .commit(&[
+            nodes("park", &[(0, b"p0"), (1, b"p1"), (2, b"p2")]),
+            solved("park", point(1, 1, 2)),
+            solved("park", point(0, 0, 1)),
+            nodes("campus", &[(0, b"c0")]),
+            solved("campus", point(1, 0, 0)),
+        ])
+        .unwrap();
+    let park = store.load_fleet("park").unwrap();
+    assert_eq!(park.solve_points, [point(0, 0, 1), point(1, 1, 2)]);
+    assert!(park.legacy_solves.is_empty());
+    let e = store.load_fleet("campus").unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "store: fleet campus: solve 1 where 0 was due"
+    );
+    drop(store);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -242,13 +242,7 @@ impl Worker {
 
     /// Solves `fleet` now, on the worker: after its solve that is out comes back.
     fn optimize_now(&mut self, fleet: &str) -> Result<serde_json::Value, OptimizeError> {
-        let solve = self.take_now(fleet)?;
-        let taken_after = solve.nodes() as u64 - 1;
-        let done = Done {
-            fleet: fleet.to_owned(),
-            taken_after,
-            solved: solve.run(),
-        };
+        let done = self.run_now(fleet)?;
         self.applied(done)
     }
 
@@ -259,14 +253,19 @@ impl Worker {
                 "a solve of {fleet} is held"
             )));
         }
+        let done = self.run_now(fleet)?;
+        self.solving.held.insert(fleet.to_owned(), done);
+        Ok(())
+    }
+
+    /// `fleet`'s solve, taken and run here on the worker.
+    fn run_now(&mut self, fleet: &str) -> Result<Done, OptimizeError> {
         let solve = self.take_now(fleet)?;
-        let done = Done {
+        Ok(Done {
             fleet: fleet.to_owned(),
             taken_after: solve.nodes() as u64 - 1,
             solved: solve.run(),
-        };
-        self.solving.held.insert(fleet.to_owned(), done);
-        Ok(())
+        })
     }
 
     /// `fleet`'s solve, taken now: once the one out comes back (applied as usual), or the

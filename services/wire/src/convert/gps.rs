@@ -2,7 +2,7 @@
 
 use super::check_header;
 use super::pose::{check_covariance, check_vec3};
-use crate::error::finite;
+use crate::error::{finite, within};
 use crate::{WireError, v1};
 use slam::geodesy::Geodetic;
 use slam::gnss::{FixStatus, GpsFix};
@@ -12,20 +12,8 @@ use slam::nalgebra::{Matrix3, Vector3};
 /// finite altitude and lever arm, a known status, a covariance of 9 values or none.
 pub fn validate_gps_fix(fix: &v1::GpsFix) -> Result<(), WireError> {
     check_header(fix.header.as_ref(), "GpsFix.header")?;
-    let in_range = |field, value: f64, limit: f64| {
-        finite(field, None, value)?;
-        if value.abs() > limit {
-            return Err(WireError::InvalidValue {
-                field,
-                index: None,
-                value,
-                problem: "out of range",
-            });
-        }
-        Ok(())
-    };
-    in_range("GpsFix.latitude_deg", fix.latitude_deg, 90.0)?;
-    in_range("GpsFix.longitude_deg", fix.longitude_deg, 180.0)?;
+    within("GpsFix.latitude_deg", fix.latitude_deg, 90.0)?;
+    within("GpsFix.longitude_deg", fix.longitude_deg, 180.0)?;
     finite("GpsFix.altitude_m", None, fix.altitude_m)?;
     check_covariance(
         &fix.position_covariance_m2,

@@ -77,6 +77,33 @@ pub fn leveled_scan_to_wire(
     }
 }
 
+/// Beam `index` of a scan (its bearing and range fields named): a finite bearing, a finite
+/// range from 0 (no return) to [`MAX_RANGE_M`].
+pub(super) fn check_beam(
+    (bearing_field, range_field): (&'static str, &'static str),
+    index: usize,
+    bearing_rad: f32,
+    range_m: f32,
+) -> Result<(), WireError> {
+    finite(bearing_field, Some(index), bearing_rad.into())?;
+    bounded(
+        range_field,
+        Some(index),
+        range_m.into(),
+        MAX_RANGE_M,
+        "implausible_range",
+    )?;
+    if range_m < 0.0 {
+        return Err(WireError::InvalidValue {
+            field: range_field,
+            index: Some(index),
+            value: range_m.into(),
+            problem: "negative",
+        });
+    }
+    Ok(())
+}
+
 /// A leveled scan from the wire, checked: header of this version, at least one beam,
 /// `bearing_rad` and `range_m` of equal length and matching `columns`, counts (if present)
 /// that add up, finite bearings, finite ranges ≥ 0. Range 0 becomes `None` (no return).
@@ -110,22 +137,12 @@ pub fn leveled_scan_from_wire(msg: &v1::LeveledScan) -> Result<LeveledScan, Wire
         .zip(&msg.range_m)
         .enumerate()
         .map(|(i, (&bearing_rad, &range_m))| {
-            finite("LeveledScan.bearing_rad", Some(i), bearing_rad.into())?;
-            bounded(
-                "LeveledScan.range_m",
-                Some(i),
-                range_m.into(),
-                MAX_RANGE_M,
-                "implausible_range",
+            check_beam(
+                ("LeveledScan.bearing_rad", "LeveledScan.range_m"),
+                i,
+                bearing_rad,
+                range_m,
             )?;
-            if range_m < 0.0 {
-                return Err(WireError::InvalidValue {
-                    field: "LeveledScan.range_m",
-                    index: Some(i),
-                    value: range_m.into(),
-                    problem: "negative",
-                });
-            }
             Ok(Beam {
                 bearing_rad,
                 range_m: (range_m > 0.0).then_some(range_m),

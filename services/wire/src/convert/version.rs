@@ -4,7 +4,8 @@
 
 use super::decode;
 use super::pose::{pose2_from_wire, pose2_to_wire};
-use crate::error::{MAX_RANGE_M, bounded, coordinate, finite};
+use super::scan::check_beam;
+use crate::error::{MAX_RANGE_M, bounded, coordinate, within};
 use crate::{Message, WireError, v1, validate_id};
 use slam::geodesy::{GeoDatum, Geodetic};
 use slam::{OccupancyGrid, Pose2};
@@ -252,22 +253,10 @@ pub fn map_version_from_wire(msg: &v1::MapVersion) -> Result<MapVersion, WireErr
 }
 
 fn datum_from_wire(d: &v1::GeoDatum) -> Result<GeoDatum, WireError> {
-    let in_range = |field, value: f64, limit: f64| {
-        finite(field, None, value)?;
-        if value.abs() > limit {
-            return Err(WireError::InvalidValue {
-                field,
-                index: None,
-                value,
-                problem: "out of range",
-            });
-        }
-        Ok(value)
-    };
     Ok(GeoDatum {
         origin: Geodetic {
-            latitude_deg: in_range("GeoDatum.latitude_deg", d.latitude_deg, 90.0)?,
-            longitude_deg: in_range("GeoDatum.longitude_deg", d.longitude_deg, 180.0)?,
+            latitude_deg: within("GeoDatum.latitude_deg", d.latitude_deg, 90.0)?,
+            longitude_deg: within("GeoDatum.longitude_deg", d.longitude_deg, 180.0)?,
             height_m: coordinate("GeoDatum.height_m", None, d.height_m)?,
         },
     })
@@ -289,23 +278,12 @@ fn node_from_wire(index: usize, n: &v1::VersionNode) -> Result<VersionNode, Wire
         });
     }
     for (i, (&bearing, &range)) in n.bearing_rad.iter().zip(&n.range_m).enumerate() {
-        finite("VersionNode.bearing_rad", Some(i), bearing.into())?;
-        let field = "VersionNode.range_m";
-        bounded(
-            field,
-            Some(i),
-            range.into(),
-            MAX_RANGE_M,
-            "implausible_range",
+        check_beam(
+            ("VersionNode.bearing_rad", "VersionNode.range_m"),
+            i,
+            bearing,
+            range,
         )?;
-        if range < 0.0 {
-            return Err(WireError::InvalidValue {
-                field,
-                index: Some(i),
-                value: range.into(),
-                problem: "negative",
-            });
-        }
     }
     Ok(VersionNode {
         robot: n.robot_id.clone(),
@@ -402,28 +380,7 @@ fn grid_from_wire(g: &v1::VersionGrid) -> Result<OccupancyGrid, WireError> {
 
 /// CRC-32 (IEEE 802.3, reflected, as zip, gzip and PNG).
 pub fn crc32(bytes: &[u8]) -> u32 {
-    const TABLE: [u32; 256] = {
-        let mut table = [0u32; 256];
-        let mut i = 0;
-        while i < 256 {
-            let mut c = i as u32;
-            let mut k = 0;
-            while k < 8 {
-                c = if c & 1 != 0 {
-                    0xEDB8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
-                k += 1;
-            }
-            table[i] = c;
-            i += 1;
-        }
-        table
-    };
-    !bytes.iter().fold(!0u32, |c, &b| {
-        TABLE[((c ^ u32::from(b)) & 0xFF) as usize] ^ (c >> 8)
-    })
+    crc32fast::hash(bytes)
 }
 
 #[cfg(test)]
