@@ -42,6 +42,8 @@ pub struct MapperConfig {
     pub ros2_out: Option<wire::ros2::RosOutConfig>,
     /// Map versions: frozen maps kept in the store (`[versions]`).
     pub versions: VersionsConfig,
+    /// Snapshots of the fleets' maps in the store (`[store]`).
+    pub store: StoreConfig,
 }
 
 impl Default for MapperConfig {
@@ -60,6 +62,7 @@ impl Default for MapperConfig {
             mapping: fleet_mapping_params(),
             ros2_out: None,
             versions: VersionsConfig::default(),
+            store: StoreConfig::default(),
         }
     }
 }
@@ -125,6 +128,25 @@ impl Default for VersionsConfig {
     fn default() -> Self {
         VersionsConfig {
             max_versions: NonZeroUsize::new(20).expect("nonzero"),
+        }
+    }
+}
+
+/// Snapshots of the fleets' maps (`[store]`): a restart restores a fleet from its newest
+/// snapshot and maps only the nodes stored after it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StoreConfig {
+    /// A fleet's snapshot is written once it took this many nodes since its last one (when
+    /// no solve of it is out), and at a graceful stop; 0: never (a restart replays every
+    /// node). Writing one stalls the worker for a time that grows with the map.
+    pub snapshot_every_nodes: u64,
+}
+
+impl Default for StoreConfig {
+    fn default() -> Self {
+        StoreConfig {
+            snapshot_every_nodes: 1000,
         }
     }
 }

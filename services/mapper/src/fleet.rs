@@ -382,6 +382,29 @@ impl FleetMap {
             });
         }
         let (robot, chain, odometry_break) = self.chain_for(node)?;
+        let (record, scan) = self.read_node(node, robot);
+        let network_chain = self.robots[robot].chains[chain].network_chain;
+        let placed =
+            self.mapper
+                .add_robot_scan(network_chain, record.odometry, scan, &record.gps)?;
+        let slam::Placed::Node(index) = placed else {
+            unreachable!("node distance 0: every scan is a node")
+        };
+        let robot_record = &mut self.robots[robot];
+        robot_record.last_node_seq = node.node_seq;
+        robot_record.chains[chain].last_node_seq = node.node_seq;
+        robot_record.chains[chain].last_node = index;
+        robot_record.nodes.push(index);
+        self.nodes.push(Arc::new(record));
+        Ok(Ingested {
+            node: index,
+            odometry_break,
+        })
+    }
+
+    /// What the map keeps of a node of robot `robot` (its GPS fixes in the map's frame: the
+    /// first fix sets the datum when none is configured), and its scan as matching uses it.
+    fn read_node(&mut self, node: &NodeInput, robot: usize) -> (NodeRecord, Scan2) {
         let robot_odometry = Pose2::from_isometry3(&node.odometry.pose);
         let scan_frame = robot_odometry.compose(&node.scan_origin);
         let (bearings_rad, ranges_m) = node.polar();
@@ -394,26 +417,13 @@ impl FleetMap {
             .iter()
             .filter(|fix| fix.has_position())
             .filter_map(|fix| {
-                // The first fix sets the datum when none is configured.
                 let datum = *self.datum.get_or_insert(GeoDatum {
                     origin: fix.position,
                 });
                 fix.observation(&datum, &attitude, robot_odometry.theta, &node.scan_origin)
             })
             .collect();
-        let network_chain = self.robots[robot].chains[chain].network_chain;
-        let placed = self
-            .mapper
-            .add_robot_scan(network_chain, scan_frame, scan, &gps)?;
-        let slam::Placed::Node(index) = placed else {
-            unreachable!("node distance 0: every scan is a node")
-        };
-        let record = &mut self.robots[robot];
-        record.last_node_seq = node.node_seq;
-        record.chains[chain].last_node_seq = node.node_seq;
-        record.chains[chain].last_node = index;
-        record.nodes.push(index);
-        self.nodes.push(Arc::new(NodeRecord {
+        let record = NodeRecord {
             robot,
             chain_id: node.chain_id,
             node_seq: node.node_seq,
@@ -425,11 +435,8 @@ impl FleetMap {
             counts: node.counts,
             bearings_rad,
             ranges_m,
-        }));
-        Ok(Ingested {
-            node: index,
-            odometry_break,
-        })
+        };
+        (record, scan)
     }
 
     /// Solves the network if the nodes added since the last solve call for it (a loop
@@ -493,6 +500,9 @@ impl FleetMap {
             .collect()
     }
 }
+
+#[path = "fleet_snapshot.rs"]
+pub(crate) mod snapshot;
 
 #[cfg(test)]
 #[path = "fleet_tests.rs"]

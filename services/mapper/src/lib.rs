@@ -4,7 +4,7 @@
 //!
 //! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
 //! HTTP side reads), [`live`] (each robot's live feed), [`tiles`] (the map's
-//! tiles for windows around robots), [`marginals`], [`versions`] (frozen maps). The disk: [`store`]. The shells: [`server`] (wiring),
+//! tiles for windows around robots), [`marginals`], [`versions`] (frozen maps). The disk: [`store`], [`restore`] (the store read back at start, and `--verify-store`). The shells: [`server`] (wiring),
 //! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`recording`] (a
 //! recording fed in as the bus's traffic), [`ros_out`] (the maps to ROS 2), [`api`] (HTTP).
 
@@ -16,6 +16,7 @@ pub mod live;
 pub mod marginals;
 pub mod odometry;
 pub mod recording;
+pub mod restore;
 pub mod ros_out;
 pub mod server;
 pub mod shared_log;

@@ -7,16 +7,14 @@
 
 use crate::bus::Bus;
 use crate::config::MapperConfig;
-use crate::fleet::FleetMap;
 use crate::recording::FeedReport;
 use crate::state::Shared;
 use crate::store::Store;
 use crate::worker::{Work, Worker};
 use anyhow::{Context, Result};
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::mpsc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use wire::Topic;
 use wire::session::now_ns;
 
@@ -92,7 +90,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     // The worker writes; the HTTP side reads clouds (redb: readers never wait on the writer).
     let store = Arc::new(store);
     let shared = Arc::new(Shared::new(config.token.clone(), now_ns()));
-    let fleets = restore(&config, &store, &shared)?;
+    let (fleets, snapshots) = crate::restore::restore(&config, &store, &shared)?;
 
     let session = config.zenoh.open(wire::session::Role::Router).await?;
     let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
@@ -104,7 +102,8 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             fleets,
             shared.clone(),
             Bus::new(session.clone()),
-        );
+        )
+        .with_snapshots(snapshots);
         std::thread::Builder::new()
             .name("levelmap-mapping".into())
             .spawn(move || {
@@ -223,89 +222,4 @@ async fn declare_live(
         })
         .await
         .map_err(anyhow::Error::from_boxed)
-}
-
-/// Replays the store, fleet by fleet. A fleet whose rows do not replay is quarantined (its
-/// reason kept in `shared`): the others are restored and served.
-fn restore(
-    config: &MapperConfig,
-    store: &Store,
-    shared: &Shared,
-) -> Result<HashMap<String, FleetMap>> {
-    let mut fleets = HashMap::new();
-    for id in store.fleet_ids()? {
-        match replay(config, store, &id) {
-            Ok(map) => {
-                shared.publish_map(&map, 0.0);
-                fleets.insert(id, map);
-            }
-            Err(e) => {
-                let reason = format!("{e:#}");
-                tracing::error!(fleet = %id, "quarantined: its stored map does not replay: {reason}");
-                shared
-                    .quarantined
-                    .write()
-                    .expect("quarantine lock")
-                    .insert(id, reason);
-            }
-        }
-    }
-    Ok(fleets)
-}
-
-/// One fleet's map rebuilt from its rows; its edges checked against the stored ones.
-fn replay(config: &MapperConfig, store: &Store, id: &str) -> Result<FleetMap> {
-    let started = Instant::now();
-    let stored = store.load_fleet(id)?;
-    let mut map = config.new_fleet(id);
-    let mut legacy = stored.legacy_solves.iter().peekable();
-    let mut points = stored.solve_points.iter().peekable();
-    // The solve taken and not applied yet.
-    let mut out = None;
-    for (arrival, bytes) in stored.nodes.iter().enumerate() {
-        let arrival = arrival as u64;
-        let (node, _) = wire::decode_node_input(bytes)
-            .with_context(|| format!("store: node {arrival} of fleet {id} is unreadable"))?;
-        map.ingest(&node)
-            .with_context(|| format!("store: replaying node {arrival} of fleet {id}"))?;
-        if legacy.next_if_eq(&&arrival).is_some() {
-            map.optimize_now()?;
-        }
-        while let Some(point) = points.peek() {
-            if out.is_none() && point.taken_after == arrival {
-                out = map.take_solve_now();
-                anyhow::ensure!(
-                    out.is_some(),
-                    "store: fleet {id}: solve {} taken twice",
-                    point.seq
-                );
-            }
-            if out.is_none() || point.applied_after != arrival {
-                break;
-            }
-            let solved = out.take().expect("taken above").run();
-            map.finish_solve(solved)?;
-            map.count_solve(point);
-            points.next();
-        }
-    }
-    anyhow::ensure!(
-        points.peek().is_none(),
-        "store: fleet {id}: solves stored beyond its nodes"
-    );
-    let rebuilt = crate::store::encode_edges(&map.graph().edges);
-    anyhow::ensure!(
-        rebuilt == stored.edges,
-        "store: fleet {id} replays to {} edges that differ from the {} stored",
-        rebuilt.len(),
-        stored.edges.len()
-    );
-    tracing::info!(
-        fleet = %id,
-        nodes = stored.nodes.len(),
-        edges = stored.edges.len(),
-        "restored in {:.0} ms",
-        started.elapsed().as_secs_f64() * 1e3
-    );
-    Ok(map)
 }

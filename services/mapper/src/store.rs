@@ -1,6 +1,6 @@
 //! The durable store (redb, embedded): every accepted node, as received but for its segmented
 //! cloud, with the edges it added, committed in one transaction before the node is acked. A
-//! restart replays the nodes in their arrival order through the same deterministic mapper,
+//! full replay maps the nodes in their arrival order through the same deterministic mapper,
 //! which restores the graph exactly; the stored edges check that it did. Clouds (tens of KB a
 //! node, for viewing only) are kept in a table of their own, in the node's transaction, and
 //! read one at a time on request: a replay never reads them.
@@ -8,6 +8,9 @@
 //! A failed commit (a full disk) closes the file: redb wants a database that met an I/O error
 //! opened again, which the next commit does. Each fleet is read on its own, so a fleet whose
 //! rows are damaged does not keep the others from being restored.
+//!
+//! A snapshot of each fleet's map (`snapshots`) spares a restart most of the replay: the map
+//! is restored from it and the nodes after it are replayed (`crate::restore`).
 //!
 //! Map versions (`versions`) are kept in tables of their own, written from the HTTP side's
 //! blocking pool: redb runs one write transaction at a time, so they interleave with the
@@ -36,6 +39,9 @@ const SOLVES: TableDefinition<(&str, u64), ()> = TableDefinition::new("solves");
 const SOLVE_POINTS: TableDefinition<(&str, u64), (u64, u64)> = TableDefinition::new("solve_points");
 /// (fleet, node index) → the node's encoded `v1::SegmentedCloud` (`Node.cloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
+/// fleet → its newest snapshot (`crate::fleet::snapshot`): the map after its first nodes,
+/// written after they and the solves it holds were committed. Only the newest is kept.
+const SNAPSHOTS: TableDefinition<&str, &[u8]> = TableDefinition::new("snapshots");
 
 /// A failure of the store.
 #[derive(Debug, thiserror::Error)]
@@ -152,11 +158,20 @@ impl Store {
     /// the next commit opens it again (redb repairs it then) and may be the same one again:
     /// every row is keyed, so writing it twice stores it once.
     pub fn commit(&self, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
+        self.writing(|db| write(db, batches))
+    }
+
+    /// Runs a write on the database, opened again first if a failed write closed it; a
+    /// failed write closes it.
+    fn writing(
+        &self,
+        write: impl FnOnce(&Database) -> Result<(), StoreError>,
+    ) -> Result<(), StoreError> {
         if self.db.read().expect("store lock").is_none() {
             *self.db.write().expect("store lock") = Some(with_tables((self.open)()?)?);
         }
         let result = match &*self.db.read().expect("store lock") {
-            Some(db) => write(db, batches),
+            Some(db) => write(db),
             None => Err(StoreError::Closed),
         };
         if result.is_err() {
@@ -172,6 +187,24 @@ impl Store {
         let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
         let table = txn.open_table(CLOUDS)?;
         Ok(table.get((fleet, node))?.map(|v| v.value().to_vec()))
+    }
+
+    /// Replaces a fleet's snapshot (one transaction: the old one stays until it commits).
+    pub fn put_snapshot(&self, fleet: &str, snapshot: &[u8]) -> Result<(), StoreError> {
+        self.writing(|db| {
+            let txn = db.begin_write()?;
+            txn.open_table(SNAPSHOTS)?.insert(fleet, snapshot)?;
+            txn.commit()?;
+            Ok(())
+        })
+    }
+
+    /// A fleet's newest snapshot, if it has one.
+    pub fn snapshot(&self, fleet: &str) -> Result<Option<Vec<u8>>, StoreError> {
+        let db = self.db.read().expect("store lock");
+        let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
+        let table = txn.open_table(SNAPSHOTS)?;
+        Ok(table.get(fleet)?.map(|v| v.value().to_vec()))
     }
 
     /// The fleets that have nodes, sorted.
@@ -246,6 +279,7 @@ fn with_tables(db: Database) -> Result<Database, StoreError> {
     txn.open_table(SOLVES)?;
     txn.open_table(SOLVE_POINTS)?;
     txn.open_table(CLOUDS)?;
+    txn.open_table(SNAPSHOTS)?;
     versions::open_tables(&txn)?;
     txn.commit()?;
     Ok(db)

@@ -24,6 +24,7 @@ use std::time::{Duration, Instant};
 use wire::NodeInput;
 
 mod commit;
+mod snapshots;
 mod solving;
 
 /// Most messages taken into one batch (one solve, one store commit).
@@ -172,6 +173,8 @@ pub struct Worker {
     unstored: Option<Unstored>,
     /// When to try the failed commit again.
     retry_at: Instant,
+    /// Per fleet, the nodes its stored snapshot covers.
+    snapshots: HashMap<String, usize>,
 }
 
 impl Worker {
@@ -197,6 +200,7 @@ impl Worker {
             solving: Solving::start(),
             unstored: None,
             retry_at: Instant::now(),
+            snapshots: HashMap::new(),
         }
     }
 
@@ -220,7 +224,7 @@ impl Worker {
                 break;
             }
         }
-        self.solving.stop();
+        self.stop_solving();
         if let Some(unstored) = &self.unstored {
             let nodes = unstored.batch.accepted.len();
             tracing::warn!(

@@ -18,10 +18,11 @@
 use crate::network::{GpsEdge, GraphError, PoseGraph, RelativeEdge};
 use crate::optimize::{OptimizeParams, OptimizeReport, Optimizer};
 use crate::se2::Pose2;
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
 /// The edges and fixes of each node, kept as the network grows (appended only).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Adjacency {
     edges: Vec<Vec<u32>>,
     fixes: Vec<Vec<u32>>,
@@ -117,7 +118,7 @@ pub fn solve_window(
 }
 
 /// The foreground's side of the background solve: how much of the network the solver has.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct JobSource {
     edges_sent: usize,
     fixes_sent: usize,
@@ -190,6 +191,16 @@ impl SolveResult {
 }
 
 impl GlobalSolver {
+    /// The solver as it stood after the jobs `jobs` made of `graph` (a restored mapper's):
+    /// the edges and fixes they carried. Its poses come with the next job, and its optimizer
+    /// makes its symbolic factorization again.
+    pub fn resumed(graph: &PoseGraph, jobs: &JobSource) -> GlobalSolver {
+        let mut solver = GlobalSolver::default();
+        solver.graph.edges = graph.edges[..jobs.edges_sent.min(graph.edges.len())].to_vec();
+        solver.graph.gps = graph.gps[..jobs.fixes_sent.min(graph.gps.len())].to_vec();
+        solver
+    }
+
     /// Solves the whole network of `job` (and every job before it) from its estimates.
     pub fn solve(&mut self, job: SolveJob) -> SolveResult {
         self.graph.poses.clone_from(&job.poses);

@@ -43,7 +43,7 @@ pub use init::{Init, InitError, initialize};
 #[cfg(feature = "solver")]
 pub use mapping2d::{
     BackgroundSolve, ConsistencyParams, FirstContactParams, Mapper2d, Mapper2dParams, MapperStats,
-    Placed, SolvedInBackground, SubmapSearchParams, WrongClosures,
+    Placed, RestoreError, SavedMapper, SolvedInBackground, SubmapSearchParams, WrongClosures,
 };
 #[cfg(feature = "solver")]
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

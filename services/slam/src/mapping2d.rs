@@ -26,6 +26,7 @@ mod local;
 mod near;
 mod params;
 mod parts;
+mod saved;
 mod solve;
 mod submap_params;
 mod submap_search;
@@ -35,6 +36,7 @@ mod wrong_closures;
 
 pub use first_contact::FirstContactParams;
 pub use params::{ConsistencyParams, Mapper2dParams};
+pub use saved::{RestoreError, SavedMapper};
 pub use solve::{BackgroundSolve, SolvedInBackground};
 pub use submap_params::SubmapSearchParams;
 pub use wrong_closures::WrongClosures;
@@ -44,7 +46,7 @@ use crate::network::{EdgeKind, GraphError, PoseGraph, RelativeEdge};
 use crate::optimize::{OptimizeReport, Optimizer};
 use crate::robust::Robust;
 use crate::se2::{Pose2, wrap_angle};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Where a scan went.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -62,7 +64,7 @@ pub enum Placed {
 
 /// What the mapper did so far.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct MapperStats {
     /// Scans added.
     pub scans: usize,
@@ -111,7 +113,7 @@ pub struct MapperStats {
 pub use crate::gnss::GpsObservation;
 
 /// One robot's chain of nodes.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 struct Chain {
     last_node: usize,
     last_odometry: Pose2,
@@ -119,11 +121,13 @@ struct Chain {
     length: usize,
 }
 
-/// The incremental 2D mapper.
-#[derive(Debug, Default)]
+/// The incremental 2D mapper. Its serde form ([`Self::saved`], [`SavedMapper`]) is all of its
+/// state but the node scans, which its owner keeps anyway.
+#[derive(Debug, Default, Serialize, Deserialize)]
 pub struct Mapper2d {
     params: Mapper2dParams,
     graph: PoseGraph,
+    #[serde(skip)]
     node_scans: Vec<Scan2>,
     /// The robot of each node, and the node's place in that robot's chain.
     node_robot: Vec<(usize, usize)>,
@@ -134,6 +138,8 @@ pub struct Mapper2d {
     chains: Vec<Option<Chain>>,
     /// Loop-closure candidates and their consistency check.
     book: closures::ClosureBook,
+    /// Only a cache (the last symbolic factorization): not saved.
+    #[serde(skip, default = "Optimizer::for_parts")]
     optimizer: Optimizer,
     stats: MapperStats,
     last_optimization: Option<OptimizeReport>,

@@ -7,9 +7,10 @@
 //! `components` gives it) and whether GPS fixes at two distinct nodes anchor it.
 
 use crate::network::PoseGraph;
+use serde::{Deserialize, Serialize};
 
 /// Parts of a network that only grows (nodes, edges and fixes appended, never removed).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct PartTracker {
     parent: Vec<usize>,
     /// By set root: nodes in the set.

@@ -134,6 +134,7 @@ impl Worker {
                 return;
             }
         }
+        self.snapshots_due(false);
         if self.shared.feeding.load(Ordering::SeqCst) {
             return;
         }
@@ -171,6 +172,26 @@ impl Worker {
             self.solving.out.insert(id.clone(), now);
             self.solving.last_taken.insert(id, now);
         }
+    }
+
+    /// Stops the solver thread once its solve is done, and applies the solves that came back
+    /// (their points committed): then every fleet's snapshot can be written.
+    pub(super) fn stop_solving(&mut self) {
+        self.solving.stop();
+        if self.unstored.is_some() {
+            return;
+        }
+        while let Ok(done) = self.solving.done.try_recv() {
+            if self.apply_solve(done).is_err() {
+                return;
+            }
+        }
+        self.snapshots_due(true);
+    }
+
+    /// Whether a solve of `fleet` is out or held: its map's state lacks the solve's job.
+    pub(super) fn solve_out(&self, fleet: &str) -> bool {
+        self.solving.out.contains_key(fleet) || self.solving.held.contains_key(fleet)
     }
 
     /// Applies a solve that ran: its point committed, then the new view and the corrected

@@ -10,17 +10,18 @@ use super::consistency::{ChainPaths, Closure, Uncertain, cycle_chi2, ends_gap, m
 use crate::network::{EdgeKind, GraphError, RelativeEdge};
 use crate::se2::Pose2;
 use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
 /// What became of a candidate.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 enum State {
     Pending,
     Accepted,
     Rejected,
 }
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 struct Candidate {
     /// With the covariance the check uses (the match's plus the floors).
     closure: Closure,
@@ -30,7 +31,7 @@ struct Candidate {
 }
 
 /// The candidates so far, the chains they are checked along, and the pairs checked.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub(super) struct ClosureBook {
     pub(super) paths: ChainPaths,
     candidates: Vec<Candidate>,

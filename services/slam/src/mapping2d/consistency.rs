@@ -10,9 +10,10 @@
 
 use crate::se2::{Pose2, wrap_angle};
 use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
 
 /// A relative pose with the covariance of a right perturbation: `pose ⊕ Exp(δ)`, δ ~ N(0, Σ).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Uncertain {
     /// The pose (m, rad).
     pub pose: Pose2,
@@ -69,7 +70,7 @@ impl Uncertain {
 }
 
 /// Where a node sits: its chain (robot) and its place in it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ChainPlace {
     /// The chain.
     pub chain: usize,
@@ -80,7 +81,7 @@ pub struct ChainPlace {
 /// Every chain's sequential measurements composed from its first node, with prefix sums of
 /// their covariances carried to that node's frame, so the path between any two places of a
 /// chain costs O(1).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct ChainPaths {
     /// By node: its chain and place.
     places: Vec<ChainPlace>,
@@ -181,7 +182,7 @@ impl ChainPaths {
 }
 
 /// A loop-closure candidate: node `to` seen from node `from`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Closure {
     /// The node it is seen from.
     pub from: usize,

@@ -63,7 +63,7 @@ impl Default for FirstContactParams {
 }
 
 /// The submaps whose pairs are searched, and the matches that wait for a second.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub(super) struct ContactSearch {
     /// The next pair to consider: submap `later` with submap `earlier` (< `later`).
     later: usize,
@@ -72,7 +72,7 @@ pub(super) struct ContactSearch {
 }
 
 /// A match between parts: the closure it would be.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 struct Hypothesis {
     edge: RelativeEdge,
 }

@@ -4,6 +4,7 @@
 //! of the whole network (or a part moved) all of them.
 
 use crate::se2::Pose2;
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
 /// Side of a cell (m).
@@ -12,7 +13,7 @@ const CELL_M: f64 = 5.0;
 type Cell = (i64, i64);
 
 /// The nodes by cell.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 pub(super) struct NodeGrid {
     cells: HashMap<Cell, Vec<usize>>,
     /// Each node's cell.

@@ -8,14 +8,17 @@ use crate::incremental::{
 };
 use crate::network::GraphError;
 use crate::optimize::OptimizeReport;
+use serde::{Deserialize, Serialize};
 
 /// A deferred mapper's solving state.
-#[derive(Debug)]
+#[derive(Debug, Serialize, Deserialize)]
 pub(super) struct Background {
     adjacency: Adjacency,
-    jobs: JobSource,
-    /// The global solver; `None` while it is out with a job.
-    solver: Option<GlobalSolver>,
+    pub(super) jobs: JobSource,
+    /// The global solver; `None` while it is out with a job. Not saved: made again from the
+    /// network and `jobs` ([`GlobalSolver::resumed`]).
+    #[serde(skip)]
+    pub(super) solver: Option<GlobalSolver>,
     /// Bumped by every solve in the foreground: a background solve taken before it is stale.
     generation: u64,
 }

@@ -5,6 +5,7 @@
 use super::Mapper2d;
 use crate::Pose2;
 use crate::matching::correlative::{PrecomputedGrids, ProbabilityGrid, precompute};
+use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex};
 
 /// Pooled grids kept at once: a submap's grid is made when it is first searched and kept
@@ -13,7 +14,7 @@ use std::sync::{Arc, Mutex};
 const POOLED_GRIDS_KEPT: usize = 32;
 
 /// A finished submap.
-#[derive(Debug)]
+#[derive(Debug, Serialize, Deserialize)]
 pub(super) struct Submap {
     pub robot: usize,
     /// The first node: the grid is in its frame.
@@ -52,16 +53,18 @@ struct PooledGrids {
 }
 
 /// Every robot's submaps, and how long each robot has gone without a closure.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 pub(super) struct Submaps {
     pub done: Vec<Submap>,
+    /// A cache, made again from the scans on use: not saved.
+    #[serde(skip)]
     pooled: Mutex<PooledGrids>,
     /// By robot.
     pub robots: Vec<RobotSubmaps>,
 }
 
 /// One robot's growing submap, and its path (m) at its last closure and last search.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub(super) struct RobotSubmaps {
     open: Vec<usize>,
     pub last_closure_m: Option<f64>,

@@ -1,0 +1,340 @@
+//! The store read back at start: each fleet's map from its newest snapshot and the nodes
+//! stored after it, or, without a usable snapshot (an older store, another snapshot format,
+//! other mapping parameters), replayed from all of its nodes. Either way the nodes are
+//! mapped again through the same deterministic mapper, each stored solve taken and applied
+//! at its points, and the rebuilt edges are checked against the stored ones.
+//!
+//! [`verify_store`] is the check behind `levelmap mapper --verify-store`: every fleet
+//! replayed in full, ignoring its snapshot, and compared with the stored edges and with what
+//! its snapshot restores.
+
+use crate::config::MapperConfig;
+use crate::fleet::FleetMap;
+use crate::state::Shared;
+use crate::store::{SolvePoint, Store, StoredFleet};
+use anyhow::{Context, Result};
+use serde::Serialize;
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// The fleets restored, and how many nodes of each its snapshot covered (0: replayed in
+/// full).
+pub type Restored = (HashMap<String, FleetMap>, HashMap<String, usize>);
+
+/// Restores the store, fleet by fleet. A fleet whose rows do not replay is quarantined (its
+/// reason kept in `shared`): the others are restored and served.
+pub fn restore(config: &MapperConfig, store: &Store, shared: &Shared) -> Result<Restored> {
+    let (mut fleets, mut covered) = (HashMap::new(), HashMap::new());
+    for id in store.fleet_ids()? {
+        match load(config, store, &id) {
+            Ok((map, from)) => {
+                shared.publish_map(&map, 0.0);
+                covered.insert(id.clone(), from);
+                fleets.insert(id, map);
+            }
+            Err(e) => {
+                let reason = format!("{e:#}");
+                tracing::error!(fleet = %id, "quarantined: its stored map does not replay: {reason}");
+                shared
+                    .quarantined
+                    .write()
+                    .expect("quarantine lock")
+                    .insert(id, reason);
+            }
+        }
+    }
+    Ok((fleets, covered))
+}
+
+/// One fleet's map: from its snapshot if it has a usable one, else replayed in full; and
+/// how many nodes the snapshot covered.
+fn load(config: &MapperConfig, store: &Store, id: &str) -> Result<(FleetMap, usize)> {
+    let started = Instant::now();
+    let stored = store.load_fleet(id)?;
+    let snapshot = store.snapshot(id).unwrap_or_else(|e| {
+        tracing::warn!(fleet = %id, "snapshot unreadable, replaying every node: {e}");
+        None
+    });
+    if let Some(bytes) = snapshot {
+        match from_snapshot(config, &stored, &bytes) {
+            Ok((map, covered)) => {
+                tracing::info!(
+                    fleet = %id,
+                    nodes = stored.nodes.len(),
+                    snapshot_nodes = covered,
+                    edges = stored.edges.len(),
+                    "restored from its snapshot in {:.0} ms",
+                    started.elapsed().as_secs_f64() * 1e3
+                );
+                return Ok((map, covered));
+            }
+            Err(e) => tracing::warn!(fleet = %id, "snapshot not used, replaying every node: {e:#}"),
+        }
+    }
+    let map = replay(config, &stored)?;
+    tracing::info!(
+        fleet = %id,
+        nodes = stored.nodes.len(),
+        edges = stored.edges.len(),
+        "replayed in {:.0} ms",
+        started.elapsed().as_secs_f64() * 1e3
+    );
+    Ok((map, 0))
+}
+
+/// A fleet's map from its snapshot and the nodes after it, its edges checked; how many
+/// nodes the snapshot covered. A snapshot that does not fit, or that makes the restore
+/// panic, is an error here (the caller replays in full), never a crash.
+pub fn from_snapshot(
+    config: &MapperConfig,
+    stored: &StoredFleet,
+    bytes: &[u8],
+) -> Result<(FleetMap, usize)> {
+    let restoring = std::panic::AssertUnwindSafe(|| -> Result<(FleetMap, usize)> {
+        let (mut map, covered) = config.new_fleet(&stored.id).restore(bytes, &stored.nodes)?;
+        replay_tail(&mut map, stored, covered)?;
+        check_edges(&map, stored)?;
+        Ok((map, covered))
+    });
+    std::panic::catch_unwind(restoring)
+        .unwrap_or_else(|_| Err(anyhow::anyhow!("restoring from the snapshot panicked")))
+}
+
+/// One fleet's map replayed from all of its nodes; its edges checked against the stored ones.
+pub fn replay(config: &MapperConfig, stored: &StoredFleet) -> Result<FleetMap> {
+    let mut map = config.new_fleet(&stored.id);
+    replay_tail(&mut map, stored, 0)?;
+    check_edges(&map, stored)?;
+    Ok(map)
+}
+
+/// Maps the stored nodes from arrival index `from` on into `map`, which holds the first
+/// `from` of them and the solves applied among them; each stored solve is taken and applied
+/// at the nodes where it was.
+fn replay_tail(map: &mut FleetMap, stored: &StoredFleet, from: usize) -> Result<()> {
+    let id = &stored.id;
+    let applied = map.solves_applied() as usize;
+    anyhow::ensure!(
+        applied <= stored.solve_points.len(),
+        "store: fleet {id}: {applied} solves applied of {} stored",
+        stored.solve_points.len()
+    );
+    let mut legacy = stored
+        .legacy_solves
+        .iter()
+        .filter(|&&a| a >= from as u64)
+        .peekable();
+    let mut points = stored.solve_points[applied..].iter().peekable();
+    // The solve taken and not applied yet.
+    let mut out = None;
+    if from > 0 {
+        // The solves taken after the snapshot's last node, at that node.
+        solve_points_at(map, from as u64 - 1, &mut points, &mut out)?;
+    }
+    for (arrival, bytes) in stored.nodes.iter().enumerate().skip(from) {
+        let arrival = arrival as u64;
+        let (node, _) = wire::decode_node_input(bytes)
+            .with_context(|| format!("store: node {arrival} of fleet {id} is unreadable"))?;
+        map.ingest(&node)
+            .with_context(|| format!("store: replaying node {arrival} of fleet {id}"))?;
+        if legacy.next_if_eq(&&arrival).is_some() {
+            map.optimize_now()?;
+        }
+        solve_points_at(map, arrival, &mut points, &mut out)?;
+    }
+    anyhow::ensure!(
+        points.peek().is_none(),
+        "store: fleet {id}: solves stored beyond its nodes"
+    );
+    Ok(())
+}
+
+/// Takes and applies the stored solves due after the node of arrival index `arrival`.
+fn solve_points_at<'a>(
+    map: &mut FleetMap,
+    arrival: u64,
+    points: &mut std::iter::Peekable<impl Iterator<Item = &'a SolvePoint>>,
+    out: &mut Option<slam::BackgroundSolve>,
+) -> Result<()> {
+    while let Some(point) = points.peek() {
+        if out.is_none() && point.taken_after == arrival {
+            *out = map.take_solve_now();
+            anyhow::ensure!(
+                out.is_some(),
+                "store: fleet {}: solve {} taken twice",
+                map.id(),
+                point.seq
+            );
+        }
+        if out.is_none() || point.applied_after != arrival {
+            break;
+        }
+        let solved = out.take().expect("taken above").run();
+        map.finish_solve(solved)?;
+        map.count_solve(point);
+        points.next();
+    }
+    Ok(())
+}
+
+/// The map's edges against the stored ones.
+fn check_edges(map: &FleetMap, stored: &StoredFleet) -> Result<()> {
+    let rebuilt = crate::store::encode_edges(&map.graph().edges);
+    anyhow::ensure!(
+        rebuilt == stored.edges,
+        "store: fleet {} replays to {} edges that differ from the {} stored",
+        stored.id,
+        rebuilt.len(),
+        stored.edges.len()
+    );
+    Ok(())
+}
+
+/// How two maps of a fleet differ: empty when they hold the same nodes, robots, edges, GPS
+/// edges, solves and mapping counts, and the same poses bit for bit.
+pub fn differences(a: &FleetMap, b: &FleetMap) -> Vec<String> {
+    let mut found = Vec::new();
+    let mut differ = |what: &str, same: bool| {
+        if !same {
+            found.push(what.to_owned());
+        }
+    };
+    let (ga, gb) = (a.graph(), b.graph());
+    differ("nodes", a.nodes().len() == b.nodes().len());
+    differ("edges", ga.edges == gb.edges);
+    differ("gps edges", ga.gps == gb.gps);
+    differ("solves applied", a.solves_applied() == b.solves_applied());
+    differ("datum", a.datum() == b.datum());
+    let robots = |m: &FleetMap| -> Vec<(String, u64, Vec<usize>)> {
+        let r = m.robots();
+        r.iter()
+            .map(|r| (r.id.clone(), r.last_node_seq, r.nodes.clone()))
+            .collect()
+    };
+    differ("robots", robots(a) == robots(b));
+    // Solves taken live but not applied (a part not anchored) leave no solve point, so a
+    // replay does not count them: not compared.
+    let counts = |m: &FleetMap| slam::MapperStats {
+        deferred_optimizations: 0,
+        ..m.stats()
+    };
+    differ("mapping counts", counts(a) == counts(b));
+    let bits = |m: &FleetMap| -> Vec<[u64; 3]> {
+        let p = m.poses();
+        p.iter()
+            .map(|p| [p.x.to_bits(), p.y.to_bits(), p.theta.to_bits()])
+            .collect()
+    };
+    if bits(a) != bits(b) {
+        found.push(format!(
+            "poses (largest difference {:.3e})",
+            largest_pose_difference(a, b)
+        ));
+    }
+    found
+}
+
+/// The largest difference of a coordinate of two maps' poses (m or rad; ∞ when their
+/// counts differ).
+pub fn largest_pose_difference(a: &FleetMap, b: &FleetMap) -> f64 {
+    if a.poses().len() != b.poses().len() {
+        return f64::INFINITY;
+    }
+    a.poses()
+        .iter()
+        .zip(b.poses())
+        .map(|(p, q)| {
+            let dtheta = slam::se2::wrap_angle(p.theta - q.theta).abs();
+            (p.x - q.x).abs().max((p.y - q.y).abs()).max(dtheta)
+        })
+        .fold(0.0, f64::max)
+}
+
+/// What `--verify-store` found of one fleet.
+#[derive(Debug, Serialize)]
+pub struct FleetCheck {
+    /// The fleet.
+    pub fleet: String,
+    /// Stored nodes, edges and solves.
+    pub nodes: usize,
+    /// See `nodes`.
+    pub edges: usize,
+    /// See `nodes`.
+    pub solves: usize,
+    /// The full replay's time (ms).
+    pub replay_ms: f64,
+    /// Why the full replay failed or its edges differ from the stored ones; `None`: they match.
+    pub replay_error: Option<String>,
+    /// The snapshot, if the fleet has one.
+    pub snapshot: Option<SnapshotCheck>,
+}
+
+/// What `--verify-store` found of a fleet's snapshot.
+#[derive(Debug, Serialize)]
+pub struct SnapshotCheck {
+    /// Nodes it covers (0 when unusable).
+    pub covers: usize,
+    /// Size (bytes).
+    pub bytes: usize,
+    /// The restore's time, snapshot and the nodes after it (ms).
+    pub restore_ms: f64,
+    /// Why it could not be restored; `None`: it was.
+    pub error: Option<String>,
+    /// What differs between the restored map and the full replay.
+    pub differences: Vec<String>,
+}
+
+/// The whole store's check: every fleet, and whether all of it matched.
+#[derive(Debug, Serialize)]
+pub struct StoreCheck {
+    /// Every fleet of the store.
+    pub fleets: Vec<FleetCheck>,
+    /// Every fleet replays to its stored edges, and every snapshot restores to its replay.
+    pub ok: bool,
+}
+
+/// Replays every fleet of the store in full (its snapshot ignored), checks its edges against
+/// the stored ones and what its snapshot restores against the replay.
+pub fn verify_store(config: &MapperConfig, store: &Store) -> Result<StoreCheck> {
+    let mut fleets = Vec::new();
+    for id in store.fleet_ids()? {
+        let stored = store.load_fleet(&id)?;
+        let started = Instant::now();
+        let replayed = replay(config, &stored);
+        let replay_ms = started.elapsed().as_secs_f64() * 1e3;
+        let snapshot = store.snapshot(&id)?.map(|bytes| {
+            let started = Instant::now();
+            let restored = from_snapshot(config, &stored, &bytes);
+            let restore_ms = started.elapsed().as_secs_f64() * 1e3;
+            let (covers, error, differences) = match (&restored, &replayed) {
+                (Ok((map, covers)), Ok(full)) => (*covers, None, differences(map, full)),
+                (Ok((_, covers)), Err(_)) => (*covers, None, vec!["no full replay to compare".into()]),
+                (Err(e), _) => (0, Some(format!("{e:#}")), Vec::new()),
+            };
+            SnapshotCheck {
+                covers,
+                bytes: bytes.len(),
+                restore_ms,
+                error,
+                differences,
+            }
+        });
+        fleets.push(FleetCheck {
+            nodes: stored.nodes.len(),
+            edges: stored.edges.len(),
+            solves: stored.solve_points.len() + stored.legacy_solves.len(),
+            fleet: id,
+            replay_ms,
+            replay_error: replayed.err().map(|e| format!("{e:#}")),
+            snapshot,
+        });
+    }
+    let ok = fleets.iter().all(|f| {
+        f.replay_error.is_none()
+            && f
+                .snapshot
+                .as_ref()
+                .is_none_or(|s| s.error.is_none() && s.differences.is_empty())
+    });
+    Ok(StoreCheck { fleets, ok })
+}

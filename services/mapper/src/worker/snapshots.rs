@@ -1,0 +1,59 @@
+//! The worker's snapshots of the fleets' maps (`crate::fleet::snapshot`): a fleet's is
+//! written once it took `[store] snapshot_every_nodes` nodes since its last one, and at a
+//! graceful stop. Only between solves (none of the fleet's out, so its state is whole) and
+//! after its nodes and solve points are committed: a snapshot never holds what the store
+//! does not. It has a transaction of its own, so a failed one costs no node its ack.
+
+use super::Worker;
+use std::collections::HashMap;
+use std::time::Instant;
+
+impl Worker {
+    /// The nodes each fleet's stored snapshot covers, as the restore found them.
+    pub fn with_snapshots(mut self, covered: HashMap<String, usize>) -> Worker {
+        self.snapshots = covered;
+        self
+    }
+
+    /// Writes the snapshots that are due; with `all`, of every fleet that took a node since
+    /// its last one.
+    pub(super) fn snapshots_due(&mut self, all: bool) {
+        let every = self.config.store.snapshot_every_nodes as usize;
+        if every == 0 || self.unstored.is_some() {
+            return;
+        }
+        let mut ids: Vec<String> = self.fleets.keys().cloned().collect();
+        ids.sort_unstable();
+        for id in ids {
+            let nodes = self.fleets[&id].nodes().len();
+            let covered = self.snapshots.get(&id).copied().unwrap_or(0);
+            let due = match all {
+                true => nodes > covered,
+                false => nodes >= covered + every,
+            };
+            if !due || self.solve_out(&id) {
+                continue;
+            }
+            let started = Instant::now();
+            let Some(snapshot) = self.fleets[&id].snapshot() else {
+                continue;
+            };
+            let encoded = started.elapsed();
+            let stored = self.store.put_snapshot(&id, &snapshot);
+            let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+            match stored {
+                Ok(()) => tracing::info!(
+                    fleet = %id,
+                    nodes,
+                    bytes = snapshot.len(),
+                    "snapshot stored: encoded in {:.1} ms, written in {:.1} ms",
+                    ms(encoded),
+                    ms(started.elapsed() - encoded)
+                ),
+                // Tried again after as many nodes: the last one stays usable.
+                Err(e) => tracing::warn!(fleet = %id, "snapshot not stored: {e}"),
+            }
+            self.snapshots.insert(id, nodes);
+        }
+    }
+}
