@@ -338,3 +338,6 @@ pub fn verify_store(config: &MapperConfig, store: &Store) -> Result<StoreCheck> 
     });
     Ok(StoreCheck { fleets, ok })
 }
+
+#[cfg(test)]
+mod tests;

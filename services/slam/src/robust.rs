@@ -4,9 +4,11 @@
 
 use serde::{Deserialize, Serialize};
 
-/// A robust kernel and its scale (in units of the Mahalanobis distance √s).
+/// A robust kernel and its scale (in units of the Mahalanobis distance √s). In text (JSON,
+/// TOML) its kernel is a field (`{"kernel": "cauchy", "c": 10.0}`); in binary formats that
+/// do not describe themselves (postcard), an enum as serde writes one.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kernel", rename_all = "snake_case")]
+#[serde(remote = "Robust")]
 pub enum Robust {
     /// Plain least squares.
     #[default]
@@ -26,6 +28,58 @@ pub enum Robust {
         /// φ (squared Mahalanobis distance).
         phi: f64,
     },
+}
+
+/// The text form: the kernel named by a field, which needs a self-describing format.
+#[derive(Serialize, Deserialize)]
+#[serde(tag = "kernel", rename_all = "snake_case")]
+enum Tagged {
+    None,
+    Huber { delta: f64 },
+    Cauchy { c: f64 },
+    Dcs { phi: f64 },
+}
+
+impl From<Robust> for Tagged {
+    fn from(r: Robust) -> Tagged {
+        match r {
+            Robust::None => Tagged::None,
+            Robust::Huber { delta } => Tagged::Huber { delta },
+            Robust::Cauchy { c } => Tagged::Cauchy { c },
+            Robust::Dcs { phi } => Tagged::Dcs { phi },
+        }
+    }
+}
+
+impl From<Tagged> for Robust {
+    fn from(t: Tagged) -> Robust {
+        match t {
+            Tagged::None => Robust::None,
+            Tagged::Huber { delta } => Robust::Huber { delta },
+            Tagged::Cauchy { c } => Robust::Cauchy { c },
+            Tagged::Dcs { phi } => Robust::Dcs { phi },
+        }
+    }
+}
+
+impl Serialize for Robust {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        if s.is_human_readable() {
+            Tagged::from(*self).serialize(s)
+        } else {
+            Robust::serialize(self, s)
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Robust {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Robust, D::Error> {
+        if d.is_human_readable() {
+            Tagged::deserialize(d).map(Robust::from)
+        } else {
+            Robust::deserialize(d)
+        }
+    }
 }
 
 impl Robust {

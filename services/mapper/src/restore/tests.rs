@@ -1,0 +1,229 @@
+//! A fleet mapped as the worker maps it (solves taken and applied a few nodes later, their
+//! points committed, a snapshot between solves), then restored from its snapshot and the
+//! nodes after it, against a full replay of its nodes.
+
+use super::*;
+use crate::store::{FleetBatch, encode_edges};
+use leveling::nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use leveling::{Beam, LeveledScan, TimedPose};
+use slam::Pose2;
+use slam::geodesy::{GeoDatum, Geodetic};
+use slam::matching::synthetic::{Scene, uniform_bearings};
+use wire::{Message, v1};
+
+const S: u64 = 1_000_000_000;
+const DATUM: Geodetic = Geodetic {
+    latitude_deg: 52.39,
+    longitude_deg: 9.71,
+    height_m: 55.0,
+};
+
+fn config(dir: &std::path::Path) -> MapperConfig {
+    MapperConfig {
+        store_path: dir.join("mapper.redb"),
+        datum: Some(DATUM),
+        ..MapperConfig::default()
+    }
+}
+
+/// Node `k` of robot `r`: three robots drive circles in the synthetic park, overlapping,
+/// with odometry that drifts (so closures pull); robot 2 has a GPS fix every 10th node.
+fn node(r: usize, k: u64) -> v1::Node {
+    let (centre, radius, step) = [([0.0, -2.0], 6.0, 0.5), ([-4.0, 0.0], 5.0, 0.45), ([3.0, -3.0], 7.0, 0.55)][r];
+    let truth = |k: u64| {
+        let a = r as f64 + k as f64 * step / radius;
+        Pose2::new(centre[0] + radius * a.cos(), centre[1] + radius * a.sin(), a + std::f64::consts::FRAC_PI_2)
+    };
+    // Odometry: each true step 2 % long and turned by 3 mrad.
+    let mut odometry = truth(0);
+    for j in 1..=k {
+        let s = truth(j - 1).between(&truth(j));
+        odometry = odometry.compose(&Pose2::new(s.x * 1.02, s.y, s.theta + 0.003));
+    }
+    let robot = format!("robot{r}");
+    let stamp = (k + 1) * S + r as u64;
+    let header = |seq| v1::Header::new("park", robot.clone(), seq, stamp, stamp);
+    let bearings = uniform_bearings(360, -std::f64::consts::PI, std::f64::consts::PI / 180.0);
+    let ranges = Scene::park().scan(&truth(k), &bearings, 40.0, 0.01, r as u64 * 100_000 + k);
+    let scan = LeveledScan {
+        stamp_ns: stamp,
+        beams: bearings
+            .iter()
+            .zip(&ranges)
+            .map(|(&b, &range)| Beam {
+                bearing_rad: b,
+                range_m: (range > 0.1 && range < 40.0).then_some(range),
+            })
+            .collect(),
+    };
+    let pose = Isometry3::from_parts(
+        Translation3::new(odometry.x, odometry.y, 0.0),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, odometry.theta),
+    );
+    let gps = (r == 2 && k % 10 == 0).then(|| {
+        let t = truth(k);
+        let at = GeoDatum { origin: DATUM }.enu_to_geodetic(&Vector3::new(t.x, t.y, 0.0));
+        v1::GpsFix {
+            header: Some(header(k)),
+            latitude_deg: at.latitude_deg,
+            longitude_deg: at.longitude_deg,
+            altitude_m: at.height_m,
+            position_covariance_m2: vec![0.04, 0.0, 0.0, 0.0, 0.04, 0.0, 0.0, 0.0, 0.25],
+            status: v1::FixStatus::RtkFixed.into(),
+            satellites: 14,
+            antenna_offset_m: Some(v1::Vec3 { x: 0.0, y: 0.0, z: 0.0 }),
+        }
+    });
+    v1::Node {
+        header: Some(header(k)),
+        node_seq: k,
+        chain_id: 1,
+        held_from_seq: 0,
+        scan: Some(wire::leveled_scan_to_wire(&scan, &Default::default(), header(k))),
+        odometry: Some(wire::odometry_to_wire(&TimedPose { stamp_ns: stamp, pose }, header(k))),
+        gps,
+        ..Default::default()
+    }
+}
+
+/// The three robots' first `per_robot` nodes, taken in turn.
+fn nodes(per_robot: u64) -> Vec<Vec<u8>> {
+    (0..per_robot)
+        .flat_map(|k| (0..3).map(move |r| node(r, k).encode_to_vec()))
+        .collect()
+}
+
+/// Maps `nodes` as the worker does, committing each node (and its edges) and each solve's
+/// points: a solve is taken every 17th node when due and applied 5 nodes later. Writes the
+/// map's snapshot after node `snapshot_after`, then takes a solve at once. The live map.
+fn map_as_the_worker(store: &Store, config: &MapperConfig, nodes: &[Vec<u8>], snapshot_after: usize) -> FleetMap {
+    let mut map = config.new_fleet("park");
+    let mut out: Option<(u64, slam::BackgroundSolve)> = None;
+    let mut edges = 0;
+    for (arrival, bytes) in nodes.iter().enumerate() {
+        let (input, _) = wire::decode_node_input(bytes).unwrap();
+        map.ingest(&input).unwrap();
+        let new = encode_edges(&map.graph().edges[edges..]);
+        store
+            .commit(&[FleetBatch {
+                fleet: "park",
+                nodes: vec![(arrival as u64, bytes.as_slice())],
+                first_edge: edges as u64,
+                edges: new,
+                ..Default::default()
+            }])
+            .unwrap();
+        edges = map.graph().edges.len();
+        if let Some((taken_after, _)) = &out
+            && arrival as u64 >= taken_after + 5
+        {
+            let (taken_after, solve) = out.take().unwrap();
+            if map.finish_solve(solve.run()).unwrap() {
+                let point = map.next_solve_point(taken_after);
+                store
+                    .commit(&[FleetBatch {
+                        fleet: "park",
+                        solved: Some(point),
+                        ..Default::default()
+                    }])
+                    .unwrap();
+            }
+        }
+        if arrival == snapshot_after {
+            assert!(out.is_none(), "no solve out at the snapshot");
+            store.put_snapshot("park", &map.snapshot().unwrap()).unwrap();
+        }
+        if out.is_none() && (arrival % 17 == 0 || arrival == snapshot_after) {
+            out = map.take_solve().map(|s| (arrival as u64, s));
+            if out.is_some() {
+                assert!(map.snapshot().is_none(), "no snapshot while a solve is out");
+            }
+        }
+    }
+    map
+}
+
+fn temp_store(name: &str) -> (std::path::PathBuf, Store) {
+    let dir = std::env::temp_dir().join(format!("levelmap-restore-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let store = Store::open(&dir.join("mapper.redb")).unwrap();
+    (dir, store)
+}
+
+#[test]
+fn a_snapshot_and_the_nodes_after_it_restore_what_a_full_replay_maps() {
+    let (dir, store) = temp_store("tail");
+    let config = config(&dir);
+    let nodes = nodes(110);
+    let live = map_as_the_worker(&store, &config, &nodes, 179);
+    let stored = store.load_fleet("park").unwrap();
+    assert!(stored.solve_points.len() >= 5, "{} solves", stored.solve_points.len());
+    let stats = live.stats();
+    assert!(stats.loop_closures > 10 && stats.gps_edges > 5, "{stats:?}");
+
+    let full = replay(&config, &stored).unwrap();
+    assert_eq!(differences(&live, &full), Vec::<String>::new(), "the replay maps as the worker did");
+    let bytes = store.snapshot("park").unwrap().unwrap();
+    let (restored, covered) = from_snapshot(&config, &stored, &bytes).unwrap();
+    assert_eq!(covered, 180);
+    // Bit for bit: poses, edges, GPS edges, counts, robots, solves.
+    assert_eq!(differences(&restored, &full), Vec::<String>::new());
+    assert_eq!(largest_pose_difference(&restored, &full), 0.0);
+
+    // What the mapper does at start: the snapshot used, the store verified.
+    let shared = Shared::new(String::new(), 0);
+    let (fleets, covered) = restore(&config, &store, &shared).unwrap();
+    assert_eq!(covered["park"], 180);
+    assert_eq!(differences(&fleets["park"], &full), Vec::<String>::new());
+    let check = verify_store(&config, &store).unwrap();
+    assert!(check.ok, "{check:?}");
+    assert_eq!(check.fleets[0].snapshot.as_ref().unwrap().covers, 180);
+
+    // Both go on mapping the same way.
+    let (mut a, mut b) = (restored, full);
+    for r in 0..3 {
+        let (input, _) = wire::decode_node_input(&node(r, 110).encode_to_vec()).unwrap();
+        a.ingest(&input).unwrap();
+        b.ingest(&input).unwrap();
+    }
+    let (sa, sb) = (a.take_solve_now().unwrap(), b.take_solve_now().unwrap());
+    a.finish_solve(sa.run()).unwrap();
+    b.finish_solve(sb.run()).unwrap();
+    assert_eq!(differences(&a, &b), Vec::<String>::new());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_unreadable_or_unfit_snapshot_falls_back_to_the_full_replay() {
+    let (dir, store) = temp_store("fallback");
+    let config = config(&dir);
+    let nodes = nodes(30);
+    map_as_the_worker(&store, &config, &nodes, 50);
+    let stored = store.load_fleet("park").unwrap();
+    let full = replay(&config, &stored).unwrap();
+    let good = store.snapshot("park").unwrap().unwrap();
+    let mut flipped = good.clone();
+    let last = flipped.len() - 1;
+    flipped[last] ^= 0x10;
+    let mut other_format = good.clone();
+    other_format[..4].copy_from_slice(&99u32.to_le_bytes());
+    let shared = Shared::new(String::new(), 0);
+    for (what, bytes) in [("a flipped bit", flipped), ("format 99", other_format), ("empty", Vec::new()), ("garbage", vec![7; 40])] {
+        store.put_snapshot("park", &bytes).unwrap();
+        let (fleets, covered) = restore(&config, &store, &shared).unwrap();
+        assert_eq!(covered["park"], 0, "{what}: replayed in full");
+        assert_eq!(differences(&fleets["park"], &full), Vec::<String>::new(), "{what}");
+        let check = verify_store(&config, &store).unwrap();
+        assert!(!check.ok, "{what}: the check fails");
+        assert!(check.fleets[0].replay_error.is_none(), "{what}");
+    }
+    // Other mapping parameters: the snapshot does not map as a replay would.
+    store.put_snapshot("park", &good).unwrap();
+    let mut other = config.clone();
+    other.mapping.loop_search_radius_m += 1.0;
+    let (_, covered) = restore(&other, &store, &shared).unwrap();
+    assert_eq!(covered["park"], 0);
+    assert!(shared.quarantined.read().unwrap().is_empty());
+    let _ = std::fs::remove_dir_all(&dir);
+}
