@@ -20,6 +20,16 @@ pub struct MapperArgs {
     /// With --from-recording: stop once it is fed and solved, instead of serving on.
     #[arg(long, requires = "from_recording")]
     pub exit_when_done: bool,
+    /// Check the store (of a stopped mapper: redb opens a file once) and exit, serving
+    /// nothing: every fleet replayed from all of its nodes, its snapshot ignored; the replay's
+    /// edges compared with the stored ones, and what the fleet's snapshot restores (snapshot
+    /// and the nodes after it) compared with the replay, bit for bit. Exit code 0 when all
+    /// of it matches, 1 otherwise.
+    #[arg(long, conflicts_with = "from_recording")]
+    pub verify_store: bool,
+    /// With --verify-store: print the report as JSON.
+    #[arg(long, requires = "verify_store")]
+    pub json: bool,
 }
 
 /// Run a robot's edge service: its source's scans leveled and published as nodes.
@@ -55,6 +65,9 @@ fn init_logging() {
 pub fn run_mapper(args: &MapperArgs) -> Result<()> {
     init_logging();
     let config = mapper::MapperConfig::load(args.config.as_deref())?;
+    if args.verify_store {
+        return verify_store(&config, args.json);
+    }
     // A bad Zenoh or TLS setting stops the mapper here, before its store is opened.
     let zenoh = config.zenoh.to_zenoh(wire::session::Role::Router)?;
     let listen = zenoh.get_json("listen/endpoints").unwrap_or_default();
@@ -94,6 +107,53 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
         tracing::info!("stopping");
         running.stop().await
     })
+}
+
+/// `levelmap mapper --verify-store`: the report, and exit code 1 unless all of it matched.
+#[cfg(feature = "mapper")]
+fn verify_store(config: &mapper::MapperConfig, json: bool) -> Result<()> {
+    let path = &config.store_path;
+    anyhow::ensure!(path.exists(), "{}: no store there", path.display());
+    let store = mapper::Store::open(path)
+        .map_err(|e| anyhow::anyhow!("{}: cannot open the store: {e}", path.display()))?;
+    let check = mapper::restore::verify_store(config, &store)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&check)?);
+    } else {
+        println!("store {}", path.display());
+        for f in &check.fleets {
+            let replay = match &f.replay_error {
+                None => "replays to the stored edges".to_owned(),
+                Some(e) => format!("DOES NOT REPLAY: {e}"),
+            };
+            println!(
+                "fleet {}: {} nodes, {} edges, {} solves: {replay} ({:.0} ms)",
+                f.fleet, f.nodes, f.edges, f.solves, f.replay_ms
+            );
+            let snapshot = match &f.snapshot {
+                None => "no snapshot".to_owned(),
+                Some(s) => match (&s.error, s.differences.is_empty()) {
+                    (Some(e), _) => format!("snapshot ({} bytes) NOT USABLE: {e}", s.bytes),
+                    (None, true) => format!(
+                        "snapshot of {} nodes ({} bytes) restores the replay exactly ({:.0} ms)",
+                        s.covers, s.bytes, s.restore_ms
+                    ),
+                    (None, false) => format!(
+                        "snapshot of {} nodes ({} bytes) DIFFERS from the replay: {}",
+                        s.covers,
+                        s.bytes,
+                        s.differences.join(", ")
+                    ),
+                },
+            };
+            println!("  {snapshot}");
+        }
+        println!("{}", if check.ok { "ok" } else { "FAILED" });
+    }
+    if !check.ok {
+        std::process::exit(1);
+    }
+    Ok(())
 }
 
 #[cfg(feature = "edge")]

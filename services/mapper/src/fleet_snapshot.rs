@@ -152,16 +152,20 @@ impl FleetMap {
             let (node, _) = wire::decode_node_input(bytes)
                 .map_err(|e| mismatch(format!("stored node {arrival}: {e}")))?;
             let robot = self.robot_index(&node.robot).ok_or_else(|| {
-                mismatch(format!("stored node {arrival}: robot {} unknown", node.robot))
+                mismatch(format!(
+                    "stored node {arrival}: robot {} unknown",
+                    node.robot
+                ))
             })?;
             let (record, scan) = self.read_node(&node, robot);
             self.robots[robot].nodes.push(arrival);
             self.nodes.push(Arc::new(record));
             scans.push(scan);
         }
-        let chains_ok = self.robots.iter().flat_map(|r| &r.chains).all(|c| {
-            c.last_node < nodes.max(1) && c.network_chain < saved.network_chains.max(1)
-        });
+        let chains_ok =
+            self.robots.iter().flat_map(|r| &r.chains).all(|c| {
+                c.last_node < nodes.max(1) && c.network_chain < saved.network_chains.max(1)
+            });
         if !chains_ok {
             return Err(mismatch("a chain names a node it does not hold".into()));
         }

@@ -308,7 +308,9 @@ pub fn verify_store(config: &MapperConfig, store: &Store) -> Result<StoreCheck> 
             let restore_ms = started.elapsed().as_secs_f64() * 1e3;
             let (covers, error, differences) = match (&restored, &replayed) {
                 (Ok((map, covers)), Ok(full)) => (*covers, None, differences(map, full)),
-                (Ok((_, covers)), Err(_)) => (*covers, None, vec!["no full replay to compare".into()]),
+                (Ok((_, covers)), Err(_)) => {
+                    (*covers, None, vec!["no full replay to compare".into()])
+                }
                 (Err(e), _) => (0, Some(format!("{e:#}")), Vec::new()),
             };
             SnapshotCheck {
@@ -331,8 +333,7 @@ pub fn verify_store(config: &MapperConfig, store: &Store) -> Result<StoreCheck> 
     }
     let ok = fleets.iter().all(|f| {
         f.replay_error.is_none()
-            && f
-                .snapshot
+            && f.snapshot
                 .as_ref()
                 .is_none_or(|s| s.error.is_none() && s.differences.is_empty())
     });

@@ -29,10 +29,18 @@ fn config(dir: &std::path::Path) -> MapperConfig {
 /// Node `k` of robot `r`: three robots drive circles in the synthetic park, overlapping,
 /// with odometry that drifts (so closures pull); robot 2 has a GPS fix every 10th node.
 fn node(r: usize, k: u64) -> v1::Node {
-    let (centre, radius, step) = [([0.0, -2.0], 6.0, 0.5), ([-4.0, 0.0], 5.0, 0.45), ([3.0, -3.0], 7.0, 0.55)][r];
+    let (centre, radius, step) = [
+        ([0.0, -2.0], 6.0, 0.5),
+        ([-4.0, 0.0], 5.0, 0.45),
+        ([3.0, -3.0], 7.0, 0.55),
+    ][r];
     let truth = |k: u64| {
         let a = r as f64 + k as f64 * step / radius;
-        Pose2::new(centre[0] + radius * a.cos(), centre[1] + radius * a.sin(), a + std::f64::consts::FRAC_PI_2)
+        Pose2::new(
+            centre[0] + radius * a.cos(),
+            centre[1] + radius * a.sin(),
+            a + std::f64::consts::FRAC_PI_2,
+        )
     };
     // Odometry: each true step 2 % long and turned by 3 mrad.
     let mut odometry = truth(0);
@@ -71,7 +79,11 @@ fn node(r: usize, k: u64) -> v1::Node {
             position_covariance_m2: vec![0.04, 0.0, 0.0, 0.0, 0.04, 0.0, 0.0, 0.0, 0.25],
             status: v1::FixStatus::RtkFixed.into(),
             satellites: 14,
-            antenna_offset_m: Some(v1::Vec3 { x: 0.0, y: 0.0, z: 0.0 }),
+            antenna_offset_m: Some(v1::Vec3 {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+            }),
         }
     });
     v1::Node {
@@ -79,8 +91,18 @@ fn node(r: usize, k: u64) -> v1::Node {
         node_seq: k,
         chain_id: 1,
         held_from_seq: 0,
-        scan: Some(wire::leveled_scan_to_wire(&scan, &Default::default(), header(k))),
-        odometry: Some(wire::odometry_to_wire(&TimedPose { stamp_ns: stamp, pose }, header(k))),
+        scan: Some(wire::leveled_scan_to_wire(
+            &scan,
+            &Default::default(),
+            header(k),
+        )),
+        odometry: Some(wire::odometry_to_wire(
+            &TimedPose {
+                stamp_ns: stamp,
+                pose,
+            },
+            header(k),
+        )),
         gps,
         ..Default::default()
     }
@@ -96,7 +118,12 @@ fn nodes(per_robot: u64) -> Vec<Vec<u8>> {
 /// Maps `nodes` as the worker does, committing each node (and its edges) and each solve's
 /// points: a solve is taken every 17th node when due and applied 5 nodes later. Writes the
 /// map's snapshot after node `snapshot_after`, then takes a solve at once. The live map.
-fn map_as_the_worker(store: &Store, config: &MapperConfig, nodes: &[Vec<u8>], snapshot_after: usize) -> FleetMap {
+fn map_as_the_worker(
+    store: &Store,
+    config: &MapperConfig,
+    nodes: &[Vec<u8>],
+    snapshot_after: usize,
+) -> FleetMap {
     let mut map = config.new_fleet("park");
     let mut out: Option<(u64, slam::BackgroundSolve)> = None;
     let mut edges = 0;
@@ -131,7 +158,9 @@ fn map_as_the_worker(store: &Store, config: &MapperConfig, nodes: &[Vec<u8>], sn
         }
         if arrival == snapshot_after {
             assert!(out.is_none(), "no solve out at the snapshot");
-            store.put_snapshot("park", &map.snapshot().unwrap()).unwrap();
+            store
+                .put_snapshot("park", &map.snapshot().unwrap())
+                .unwrap();
         }
         if out.is_none() && (arrival % 17 == 0 || arrival == snapshot_after) {
             out = map.take_solve().map(|s| (arrival as u64, s));
@@ -158,12 +187,20 @@ fn a_snapshot_and_the_nodes_after_it_restore_what_a_full_replay_maps() {
     let nodes = nodes(110);
     let live = map_as_the_worker(&store, &config, &nodes, 179);
     let stored = store.load_fleet("park").unwrap();
-    assert!(stored.solve_points.len() >= 5, "{} solves", stored.solve_points.len());
+    assert!(
+        stored.solve_points.len() >= 5,
+        "{} solves",
+        stored.solve_points.len()
+    );
     let stats = live.stats();
     assert!(stats.loop_closures > 10 && stats.gps_edges > 5, "{stats:?}");
 
     let full = replay(&config, &stored).unwrap();
-    assert_eq!(differences(&live, &full), Vec::<String>::new(), "the replay maps as the worker did");
+    assert_eq!(
+        differences(&live, &full),
+        Vec::<String>::new(),
+        "the replay maps as the worker did"
+    );
     let bytes = store.snapshot("park").unwrap().unwrap();
     let (restored, covered) = from_snapshot(&config, &stored, &bytes).unwrap();
     assert_eq!(covered, 180);
@@ -209,11 +246,20 @@ fn an_unreadable_or_unfit_snapshot_falls_back_to_the_full_replay() {
     let mut other_format = good.clone();
     other_format[..4].copy_from_slice(&99u32.to_le_bytes());
     let shared = Shared::new(String::new(), 0);
-    for (what, bytes) in [("a flipped bit", flipped), ("format 99", other_format), ("empty", Vec::new()), ("garbage", vec![7; 40])] {
+    for (what, bytes) in [
+        ("a flipped bit", flipped),
+        ("format 99", other_format),
+        ("empty", Vec::new()),
+        ("garbage", vec![7; 40]),
+    ] {
         store.put_snapshot("park", &bytes).unwrap();
         let (fleets, covered) = restore(&config, &store, &shared).unwrap();
         assert_eq!(covered["park"], 0, "{what}: replayed in full");
-        assert_eq!(differences(&fleets["park"], &full), Vec::<String>::new(), "{what}");
+        assert_eq!(
+            differences(&fleets["park"], &full),
+            Vec::<String>::new(),
+            "{what}"
+        );
         let check = verify_store(&config, &store).unwrap();
         assert!(!check.ok, "{what}: the check fails");
         assert!(check.fleets[0].replay_error.is_none(), "{what}");

@@ -62,7 +62,11 @@ impl SavedMapper {
 
     /// The mapper again, with its node scans (in node order, as it was given them). It must
     /// have been saved with `params`.
-    pub fn restore(self, params: &Mapper2dParams, scans: Vec<Scan2>) -> Result<Mapper2d, RestoreError> {
+    pub fn restore(
+        self,
+        params: &Mapper2dParams,
+        scans: Vec<Scan2>,
+    ) -> Result<Mapper2d, RestoreError> {
         let mut mapper = self.0;
         if mapper.params != *params {
             return Err(RestoreError::Params);
@@ -77,14 +81,23 @@ impl SavedMapper {
         if let Some((what, n)) = lengths.iter().find(|(_, n)| *n != nodes) {
             return Err(RestoreError::Nodes(format!("{n} {what} for {nodes} nodes")));
         }
-        let edges_ok = mapper.graph.edges.iter().all(|e| e.from < nodes && e.to < nodes);
+        let edges_ok = mapper
+            .graph
+            .edges
+            .iter()
+            .all(|e| e.from < nodes && e.to < nodes);
         let gps_ok = mapper.graph.gps.iter().all(|g| g.node < nodes);
         if !edges_ok || !gps_ok {
-            return Err(RestoreError::Nodes("an edge names a node it does not hold".into()));
+            return Err(RestoreError::Nodes(
+                "an edge names a node it does not hold".into(),
+            ));
         }
         mapper.node_scans = scans;
         mapper.optimizer = Optimizer::for_parts();
-        mapper.background.solver = Some(GlobalSolver::resumed(&mapper.graph, &mapper.background.jobs));
+        mapper.background.solver = Some(GlobalSolver::resumed(
+            &mapper.graph,
+            &mapper.background.jobs,
+        ));
         Ok(mapper)
     }
 }
