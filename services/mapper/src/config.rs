@@ -138,8 +138,9 @@ impl Default for VersionsConfig {
 #[serde(default, deny_unknown_fields)]
 pub struct StoreConfig {
     /// A fleet's snapshot is written once it took this many nodes since its last one (when
-    /// no solve of it is out), and at a graceful stop; 0: never (a restart replays every
-    /// node). Writing one stalls the worker for a time that grows with the map.
+    /// no solve of it is out), and at a graceful stop; 0: never, and none stored is used (a
+    /// restart replays every node). Writing one stalls the worker for a time that grows with
+    /// the map.
     pub snapshot_every_nodes: u64,
 }
 

@@ -51,10 +51,13 @@ pub fn restore(config: &MapperConfig, store: &Store, shared: &Shared) -> Result<
 fn load(config: &MapperConfig, store: &Store, id: &str) -> Result<(FleetMap, usize)> {
     let started = Instant::now();
     let stored = store.load_fleet(id)?;
+    // Snapshots off: none is trusted either (a way to replay every node on purpose).
+    let snapshots = config.store.snapshot_every_nodes > 0;
     let snapshot = store.snapshot(id).unwrap_or_else(|e| {
         tracing::warn!(fleet = %id, "snapshot unreadable, replaying every node: {e}");
         None
     });
+    let snapshot = snapshot.filter(|_| snapshots);
     if let Some(bytes) = snapshot {
         match from_snapshot(config, &stored, &bytes) {
             Ok((map, covered)) => {
