@@ -68,7 +68,7 @@ fn node(r: usize, k: u64) -> v1::Node {
         Translation3::new(odometry.x, odometry.y, 0.0),
         UnitQuaternion::from_euler_angles(0.0, 0.0, odometry.theta),
     );
-    let gps = (r == 2 && k % 10 == 0).then(|| {
+    let gps = (r == 2 && k.is_multiple_of(10)).then(|| {
         let t = truth(k);
         let at = GeoDatum { origin: DATUM }.enu_to_geodetic(&Vector3::new(t.x, t.y, 0.0));
         v1::GpsFix {
@@ -162,7 +162,7 @@ fn map_as_the_worker(
                 .put_snapshot("park", &map.snapshot().unwrap())
                 .unwrap();
         }
-        if out.is_none() && (arrival % 17 == 0 || arrival == snapshot_after) {
+        if out.is_none() && (arrival.is_multiple_of(17) || arrival == snapshot_after) {
             out = map.take_solve().map(|s| (arrival as u64, s));
             if out.is_some() {
                 assert!(map.snapshot().is_none(), "no snapshot while a solve is out");
