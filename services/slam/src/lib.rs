@@ -12,6 +12,7 @@
 pub mod geodesy;
 pub mod gnss;
 pub mod grid;
+pub mod localize;
 pub mod matching;
 pub mod network;
 pub mod parts;

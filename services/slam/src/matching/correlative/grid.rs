@@ -246,6 +246,11 @@ impl PrecomputedGrids {
         &self.grid
     }
 
+    /// Bytes its cells take (the grid and every pooled level).
+    pub fn cell_bytes(&self) -> usize {
+        self.grid.cells.len() + self.levels.iter().map(|l| l.cells.len()).sum::<usize>()
+    }
+
     /// The deepest level (windows of 2^depth cells).
     pub fn depth(&self) -> u32 {
         self.levels.len() as u32 - 1
