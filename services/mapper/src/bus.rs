@@ -58,9 +58,10 @@ impl Bus {
             .iter()
             .filter_map(|r| {
                 let &last = r.nodes.last()?;
+                // Its last mapped node: nodes localized since are not in the map.
                 Some(MapPose {
                     robot: r.id.clone(),
-                    node_seq: r.last_node_seq,
+                    node_seq: map.nodes()[last].node_seq,
                     pose: map.poses()[last],
                 })
             })

@@ -181,6 +181,8 @@ pub struct FleetMap {
     network_chains: usize,
     /// Solves applied and numbered ([`SolvePoint`]).
     solve_points: u64,
+    /// Robot chains' nodes that were localized on a map version instead of mapped.
+    localized: localized::LocalizedChains,
 }
 
 impl FleetMap {
@@ -209,6 +211,7 @@ impl FleetMap {
             nodes: Vec::new(),
             network_chains: 0,
             solve_points: 0,
+            localized: Default::default(),
         }
     }
 
@@ -262,13 +265,10 @@ impl FleetMap {
         self.mapper.node_scan(node)
     }
 
-    /// Where `node` stands against what the map took of its robot's chain.
+    /// Where `node` stands against what the map took of its robot's chain (mapped or
+    /// localized).
     pub fn sequence(&self, node: &NodeInput) -> Sequence {
-        let chain = self
-            .by_id
-            .get(&node.robot)
-            .and_then(|&r| self.robots[r].chain(node.chain_id));
-        let Some(chain) = chain else {
+        let Some(last) = self.chain_acked(&node.robot, node.chain_id) else {
             // A chain the map does not know starts where its robot says it still holds nodes
             // (0 for a new outbox): a lost first node is asked for, never skipped. Chain 0 is
             // a sender from before chains: its first node seen starts it, as it always did.
@@ -281,16 +281,21 @@ impl FleetMap {
             };
         };
         match node.node_seq {
-            seq if seq <= chain.last_node_seq => Sequence::Duplicate,
-            seq if seq == chain.last_node_seq + 1 => Sequence::Next,
-            _ => Sequence::Gap {
-                expected: chain.last_node_seq + 1,
-            },
+            seq if seq <= last => Sequence::Duplicate,
+            seq if seq == last + 1 => Sequence::Next,
+            _ => Sequence::Gap { expected: last + 1 },
         }
     }
 
-    /// The highest node_seq taken of a robot's chain, if any.
+    /// The highest node_seq taken of a robot's chain (mapped or localized), if any.
     pub fn chain_acked(&self, robot: &str, chain_id: u64) -> Option<u64> {
+        let mapped = self.chain_mapped(robot, chain_id);
+        let localized = self.localized.last_seq(robot, chain_id);
+        mapped.max(localized)
+    }
+
+    /// The highest node_seq mapped of a robot's chain, if any.
+    fn chain_mapped(&self, robot: &str, chain_id: u64) -> Option<u64> {
         let r = *self.by_id.get(robot)?;
         Some(self.robots[r].chain(chain_id)?.last_node_seq)
     }
@@ -338,6 +343,16 @@ impl FleetMap {
             .iter()
             .position(|c| c.chain_id == node.chain_id)
         {
+            // Nodes localized since the chain's last mapped one: its odometry link spans a
+            // drive the network never saw, so the chain goes on as a new part of the network
+            // (it joins the map by scan matching or GPS, like a robot's first node).
+            if self.localized.last_seq(&node.robot, node.chain_id)
+                > Some(record.chains[c].last_node_seq)
+            {
+                self.robots[robot].chains[c].network_chain = self.network_chains;
+                self.network_chains += 1;
+                return Ok((robot, c, None));
+            }
             let last = &self.nodes[record.chains[c].last_node];
             let xy = |p: &Pose2| [p.x, p.y];
             let from = (last.stamp_ns, xy(&last.robot_odometry));
@@ -408,6 +423,7 @@ impl FleetMap {
         let slam::Placed::Node(index) = placed else {
             unreachable!("node distance 0: every scan is a node")
         };
+        self.localized.close_span(&node.robot, node.chain_id);
         let record = &mut self.robots[robot];
         record.last_node_seq = node.node_seq;
         record.chains[chain].last_node_seq = node.node_seq;
@@ -493,6 +509,9 @@ impl FleetMap {
             .collect()
     }
 }
+
+mod localized;
+pub use localized::{LocalizedSpan, SpanReplay};
 
 #[cfg(test)]
 #[path = "fleet_tests.rs"]

@@ -70,6 +70,7 @@ impl Worker {
                         .collect(),
                     first_edge: stored as u64,
                     edges: crate::store::encode_edges(&self.fleets[fleet].graph().edges[stored..]),
+                    localized: Vec::new(),
                 }
             })
             .collect();
