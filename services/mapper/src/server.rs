@@ -8,6 +8,7 @@
 use crate::bus::Bus;
 use crate::config::MapperConfig;
 use crate::fleet::FleetMap;
+use crate::localization::MapCache;
 use crate::recording::FeedReport;
 use crate::state::Shared;
 use crate::store::Store;
@@ -93,6 +94,8 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     let store = Arc::new(store);
     let shared = Arc::new(Shared::new(config.token.clone(), now_ns()));
     let fleets = restore(&config, &store, &shared)?;
+    let maps = Arc::new(MapCache::new(&config.localization, config.max_range_m));
+    let localizing = crate::localization::restore(&store, &maps)?;
 
     let session = config.zenoh.open(wire::session::Role::Router).await?;
     let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
@@ -102,6 +105,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             config.clone(),
             store.clone(),
             fleets,
+            localizing,
             shared.clone(),
             Bus::new(session.clone()),
         );
@@ -121,7 +125,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
-    let app = crate::api::router(shared.clone(), work_tx.clone(), store, &config);
+    let app = crate::api::router(shared.clone(), work_tx.clone(), store, maps, &config);
     let mut stopping = shared.stopping.subscribe();
     let http = tokio::spawn(async move {
         let stopped = async move {
@@ -260,12 +264,14 @@ fn replay(config: &MapperConfig, store: &Store, id: &str) -> Result<FleetMap> {
     let mut map = config.new_fleet(id);
     let mut legacy = stored.legacy_solves.iter().peekable();
     let mut points = stored.solve_points.iter().peekable();
+    let mut spans = crate::fleet::SpanReplay::new(stored.localized.clone());
     // The solve taken and not applied yet.
     let mut out = None;
     for (arrival, bytes) in stored.nodes.iter().enumerate() {
         let arrival = arrival as u64;
         let (node, _) = wire::decode_node_input(bytes)
             .with_context(|| format!("store: node {arrival} of fleet {id} is unreadable"))?;
+        spans.before(&mut map, &node);
         map.ingest(&node)
             .with_context(|| format!("store: replaying node {arrival} of fleet {id}"))?;
         if legacy.next_if_eq(&&arrival).is_some() {
@@ -293,6 +299,7 @@ fn replay(config: &MapperConfig, store: &Store, id: &str) -> Result<FleetMap> {
         points.peek().is_none(),
         "store: fleet {id}: solves stored beyond its nodes"
     );
+    spans.rest(&mut map);
     let rebuilt = crate::store::encode_edges(&map.graph().edges);
     anyhow::ensure!(
         rebuilt == stored.edges,

@@ -56,6 +56,10 @@ struct Api {
     served: Arc<[String]>,
     /// Versions a fleet keeps at most (`[versions] max_versions`).
     max_versions: usize,
+    /// Versions' localization maps, shared with the worker.
+    maps: Arc<crate::localization::MapCache>,
+    /// Held while a fleet's modes change: stored and handed to the worker in one order.
+    modes_lock: Arc<tokio::sync::Mutex<()>>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -279,6 +283,7 @@ pub fn router(
     shared: Arc<Shared>,
     work: mpsc::SyncSender<Work>,
     store: Arc<Store>,
+    maps: Arc<crate::localization::MapCache>,
     config: &MapperConfig,
 ) -> Router {
     let api = Api {
@@ -292,6 +297,8 @@ pub fn router(
         tiles: Arc::default(),
         served: config.fleets.clone().into(),
         max_versions: config.versions.max_versions.get(),
+        maps,
+        modes_lock: Arc::default(),
     };
     let (router, doc) = parts(Some(&api));
     let _ = api

@@ -90,7 +90,11 @@ fn app(config: MapperConfig) -> Router {
     // The file can go: the open database keeps what it needs.
     std::fs::remove_file(&path).ok();
     let shared = Arc::new(Shared::new(config.token.clone(), 0));
-    router(shared, mpsc::sync_channel(1).0, store, &config)
+    let maps = Arc::new(crate::localization::MapCache::new(
+        &config.localization,
+        config.max_range_m,
+    ));
+    router(shared, mpsc::sync_channel(1).0, store, maps, &config)
 }
 
 fn tokens() -> MapperConfig {

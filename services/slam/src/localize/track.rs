@@ -45,6 +45,7 @@ impl Default for TrackParams {
 
 /// Where a node left the robot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum TrackStatus {
     /// Found in the map.
