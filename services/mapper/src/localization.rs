@@ -11,7 +11,9 @@
 use crate::store::{Store, StoredModes};
 use serde::{Deserialize, Serialize};
 use slam::Pose2;
-use slam::localize::{LocalizationMap, LocalizeError, LocalizeParams, TrackParams, TrackStatus, Tracker};
+use slam::localize::{
+    LocalizationMap, LocalizeError, LocalizeParams, TrackParams, TrackStatus, Tracker,
+};
 use slam::matching::Scan2;
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::num::NonZeroUsize;
@@ -169,6 +171,11 @@ impl MapCache {
         }
     }
 
+    /// Scans are cut at this range (m), as in mapping.
+    pub fn max_range_m(&self) -> f32 {
+        self.max_range_m
+    }
+
     /// The map of `fleet`'s `version`, built from the store when not kept (seconds for a
     /// large map: call it off the worker and off the async runtime).
     pub fn get(
@@ -272,7 +279,12 @@ impl LocalizationLog {
     pub fn of(&self, fleet: &str, robot: &str, since: u64) -> Option<Vec<NodeLocalization>> {
         let robots = self.robots.lock().expect("log lock");
         let log = robots.get(&(fleet.to_owned(), robot.to_owned()))?;
-        Some(log.iter().filter(|e| e.node_seq >= since).cloned().collect())
+        Some(
+            log.iter()
+                .filter(|e| e.node_seq >= since)
+                .cloned()
+                .collect(),
+        )
     }
 
     /// Each robot's newest, of one fleet.
@@ -288,7 +300,10 @@ impl LocalizationLog {
 
 /// Every fleet's stored modes with the maps they name, for the worker at start. A map
 /// that cannot be built is logged: its robots are answered lost until their mode changes.
-pub fn restore(store: &Store, maps: &MapCache) -> Result<HashMap<String, Localizing>, crate::store::StoreError> {
+pub fn restore(
+    store: &Store,
+    maps: &MapCache,
+) -> Result<HashMap<String, Localizing>, crate::store::StoreError> {
     let mut fleets = HashMap::new();
     for (fleet, stored) in store.modes()? {
         let modes = FleetModes::from_stored(&stored);
@@ -334,7 +349,13 @@ impl Localizing {
     }
 
     /// Finds `node` on its robot's version; a robot that changed version starts anew.
-    pub fn localize(&mut self, node: &NodeInput, version: u64, params: &TrackParams, max_range_m: f32) -> (Localized, NodeLocalization) {
+    pub fn localize(
+        &mut self,
+        node: &NodeInput,
+        version: u64,
+        params: &TrackParams,
+        max_range_m: f32,
+    ) -> (Localized, NodeLocalization) {
         let started = std::time::Instant::now();
         let map = self.maps.get(&version);
         let (tracked, tracker) = self
@@ -346,7 +367,8 @@ impl Localizing {
             *tracker = Tracker::new();
         }
         let (bearings, ranges): (Vec<f32>, Vec<f32>) = node.scan.returns().unzip();
-        let scan = Scan2::from_polar(&bearings, &ranges, max_range_m).expect("returns come in pairs");
+        let scan =
+            Scan2::from_polar(&bearings, &ranges, max_range_m).expect("returns come in pairs");
         let odometry = Pose2::from_isometry3(&node.odometry.pose).compose(&node.scan_origin);
         let step = match map {
             Some(map) => tracker.step(map, params, odometry, &scan),

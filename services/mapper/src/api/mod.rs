@@ -12,6 +12,7 @@ mod fleets;
 mod graph;
 mod limits;
 mod live;
+mod localize;
 mod map;
 mod nodes;
 mod service;
@@ -196,6 +197,7 @@ impl Api {
         (name = "map", description = "The occupancy grid and map products"),
         (name = "nodes", description = "One node of the network"),
         (name = "versions", description = "Map versions: the map frozen, as one file"),
+        (name = "localization", description = "Robots localizing on a map version; a scan found on one"),
         (name = "events", description = "The event stream"),
         (name = "web", description = "The dashboard"),
     )
@@ -253,6 +255,9 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(versions::version_import))
         .routes(routes!(versions::version_summary, versions::version_delete))
         .routes(routes!(versions::version_file))
+        .routes(routes!(localize::modes, localize::set_modes))
+        .routes(routes!(localize::robot_localizations))
+        .routes(routes!(localize::localize))
         .routes(routes!(events::events))
 }
 

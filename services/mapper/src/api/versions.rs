@@ -31,7 +31,7 @@ pub(super) struct VersionList {
 
 impl Api {
     /// 503 for a quarantined fleet, 404 for one this mapper does not serve.
-    fn versions_of(&self, fleet: &str) -> Reply<()> {
+    pub(super) fn versions_of(&self, fleet: &str) -> Reply<()> {
         self.available(fleet)?;
         if self.served.iter().any(|f| f == fleet) {
             Ok(())

@@ -41,7 +41,10 @@ impl Worker {
         version: u64,
         batch: &mut Batch,
     ) {
-        let map = self.fleets.get_mut(&input.fleet).expect("made by the caller");
+        let map = self
+            .fleets
+            .get_mut(&input.fleet)
+            .expect("made by the caller");
         let span = match map.take_localized(input) {
             Ok(span) => span,
             Err(IngestError::Refused { source, .. }) => {
