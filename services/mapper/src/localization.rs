@@ -152,9 +152,12 @@ pub enum MapError {
     Store(#[from] crate::store::StoreError),
 }
 
+/// A version's map by (fleet, version).
+type KeptMap = ((String, u64), Arc<LocalizationMap>);
+
 /// Versions' maps, built once each and shared; the newest used are kept, up to a bound.
 pub struct MapCache {
-    maps: Mutex<VecDeque<((String, u64), Arc<LocalizationMap>)>>,
+    maps: Mutex<VecDeque<KeptMap>>,
     limit: usize,
     params: LocalizeParams,
     max_range_m: f32,

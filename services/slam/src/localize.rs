@@ -45,6 +45,17 @@ pub struct LocalizeParams {
     pub max_runner_up_ratio: f64,
     /// See `max_runner_up_ratio` (m).
     pub ambiguity_radius_m: f64,
+    /// A rival is refined like the best pose; it makes the scan ambiguous only when its
+    /// refined quality is within this of the best's (free space its returns fall in lowers
+    /// it)…
+    pub quality_margin: f64,
+    /// …checking at most this many rivals (the best scoring); more than this is ambiguous.
+    pub max_rivals_refined: usize,
+    /// A prior that may be wrong ([`LocalizationMap::relocalize`]): its window's best pose
+    /// must refine to at least this quality, or the whole map is searched. A wrong prior
+    /// finds poses that fit part of the scan (a wall, a row of trees): in the park they
+    /// refined to 0.81–0.86, right ones to 0.93 and more.
+    pub prior_min_quality: f64,
     /// The map's scans nearest the found pose that refine it (IDC against the nearest, then
     /// point-to-line against all of them)…
     pub reference_nodes: usize,
@@ -59,7 +70,9 @@ pub struct LocalizeParams {
     pub idc: IdcParams,
     /// Point-to-line refinement after IDC.
     pub refine: RefineParams,
-    /// The refined match must pass this gate.
+    /// The refined match must pass this gate. Unlike a loop closure's, it does not ask for
+    /// convergence: the refinement only polishes a pose the search found to a cell, and must
+    /// agree with it (`refine_max_shift_m`, `refine_max_turn_rad`).
     pub gate: QualityGate,
 }
 
@@ -78,13 +91,19 @@ impl Default for LocalizeParams {
             global_min_score: 0.6,
             max_runner_up_ratio: 0.85,
             ambiguity_radius_m: 1.5,
+            quality_margin: 0.1,
+            max_rivals_refined: 4,
+            prior_min_quality: 0.9,
             reference_nodes: 3,
             reference_radius_m: 8.0,
             refine_max_shift_m: 0.3,
             refine_max_turn_rad: 3f64.to_radians(),
             idc: IdcParams::default(),
             refine: RefineParams::default(),
-            gate: QualityGate::default(),
+            gate: QualityGate {
+                require_converged: false,
+                ..QualityGate::default()
+            },
         }
     }
 }
@@ -278,23 +297,35 @@ impl LocalizationMap {
     }
 
     /// As [`Self::localize`], falling back to the global search when the prior's window holds
-    /// no match: a robot that is lost, or whose prior is wrong.
+    /// no match, or an ambiguous one: a robot that is lost, or whose prior is wrong. A
+    /// wrong prior beside a long wall finds the wall, shifted; the ambiguity test (a pose
+    /// half the window away scoring nearly as well) sends it to the global search instead.
     pub fn relocalize(
         &self,
         scan: &Scan2,
         prior: Option<&Prior>,
     ) -> Result<Localization, LocalizeError> {
-        match prior.map(|p| self.search_window(scan, p)) {
+        match prior.map(|p| self.search_in(scan, p, true)) {
             Some(Ok(found)) => Ok(found),
             _ => self.search_global(scan),
         }
     }
 
-    /// The best pose within the prior's window, refined.
+    /// The best pose within the prior's window, refined. A robot followed by odometry needs
+    /// no ambiguity test: its prior is what keeps it in place along a wall.
     pub fn search_window(
         &self,
         scan: &Scan2,
         prior: &Prior,
+    ) -> Result<Localization, LocalizeError> {
+        self.search_in(scan, prior, false)
+    }
+
+    fn search_in(
+        &self,
+        scan: &Scan2,
+        prior: &Prior,
+        unambiguous: bool,
     ) -> Result<Localization, LocalizeError> {
         let p = &self.params;
         let (x, y) = (prior.pose.x, prior.pose.y);
@@ -305,12 +336,31 @@ impl LocalizationMap {
             angular_rad: prior.angular_rad.max(0.0),
         };
         self.check_returns(scan)?;
-        let found = search(&tile.grids, scan, prior.pose, &window, p.min_score, &p.grid).ok_or(
-            LocalizeError::NotFound {
-                min_score: p.min_score,
-                best: None,
-            },
-        )?;
+        let not_found = LocalizeError::NotFound {
+            min_score: p.min_score,
+            best: None,
+        };
+        let found = search(&tile.grids, scan, prior.pose, &window, p.min_score, &p.grid)
+            .ok_or(not_found)?;
+        if unambiguous {
+            let excluded = Exclusion {
+                pose: found.pose,
+                radius_m: p.ambiguity_radius_m.min(window.linear_m / 2.0),
+            };
+            let floor = found.score * p.max_runner_up_ratio;
+            let grids = &tile.grids;
+            let rival = runner_up(grids, scan, prior.pose, &window, &excluded, floor, &p.grid);
+            let mut rivals: Vec<CorrelativeMatch> = rival.into_iter().collect();
+            let verified =
+                self.verified(scan, &found, &mut rivals, SearchKind::Window, p.min_score)?;
+            if verified.quality < p.prior_min_quality {
+                return Err(LocalizeError::NotFound {
+                    min_score: p.min_score,
+                    best: Some(found.score),
+                });
+            }
+            return Ok(verified);
+        }
         self.refined(scan, &found, SearchKind::Window, p.min_score)
     }
 
@@ -348,7 +398,7 @@ impl LocalizationMap {
             radius_m: p.ambiguity_radius_m,
         };
         let far = |m: &CorrelativeMatch| distance(&m.pose, &best.pose) > p.ambiguity_radius_m;
-        let rival = bests
+        let mut rivals: Vec<CorrelativeMatch> = bests
             .iter()
             .filter_map(|(k, m)| {
                 if far(m) {
@@ -368,16 +418,57 @@ impl LocalizationMap {
                 .filter(far)
             })
             .filter(|m| m.score >= rival_floor)
-            .max_by(|a, b| a.score.total_cmp(&b.score));
-        if let Some(rival) = rival {
+            .collect();
+        let mut found = self.verified(
+            scan,
+            &best,
+            &mut rivals,
+            SearchKind::Global,
+            p.global_min_score,
+        )?;
+        found.candidates = candidates;
+        Ok(found)
+    }
+
+    /// `best` refined, unless one of `rivals` (poses elsewhere that score nearly as well)
+    /// refines about as well: then the scan is ambiguous. The refinement sees what the
+    /// correlative score does not: returns in space the map saw free. A wall that fits a
+    /// shifted pose fits it with conflicts, and a rival that does not refine, or refines
+    /// far worse, is no rival.
+    fn verified(
+        &self,
+        scan: &Scan2,
+        best: &CorrelativeMatch,
+        rivals: &mut [CorrelativeMatch],
+        kind: SearchKind,
+        min_score: f64,
+    ) -> Result<Localization, LocalizeError> {
+        let p = &self.params;
+        let found = self.refined(scan, best, kind, min_score)?;
+        rivals.sort_by(|a, b| b.score.total_cmp(&a.score));
+        for rival in rivals.iter().take(p.max_rivals_refined) {
+            let Ok(other) = self.refined(scan, rival, kind, min_score) else {
+                continue;
+            };
+            let apart = distance(&other.pose, &found.pose);
+            if apart > p.ambiguity_radius_m.min(distance(&rival.pose, &best.pose))
+                && other.quality >= found.quality - p.quality_margin
+            {
+                return Err(LocalizeError::Ambiguous {
+                    score: best.score,
+                    rival: rival.score,
+                    distance_m: apart,
+                });
+            }
+        }
+        if rivals.len() > p.max_rivals_refined {
+            let rival = rivals[p.max_rivals_refined];
             return Err(LocalizeError::Ambiguous {
                 score: best.score,
                 rival: rival.score,
                 distance_m: distance(&rival.pose, &best.pose),
             });
         }
-        let mut found = self.refined(scan, &best, SearchKind::Global, p.global_min_score)?;
-        found.candidates = candidates;
         Ok(found)
     }
 

@@ -81,10 +81,13 @@ pub(super) async fn set_modes(
     State(api): State<Api>,
     Path(fleet): Path<String>,
     headers: HeaderMap,
-    Json(change): Json<SetModes>,
+    body: axum::body::Bytes,
 ) -> Reply<Json<ModesView>> {
+    // The token first: a caller without one learns nothing of the body's faults.
     authorized(&api, &headers)?;
     api.versions_of(&fleet)?;
+    let change: SetModes = serde_json::from_slice(&body)
+        .map_err(|e| ApiError::BadRequest(format!("not a change of mode: {e}")))?;
     for robot in change.robots.iter().flatten() {
         wire::validate_id("robot", robot).map_err(|e| ApiError::BadRequest(e.to_string()))?;
     }

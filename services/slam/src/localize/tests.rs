@@ -238,3 +238,38 @@ fn the_tracker_follows_odometry_from_fix_to_fix_and_searches_again_when_lost() {
     assert_eq!(step.found.as_ref().unwrap().search, SearchKind::Global);
     assert!(error(&step.pose.unwrap(), &truth).0 < 0.03);
 }
+
+#[test]
+fn a_wrong_prior_along_a_wall_is_not_trusted_when_relocalizing() {
+    // A long corridor with one post: the walls fit any shift along them.
+    let mut scene = Scene::corridor(4.0, 80.0);
+    scene.trunks.push(([10.0, 1.2], 0.15));
+    let scans = (-20..=20)
+        .step_by(2)
+        .map(|x| {
+            let pose = Pose2::new(f64::from(x), 0.0, 0.0);
+            (pose, scan_at(&scene, &pose, (x + 50) as u64))
+        })
+        .collect();
+    let map = LocalizationMap::new(scans, LocalizeParams::default()).unwrap();
+    let truth = Pose2::new(10.3, -0.2, 0.05);
+    let scan = scan_at(&scene, &truth, 7);
+    // 8 m off along the corridor, with a window of 1.5 m: the walls fit there.
+    let wrong = Prior {
+        pose: Pose2::new(2.3, -0.2, 0.05),
+        linear_m: 1.5,
+        angular_rad: 0.2,
+    };
+    let trusted = map.localize(&scan, Some(&wrong)).unwrap();
+    assert!(
+        error(&trusted.pose, &truth).0 > 5.0,
+        "the window alone is fooled"
+    );
+    match map.relocalize(&scan, Some(&wrong)) {
+        Ok(found) => {
+            assert!(error(&found.pose, &truth).0 < 0.05, "{found:?}");
+            assert_eq!(found.search, SearchKind::Global);
+        }
+        Err(e) => assert!(matches!(e, LocalizeError::Ambiguous { .. }), "{e}"),
+    }
+}
