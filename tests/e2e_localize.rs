@@ -185,6 +185,35 @@ async fn modes_are_checked_kept_over_a_restart_and_hold_their_version() {
     assert!(answers.get(&8).is_some_and(found), "{answers:?}");
     assert_eq!(node_count(&http).await, 5);
 
+    // A scan over HTTP as protobuf: found, answered as a Localization.
+    let request = wire::v1::LocalizeRequest {
+        version: 1,
+        scan: nodes[3].scan.clone(),
+        map_version: 1,
+        ..Default::default()
+    };
+    let h = http.clone();
+    let answer = tokio::task::spawn_blocking(move || {
+        let request = ureq::http::Request::builder()
+            .method("POST")
+            .uri(format!("http://{h}{FLEET}/localize"))
+            .header("Content-Type", "application/x-protobuf")
+            .body(request.encode_to_vec())
+            .unwrap();
+        let mut response = agent().run(request).unwrap();
+        assert_eq!(response.status().as_u16(), 200);
+        response.body_mut().read_to_vec().unwrap()
+    })
+    .await
+    .unwrap();
+    let answer = wire::decode_localization(&answer).unwrap();
+    assert_eq!(
+        answer.status,
+        slam::localize::TrackStatus::Localized,
+        "{answer:?}"
+    );
+    assert_eq!(answer.search, Some(slam::localize::SearchKind::Global));
+
     // Back to map (every robot): the next nodes are mapped, and the version may go.
     let h = http.clone();
     tokio::task::spawn_blocking(move || {
