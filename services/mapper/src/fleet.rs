@@ -75,6 +75,12 @@ impl NodeRecord {
     }
 }
 
+/// A node's leveled scan as matching uses it: its returns, cut at `max_range_m`.
+pub fn matching_scan(node: &NodeInput, max_range_m: f32) -> Scan2 {
+    let (bearings, ranges): (Vec<f32>, Vec<f32>) = node.scan.returns().unzip();
+    Scan2::from_polar(&bearings, &ranges, max_range_m).expect("returns come in pairs")
+}
+
 /// Most robots one fleet takes: per-robot state is bounded (a node of one more is rejected,
 /// `too_many_robots`).
 pub const MAX_ROBOTS_PER_FLEET: usize = 1024;
@@ -181,8 +187,11 @@ pub struct FleetMap {
     network_chains: usize,
     /// Solves applied and numbered ([`SolvePoint`]).
     solve_points: u64,
-    /// Robot chains' nodes that were localized on a map version instead of mapped.
+    /// Robot chains' nodes that were localized on a map version, or passed over covered
+    /// ground, instead of mapped.
     localized: localized::LocalizedChains,
+    /// Each chain's last node, for the next one's prediction over covered ground.
+    covers: HashMap<(String, u64), coverage::Cover>,
 }
 
 impl FleetMap {
@@ -212,6 +221,7 @@ impl FleetMap {
             network_chains: 0,
             solve_points: 0,
             localized: Default::default(),
+            covers: HashMap::new(),
         }
     }
 
@@ -294,6 +304,12 @@ impl FleetMap {
         mapped.max(localized)
     }
 
+    /// The network's odometry chain that a robot's chain goes on in, once it has a node.
+    fn network_chain_of(&self, robot: &str, chain_id: u64) -> Option<usize> {
+        let r = *self.by_id.get(robot)?;
+        Some(self.robots[r].chain(chain_id)?.network_chain)
+    }
+
     /// The highest node_seq mapped of a robot's chain, if any.
     fn chain_mapped(&self, robot: &str, chain_id: u64) -> Option<u64> {
         let r = *self.by_id.get(robot)?;
@@ -346,9 +362,7 @@ impl FleetMap {
             // Nodes localized since the chain's last mapped one: its odometry link spans a
             // drive the network never saw, so the chain goes on as a new part of the network
             // (it joins the map by scan matching or GPS, like a robot's first node).
-            if self.localized.last_seq(&node.robot, node.chain_id)
-                > Some(record.chains[c].last_node_seq)
-            {
+            if self.localized.breaks(&node.robot, node.chain_id) {
                 self.robots[robot].chains[c].network_chain = self.network_chains;
                 self.network_chains += 1;
                 return Ok((robot, c, None));
@@ -400,9 +414,7 @@ impl FleetMap {
         let robot_odometry = Pose2::from_isometry3(&node.odometry.pose);
         let scan_frame = robot_odometry.compose(&node.scan_origin);
         let (bearings_rad, ranges_m) = node.polar();
-        let (bearings, ranges): (Vec<f32>, Vec<f32>) = node.scan.returns().unzip();
-        let scan =
-            Scan2::from_polar(&bearings, &ranges, self.max_range_m).expect("returns come in pairs");
+        let scan = matching_scan(node, self.max_range_m);
         let attitude = node.odometry.pose.rotation;
         let gps: Vec<GpsObservation> = node
             .gps
@@ -510,6 +522,7 @@ impl FleetMap {
     }
 }
 
+mod coverage;
 mod localized;
 pub use localized::{LocalizedSpan, SpanReplay};
 

@@ -139,7 +139,7 @@ fn localized_nodes_are_taken_in_sequence_without_growing_the_network() {
     let mut spans = Vec::new();
     for seq in 3..6 {
         spans.push(
-            map.take_localized(&node("r", 7, seq, 3, seq as f64))
+            map.take_localized(&node("r", 7, seq, 3, seq as f64), false)
                 .unwrap(),
         );
     }
@@ -149,7 +149,7 @@ fn localized_nodes_are_taken_in_sequence_without_growing_the_network() {
     assert_eq!((last.first_seq, last.last_seq), (3, 5));
     assert_eq!(map.sequence(&node("r", 7, 4, 3, 4.0)), Sequence::Duplicate);
     assert!(
-        map.take_localized(&node("r", 7, 7, 7, 7.0)).is_err(),
+        map.take_localized(&node("r", 7, 7, 7, 7.0), false).is_err(),
         "a gap"
     );
     // Mapping again: node 6 is taken, as a new part of the network (its odometry link
@@ -157,11 +157,13 @@ fn localized_nodes_are_taken_in_sequence_without_growing_the_network() {
     map.ingest(&node("r", 7, 6, 6, 60.0)).unwrap();
     assert_ne!(map.mapper.node_robot(2).0, map.mapper.node_robot(3).0);
     // A second run of localized nodes is a second span.
-    let again = map.take_localized(&node("r", 7, 7, 7, 61.0)).unwrap();
+    let again = map
+        .take_localized(&node("r", 7, 7, 7, 61.0), false)
+        .unwrap();
     assert_eq!((again.first_seq, again.last_seq), (7, 7));
     spans.push(again);
     // A robot that only ever localized: its chain is known to the sequence, not as a robot.
-    let only = map.take_localized(&node("q", 1, 0, 0, 0.0)).unwrap();
+    let only = map.take_localized(&node("q", 1, 0, 0, 0.0), false).unwrap();
     spans.push(only);
     assert_eq!(map.robots().len(), 1);
     assert_eq!(map.chain_acked("q", 1), Some(0));
@@ -181,6 +183,8 @@ fn localized_nodes_are_taken_in_sequence_without_growing_the_network() {
     assert_eq!(replayed.chain_acked("r", 7), Some(7));
     assert_eq!(replayed.chain_acked("q", 1), Some(0));
     // The open run goes on in the same span.
-    let next = replayed.take_localized(&node("r", 7, 8, 8, 62.0)).unwrap();
+    let next = replayed
+        .take_localized(&node("r", 7, 8, 8, 62.0), false)
+        .unwrap();
     assert_eq!((next.first_seq, next.last_seq), (7, 8));
 }

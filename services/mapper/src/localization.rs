@@ -369,9 +369,7 @@ impl Localizing {
             *tracked = version;
             *tracker = Tracker::new();
         }
-        let (bearings, ranges): (Vec<f32>, Vec<f32>) = node.scan.returns().unzip();
-        let scan =
-            Scan2::from_polar(&bearings, &ranges, max_range_m).expect("returns come in pairs");
+        let scan = crate::fleet::matching_scan(node, max_range_m);
         let odometry = Pose2::from_isometry3(&node.odometry.pose).compose(&node.scan_origin);
         let step = match map {
             Some(map) => tracker.step(map, params, odometry, &scan),

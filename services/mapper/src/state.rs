@@ -153,6 +153,9 @@ pub struct Metrics {
     pub nodes_duplicate: AtomicU64,
     /// Nodes of localizing robots localized and stored (as spans), not mapped.
     pub nodes_localized: AtomicU64,
+    /// Nodes of mapping robots passed over covered ground: located, stored as spans, not
+    /// mapped.
+    pub nodes_passed: AtomicU64,
     /// Live odometry messages taken.
     pub odometry_received: AtomicU64,
     /// Acks published.

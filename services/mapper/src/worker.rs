@@ -366,6 +366,11 @@ impl Worker {
             return;
         }
         let map = self.fleets.get_mut(&fleet).expect("made above");
+        if let Some(pose) = map.pass(&input) {
+            self.take_passed(key, &input, pose, batch);
+            return;
+        }
+        let map = self.fleets.get_mut(&fleet).expect("made above");
         let arrival = map.nodes().len() as u64;
         let accepted = match map.ingest(&input) {
             Ok(ingested) => {

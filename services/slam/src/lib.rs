@@ -43,8 +43,9 @@ pub mod optimize;
 pub use init::{Init, InitError, initialize};
 #[cfg(feature = "solver")]
 pub use mapping2d::{
-    BackgroundSolve, ConsistencyParams, FirstContactParams, Mapper2d, Mapper2dParams, MapperStats,
-    Placed, SolvedInBackground, SubmapSearchParams, WrongClosures,
+    BackgroundSolve, ConsistencyParams, CoverageParams, FirstContactParams, Mapper2d,
+    Mapper2dParams, MapperStats, Passed, Placed, SolvedInBackground, SubmapSearchParams,
+    WrongClosures,
 };
 #[cfg(feature = "solver")]
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

@@ -84,6 +84,11 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
             &m.nodes_localized,
         ),
         (
+            "levelmap_nodes_passed_total",
+            "Nodes of mapping robots passed over covered ground (located, not mapped).",
+            &m.nodes_passed,
+        ),
+        (
             "levelmap_localizations_sent_total",
             "Localizations published to localizing robots.",
             &m.localizations_sent,

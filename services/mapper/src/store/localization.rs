@@ -6,8 +6,11 @@ use super::{Store, StoreError};
 use crate::fleet::LocalizedSpan;
 use redb::{ReadTransaction, ReadableTable, TableDefinition, WriteTransaction};
 
-/// (fleet, robot, chain_id, first node_seq) → last node_seq of a run of localized nodes.
-const LOCALIZED: TableDefinition<(&str, &str, u64, u64), u64> =
+/// (fleet, robot, chain_id, first node_seq) → the run's last node_seq, and for a run passed
+/// over covered ground (not localized on a version) the chain's passes: how many, their
+/// path (m), the last one's odometry (x, y, θ); NaN path for a localized run.
+type SpanRow = (u64, u64, f64, f64, f64, f64);
+const LOCALIZED: TableDefinition<(&str, &str, u64, u64), SpanRow> =
     TableDefinition::new("localized_spans");
 /// (fleet, robot) → the version the robot localizes on, 0 to map; robot "" is the fleet's
 /// setting for robots without one of their own.
@@ -65,10 +68,15 @@ pub(super) fn write_spans(
 ) -> Result<(), StoreError> {
     let mut table = txn.open_table(LOCALIZED)?;
     for s in spans {
-        table.insert(
-            (fleet, s.robot.as_str(), s.chain_id, s.first_seq),
-            s.last_seq,
-        )?;
+        let key = (fleet, s.robot.as_str(), s.chain_id, s.first_seq);
+        let row = match s.passed {
+            Some(p) => {
+                let o = p.odometry.unwrap_or(slam::Pose2::IDENTITY);
+                (s.last_seq, p.nodes as u64, p.path_m, o.x, o.y, o.theta)
+            }
+            None => (s.last_seq, 0, f64::NAN, 0.0, 0.0, 0.0),
+        };
+        table.insert(key, row)?;
     }
     Ok(())
 }
@@ -87,11 +95,18 @@ pub(super) fn read_spans(
         if f != fleet {
             break;
         }
+        let (last_seq, nodes, path_m, x, y, theta) = v.value();
+        let passed = (!path_m.is_nan()).then(|| slam::Passed {
+            nodes: nodes as usize,
+            path_m,
+            odometry: Some(slam::Pose2::new(x, y, theta)),
+        });
         spans.push(LocalizedSpan {
             robot: robot.to_owned(),
             chain_id,
             first_seq,
-            last_seq: v.value(),
+            last_seq,
+            passed,
         });
     }
     Ok(spans)

@@ -6,7 +6,8 @@
 use super::{Batch, Worker};
 use crate::fleet::{IngestError, LocalizedSpan};
 use crate::localization::{FleetModes, NodeLocalization, RobotMode};
-use slam::localize::LocalizationMap;
+use slam::Pose2;
+use slam::localize::{LocalizationMap, SearchKind, TrackStatus};
 use std::collections::HashMap;
 use std::sync::Arc;
 use wire::{Localized, NodeInput};
@@ -45,7 +46,7 @@ impl Worker {
             .fleets
             .get_mut(&input.fleet)
             .expect("made by the caller");
-        let span = match map.take_localized(input) {
+        let span = match map.take_localized(input, false) {
             Ok(span) => span,
             Err(IngestError::Refused { source, .. }) => {
                 self.reject(source.reason(), key, &source);
@@ -76,6 +77,66 @@ impl Worker {
         });
     }
 
+    /// Takes `input` as passed over covered ground, at `pose` on the live map (docs/services.md,
+    /// "Bounded growth"): numbered and acked like a localized node, answered to its robot as
+    /// one (map version 0: the live map).
+    pub(super) fn take_passed(
+        &mut self,
+        key: &str,
+        input: &NodeInput,
+        pose: Pose2,
+        batch: &mut Batch,
+    ) {
+        let started = std::time::Instant::now();
+        let map = self
+            .fleets
+            .get_mut(&input.fleet)
+            .expect("made by the caller");
+        let span = match map.take_localized(input, true) {
+            Ok(span) => span,
+            Err(e) => {
+                self.reject("invalid_value", key, &e);
+                return;
+            }
+        };
+        crate::state::Metrics::bump(&self.shared.metrics.nodes_passed);
+        let message = Localized {
+            fleet: input.fleet.clone(),
+            robot: input.robot.clone(),
+            chain_id: input.chain_id,
+            node_seq: input.node_seq,
+            map_version: 0,
+            status: TrackStatus::Localized,
+            pose: Some(pose),
+            covariance: None,
+            score: 0.0,
+            search: Some(SearchKind::Window),
+            sent_ns: wire::session::now_ns(),
+            reason: String::new(),
+        };
+        let entry = NodeLocalization {
+            chain_id: input.chain_id,
+            node_seq: input.node_seq,
+            stamp_ns: input.stamp_ns,
+            version: 0,
+            status: TrackStatus::Localized,
+            pose: Some(pose),
+            covariance: None,
+            score: None,
+            search: Some(SearchKind::Window),
+            reason: None,
+            took_ms: started.elapsed().as_secs_f64() * 1e3,
+        };
+        batch.localized.push(LocalizedNode {
+            fleet: input.fleet.clone(),
+            robot: input.robot.clone(),
+            chain_id: input.chain_id,
+            span,
+            message,
+            entry,
+        });
+    }
+
     /// A fleet's new modes.
     pub(super) fn set_modes(
         &mut self,
@@ -95,7 +156,9 @@ impl Worker {
         let history = self.config.localization.history.get();
         for n in nodes {
             self.bus.localization(&self.shared.metrics, &n.message);
-            crate::state::Metrics::bump(&self.shared.metrics.nodes_localized);
+            if n.entry.version != 0 {
+                crate::state::Metrics::bump(&self.shared.metrics.nodes_localized);
+            }
             self.shared
                 .localizations
                 .push(&n.fleet, &n.robot, n.entry.clone(), history);
