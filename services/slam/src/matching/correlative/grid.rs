@@ -100,6 +100,11 @@ impl ProbabilityGrid {
         ]
     }
 
+    /// Its size in cells: width (along x) and height.
+    pub(super) fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
     /// Cell size (m).
     pub fn resolution_m(&self) -> f64 {
         self.resolution_m
