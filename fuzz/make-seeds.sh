@@ -2,8 +2,9 @@
 # Writes the seed inputs of the fuzz targets into DIR/<target>/ (README.md, "Corpora"): small
 # excerpts of the public test data (tests/README.md; $LEVELMAP_DATA, else ../shared/data
 # beside the repository), the node target's messages (examples/node_seeds.rs), the ROS 2
-# samples (examples/ros2_cdr_seeds.rs), tiny Ouster captures (examples/pcap_ouster_seeds.rs) and
-# map version files (examples/map_version_seeds.rs). The files
+# samples (examples/ros2_cdr_seeds.rs), tiny Ouster captures (examples/pcap_ouster_seeds.rs),
+# map version files (examples/map_version_seeds.rs) and localize requests and localizations
+# (examples/localize_seeds.rs). The files
 # read are never changed. The committed corpora are these seeds plus what the fuzzer found,
 # minimized (`cargo fuzz cmin`).
 set -euo pipefail
@@ -14,7 +15,7 @@ if [ ! -d "$data" ]; then
   echo "fuzz/make-seeds.sh: $data is missing (scripts/test-data.sh fetch)" >&2
   exit 1
 fi
-mkdir -p "$out"/{node,g2o,toro,carmen,relations,kitti,threedtk,ros2_cdr,pcap_ouster,map_version}
+mkdir -p "$out"/{node,g2o,toro,carmen,relations,kitti,threedtk,ros2_cdr,pcap_ouster,map_version,localize}
 
 # A pose graph's first N vertices and the edges among them (the whole graph is megabytes).
 graph_excerpt() { # file vertex-tag edge-tag n
@@ -72,6 +73,7 @@ cargo run --quiet --locked --manifest-path fuzz/Cargo.toml --example node_seeds 
 cargo run --quiet --locked --manifest-path fuzz/Cargo.toml --example ros2_cdr_seeds -- "$out/ros2_cdr"
 cargo run --quiet --locked --manifest-path fuzz/Cargo.toml --example pcap_ouster_seeds -- "$out/pcap_ouster"
 cargo run --quiet --locked --manifest-path fuzz/Cargo.toml --example map_version_seeds -- "$out/map_version"
+cargo run --quiet --locked --manifest-path fuzz/Cargo.toml --example localize_seeds -- "$out/localize"
 if find "$out" -type f -empty | grep .; then
   echo "fuzz/make-seeds.sh: the seeds above are empty" >&2
   exit 1

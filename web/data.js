@@ -29,6 +29,15 @@ export async function loadRobots() {
     s.nodes = r.nodes;
     if (r.last_seen_ns) s.lastSeenMs = now - (now_ns - r.last_seen_ns) / 1e6;
   }
+  // Each robot's mode (map, or localize on a version) and its newest localization: a
+  // robot that only localizes has no node in the map, its pose is the localization's.
+  const { modes, localizations } = await getJson(`/fleets/${state.fleet}/modes`);
+  for (const [id, l] of Object.entries(localizations)) {
+    const s = robot(id);
+    s.localization = l;
+    if (l.pose && !robots.some((r) => r.id === id)) s.pose = l.pose;
+  }
+  for (const s of Object.values(state.robots)) s.mode = modes.robots[s.id] ?? modes.fleet;
 }
 
 let lastGraphLoad = 0;

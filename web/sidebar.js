@@ -22,6 +22,13 @@ export function renderSummary() {
   ]);
 }
 
+/// "maps", or "v1 · localized" (the version it localizes on, and how its last node went).
+function modeText(r) {
+  if (r.mode?.mode !== "localize") return "maps";
+  const status = r.localization?.version === r.mode.version ? ` · ${r.localization.status.replace("_", " ")}` : "";
+  return `v${r.mode.version}${status}`;
+}
+
 export function renderRobots() {
   const ul = $("robot-list");
   const now = Date.now();
@@ -52,7 +59,10 @@ export function renderRobots() {
         } else follow(r.id);
         renderRobots();
       });
-      li.append(sw, name, age, button);
+      const mode = document.createElement("span");
+      mode.className = "mode";
+      mode.textContent = modeText(r);
+      li.append(sw, name, mode, age, button);
       return li;
     });
   ul.replaceChildren(...items);

@@ -12,8 +12,9 @@
 #                                   CA, and the access-control list for FLEET's ROBOTs
 #
 # Robot R may put only on levelmap/FLEET/robots/R/{node,odom,scan}, and receive only its own
-# levelmap/FLEET/robots/R/ack and levelmap/FLEET/map/** (and query the latter); the mapper's
-# own session is the router, so acks and map data can come from nowhere else. Everything
+# levelmap/FLEET/robots/R/{ack,localization} and levelmap/FLEET/map/** (and query the latter);
+# the mapper's own session is the router, so acks, localizations and map data can come from
+# nowhere else. Everything
 # else is denied, to anyone (a certificate of this CA with another common name included).
 #
 # Environment:
@@ -134,9 +135,10 @@ for robot in "${robots[@]}"; do
       { id: \"$robot-puts\", permission: \"allow\", flows: [\"ingress\"], messages: [\"put\"],
         key_exprs: [\"$own/node\", \"$own/odom\", \"$own/scan\"] },
       { id: \"$robot-subscribes\", permission: \"allow\", flows: [\"ingress\"],
-        messages: [\"declare_subscriber\"], key_exprs: [\"$own/ack\", \"$map\"] },
+        messages: [\"declare_subscriber\"],
+        key_exprs: [\"$own/ack\", \"$own/localization\", \"$map\"] },
       { id: \"$robot-receives\", permission: \"allow\", flows: [\"egress\"], messages: [\"put\"],
-        key_exprs: [\"$own/ack\", \"$map\"] },
+        key_exprs: [\"$own/ack\", \"$own/localization\", \"$map\"] },
       { id: \"$robot-queries\", permission: \"allow\", flows: [\"ingress\"], messages: [\"query\"],
         key_exprs: [\"$map\"] },
       { id: \"$robot-replies\", permission: \"allow\", flows: [\"egress\"], messages: [\"reply\"],

@@ -163,6 +163,8 @@ test("the robots move on the map", async () => {
   // The summary panel and the robots' list show the live map.
   assert.match(await page.textContent("#summary-list"), /nodes\d+/);
   assert.equal(await page.locator("#robot-list li").count(), 3);
+  // Each robot's mode: the demo's robots map.
+  assert.deepEqual(await page.locator("#robot-list li .mode").allTextContents(), ["maps", "maps", "maps"]);
 });
 
 test("the follow view keeps a robot in the middle and draws its live scan", async () => {

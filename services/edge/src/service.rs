@@ -52,8 +52,16 @@ pub struct EdgeReport {
     /// Corrected poses the mapper sent back after its solves, and the latest: this robot's
     /// last node on the map.
     pub map_pose_updates: u64,
-    /// The latest corrected pose of this robot's last node.
+    /// The latest corrected pose of this robot's last node (mapped, or localized on a map
+    /// version).
     pub map_pose: Option<slam::Pose2>,
+    /// Localizations of this robot's nodes on a map version (while it localizes), and of
+    /// them, those found in the map (the rest carried forward by odometry, or lost).
+    pub localizations: u64,
+    /// See `localizations`.
+    pub localized: u64,
+    /// The latest localization's status and map version.
+    pub localization: Option<(slam::localize::TrackStatus, u64)>,
     /// The latest map→odom correction (`[ros2_out]` publishes it on `/tf`).
     pub map_from_odometry: Option<slam::Pose2>,
     /// Transforms published on `/tf` (`[ros2_out]`).
@@ -83,6 +91,9 @@ struct Link {
     live_scans: zenoh::pubsub::Publisher<'static>,
     acks: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
     map_poses:
+        zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    /// The mapper's localizations of this robot's nodes, while it localizes on a version.
+    localizations:
         zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
 }
 
@@ -118,6 +129,10 @@ impl Link {
             .declare_subscriber(wire::map_key(&config.fleet, "poses")?)
             .await
             .map_err(anyhow::Error::from_boxed)?;
+        let localizations = session
+            .declare_subscriber(wire::localization_key(&config.fleet, &config.robot)?)
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
         Ok(Link {
             session,
             nodes,
@@ -125,6 +140,7 @@ impl Link {
             live_scans,
             acks,
             map_poses,
+            localizations,
         })
     }
 }
@@ -296,6 +312,29 @@ impl Sending {
         }
     }
 
+    /// The mapper's localization of one of this robot's nodes on a map version: a corrected
+    /// pose like a solve's, unless the robot is lost.
+    fn on_localization(&mut self, robot: &str, payload: &[u8]) {
+        match wire::decode_localization(payload) {
+            Ok(l) if l.robot == robot => {
+                self.report.localizations += 1;
+                self.report.localization = Some((l.status, l.map_version));
+                if l.status == slam::localize::TrackStatus::Localized {
+                    self.report.localized += 1;
+                }
+                if let Some(pose) = l.pose {
+                    self.report.map_pose = Some(pose);
+                    if self.correction.on_map_pose(l.node_seq, pose).is_some() {
+                        self.report.map_from_odometry = self.correction.map_from_odometry();
+                        self.publish_tf();
+                    }
+                }
+            }
+            Ok(l) => tracing::warn!(robot, "a localization of {} ignored", l.robot),
+            Err(e) => tracing::warn!(robot, "bad localization: {e}"),
+        }
+    }
+
     /// The latest correction on `/tf`, once there is one and `[ros2_out]` is open.
     fn publish_tf(&mut self) {
         if let Some(opening) = self.tf_opening.as_mut()
@@ -457,6 +496,10 @@ pub async fn run(
             sample = link.map_poses.recv_async() => {
                 let Ok(sample) = sample else { break };
                 sending.on_map_poses(robot, &sample.payload().to_bytes());
+            }
+            sample = link.localizations.recv_async() => {
+                let Ok(sample) = sample else { break };
+                sending.on_localization(robot, &sample.payload().to_bytes());
             }
             _ = tick.tick() => {
                 if sending.on_tick(&link, source_done).await? { break; }

@@ -444,7 +444,7 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
 }
 
 /// An HTTP client that hands every status back (a 404 is an answer, not an error).
-fn agent() -> ureq::Agent {
+pub(crate) fn agent() -> ureq::Agent {
     ureq::Agent::config_builder()
         .http_status_as_error(false)
         .build()

@@ -16,11 +16,17 @@ use std::time::Instant;
 use wire::session::SessionConfig;
 
 /// Run the fleet demo: a mapper and simulated robots over real Zenoh, the map over HTTP.
-#[derive(Args, Debug)]
+#[derive(Args, Clone, Debug)]
 pub struct DemoArgs {
     /// How long the robots drive (s of simulated time).
     #[arg(long, default_value_t = 120.0)]
     pub duration: f64,
+    /// Drive this many laps of the first robot's loop instead of `--duration`.
+    #[arg(long)]
+    pub laps: Option<u32>,
+    /// Skip the fixed-2D baseline (minutes for a long drive).
+    #[arg(long)]
+    pub no_baseline: bool,
     /// Robots (1 to 3: the park's loops).
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
     pub robots: u8,
@@ -95,12 +101,28 @@ struct DemoReport {
     node_resends: u64,
     /// Nodes left unacked in the outboxes (0 when every node reached the map).
     outbox_pending: u64,
+    /// Nodes passed over covered ground (located, not added: docs/services.md, "Bounded
+    /// growth").
+    nodes_passed: u64,
+    /// The mapper's store file at the end (bytes).
+    store_bytes: u64,
+    /// Simulated time driven (s).
+    duration_s: f64,
+    /// With `--laps`: the map when the first robot finished its first lap.
+    first_lap: Option<FirstLap>,
     wall_s: f64,
 }
 
 /// Runs the demo: a mapper and simulated robots, the map scored against ground truth.
 pub fn run(args: &DemoArgs) -> Result<()> {
-    crate::runtime()?.block_on(run_async(args))
+    let mut args = args.clone();
+    if let Some(laps) = args.laps {
+        let lap_ns = sim::Route::park_loop(0)
+            .and_then(|r| r.lap_ns())
+            .context("the first loop's lap time")?;
+        args.duration = f64::from(laps) * lap_ns as f64 * 1e-9;
+    }
+    crate::runtime()?.block_on(run_async(&args))
 }
 
 async fn run_async(args: &DemoArgs) -> Result<()> {
@@ -127,6 +149,19 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         println!("mapper: Zenoh {} · HTTP {api}/summary", args.zenoh);
     }
     let epoch_ns = wire::session::now_ns();
+    let duration_ns = (args.duration * 1e9) as u64;
+    let start = if args.scatter_starts {
+        FleetStart::Scattered
+    } else {
+        FleetStart::Dock
+    };
+    let truth: Vec<FleetRobot> = (0..usize::from(args.robots))
+        .map(|i| {
+            FleetRobot::starting(edge::park(), i, duration_ns, args.seed, start).expect("park loop")
+        })
+        .collect();
+    // Without GPS and a known start the map's frame is its own.
+    let ate_aligned = args.no_gps && args.scatter_starts;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let mut robots = Vec::new();
     for i in 0..usize::from(args.robots) {
@@ -141,6 +176,11 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         wire::session::shutdown_signal().await;
         let _ = stop_tx.send(true);
     });
+    // With --laps: the map as it was when the first robot finished its first lap.
+    let first_lap = match args.laps {
+        Some(_) => Some(after_first_lap(&mapper, &truth, epoch_ns, ate_aligned, &args.dir).await?),
+        None => None,
+    };
     let mut sends = (0, 0, 0);
     for robot in robots {
         let report = robot.await??;
@@ -163,38 +203,10 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         .shared
         .fleet(FLEET)
         .context("no node reached the mapper")?;
-    let duration_ns = (args.duration * 1e9) as u64;
-    let start = if args.scatter_starts {
-        FleetStart::Scattered
-    } else {
-        FleetStart::Dock
-    };
-    let truth: Vec<FleetRobot> = (0..usize::from(args.robots))
-        .map(|i| {
-            FleetRobot::starting(edge::park(), i, duration_ns, args.seed, start).expect("park loop")
-        })
-        .collect();
-    let leveled_truth = |robot: usize, stamp_ns: u64| {
-        let t = &truth[robot];
-        let pose = t.truth_at(stamp_ns - epoch_ns);
-        Pose2::from_isometry3(&leveling::leveled_frame(&pose, &t.scanner().mount).inverse())
-    };
-    let pairs = view.nodes.iter().zip(&view.poses).map(|(n, p)| {
-        let robot: usize = view.robots[n.robot].id["robot".len()..]
-            .parse()
-            .expect("robotN");
-        (*p, leveled_truth(robot, n.stamp_ns))
-    });
-    // Without GPS and a known start the map's frame is its own.
-    let ate_aligned = args.no_gps && args.scatter_starts;
-    let ate = if ate_aligned {
-        slam::aligned_position_rmse(pairs)
-    } else {
-        slam::position_rmse(pairs)
-    };
+    let ate = ate_of(&view, &truth, epoch_ns, ate_aligned);
     // Seconds of simulation and mapping (minutes in a debug build): on the blocking pool, so
     // that the mapper's HTTP API, on this runtime, goes on answering meanwhile.
-    let baseline = if args.no_gps || args.scatter_starts {
+    let baseline = if args.no_gps || args.scatter_starts || args.no_baseline {
         None
     } else {
         let (robots, duration, seed) = (usize::from(args.robots), args.duration, args.seed);
@@ -226,6 +238,14 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         node_sends: sends.0,
         node_resends: sends.1,
         outbox_pending: sends.2,
+        nodes_passed: mapper
+            .shared
+            .metrics
+            .nodes_passed
+            .load(std::sync::atomic::Ordering::Relaxed),
+        store_bytes: std::fs::metadata(args.dir.join("mapper.redb")).map_or(0, |m| m.len()),
+        duration_s: args.duration,
+        first_lap,
         wall_s: started.elapsed().as_secs_f64(),
     };
     if args.json {
@@ -263,6 +283,74 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         ctrl_c.abort();
     }
     mapper.stop().await
+}
+
+/// The map's node positions against the ground truth (RMSE, m); fitted to it first when the
+/// map has a frame of its own.
+fn ate_of(
+    view: &mapper::state::FleetView,
+    truth: &[FleetRobot],
+    epoch_ns: u64,
+    aligned: bool,
+) -> f64 {
+    let leveled_truth = |robot: usize, stamp_ns: u64| {
+        let t = &truth[robot];
+        let pose = t.truth_at(stamp_ns - epoch_ns);
+        Pose2::from_isometry3(&leveling::leveled_frame(&pose, &t.scanner().mount).inverse())
+    };
+    let pairs = view.nodes.iter().zip(&view.poses).map(|(n, p)| {
+        let robot: usize = view.robots[n.robot].id["robot".len()..]
+            .parse()
+            .expect("robotN");
+        (*p, leveled_truth(robot, n.stamp_ns))
+    });
+    if aligned {
+        slam::aligned_position_rmse(pairs)
+    } else {
+        slam::position_rmse(pairs)
+    }
+}
+
+/// The map after the first lap of the first robot's loop.
+#[derive(Serialize)]
+struct FirstLap {
+    nodes: usize,
+    ate_rmse_m: f64,
+    store_bytes: u64,
+}
+
+/// Waits until robot0's odometry is past its first lap, solves the map and takes its
+/// figures (the robots drive on meanwhile).
+async fn after_first_lap(
+    mapper: &mapper::Running,
+    truth: &[FleetRobot<'_>],
+    epoch_ns: u64,
+    aligned: bool,
+    dir: &std::path::Path,
+) -> Result<FirstLap> {
+    let lap_ns = sim::Route::park_loop(0)
+        .and_then(|r| r.lap_ns())
+        .context("the first loop's lap time")?;
+    loop {
+        let at = mapper
+            .shared
+            .live
+            .lock()
+            .expect("live lock")
+            .get(&(FLEET.to_owned(), "robot0".to_owned()))
+            .map(|l| l.stamp_ns);
+        if at.is_some_and(|t| t >= epoch_ns + lap_ns) {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    mapper.optimize(FLEET).await?;
+    let view = mapper.shared.fleet(FLEET).context("no node after a lap")?;
+    Ok(FirstLap {
+        nodes: view.poses.len(),
+        ate_rmse_m: ate_of(&view, truth, epoch_ns, aligned),
+        store_bytes: std::fs::metadata(dir.join("mapper.redb")).map_or(0, |m| m.len()),
+    })
 }
 
 fn robot_config(args: &DemoArgs, i: usize) -> EdgeConfig {

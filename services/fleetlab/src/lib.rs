@@ -9,10 +9,12 @@ pub mod bench_fleet;
 pub mod bench_incremental;
 pub mod demo;
 pub mod fixed2d;
+pub mod localize_demo;
 
 pub use bench_fleet::BenchFleetArgs;
 pub use bench_incremental::BenchIncrementalArgs;
 pub use demo::DemoArgs;
+pub use localize_demo::LocalizeDemoArgs;
 
 /// The fleet (site) every lab run maps.
 pub const FLEET: &str = "park";

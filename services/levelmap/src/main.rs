@@ -43,6 +43,8 @@ enum Command {
     BenchIncremental(fleetlab::BenchIncrementalArgs),
     #[cfg(feature = "lab")]
     Demo(fleetlab::DemoArgs),
+    #[cfg(feature = "lab")]
+    DemoLocalize(fleetlab::LocalizeDemoArgs),
     #[cfg(feature = "edge")]
     Edge(services::EdgeArgs),
     Level(level::LevelArgs),
@@ -74,6 +76,8 @@ fn main() -> ExitCode {
         Command::BenchIncremental(args) => fleetlab::bench_incremental::run(&args),
         #[cfg(feature = "lab")]
         Command::Demo(args) => fleetlab::demo::run(&args),
+        #[cfg(feature = "lab")]
+        Command::DemoLocalize(args) => fleetlab::localize_demo::run(&args),
         #[cfg(feature = "edge")]
         Command::Edge(args) => services::run_edge(&args),
         #[cfg(feature = "mapper")]

@@ -50,6 +50,18 @@ impl Bus {
         }
     }
 
+    /// A localizing robot's node on its map version, to the robot.
+    pub fn localization(&self, metrics: &Metrics, message: &wire::Localized) {
+        let Ok(key) = wire::localization_key(&message.fleet, &message.robot) else {
+            return;
+        };
+        let bytes = wire::localization_to_wire(message).encode_to_vec();
+        match self.session.put(key, bytes).wait() {
+            Ok(()) => Metrics::bump(&metrics.localizations_sent),
+            Err(e) => tracing::warn!(robot = message.robot, "localization not sent: {e}"),
+        }
+    }
+
     /// Every robot's last node, corrected, on `levelmap/{fleet}/map/poses`, with where the
     /// solve was taken (`solved_from`: each robot's last node_seq then).
     pub fn publish_poses(&self, map: &FleetMap, solved_from: &[(String, u64)]) {
@@ -58,9 +70,10 @@ impl Bus {
             .iter()
             .filter_map(|r| {
                 let &last = r.nodes.last()?;
+                // Its last mapped node: nodes localized since are not in the map.
                 Some(MapPose {
                     robot: r.id.clone(),
-                    node_seq: r.last_node_seq,
+                    node_seq: map.nodes()[last].node_seq,
                     pose: map.poses()[last],
                 })
             })

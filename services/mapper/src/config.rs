@@ -42,6 +42,8 @@ pub struct MapperConfig {
     pub ros2_out: Option<wire::ros2::RosOutConfig>,
     /// Map versions: frozen maps kept in the store (`[versions]`).
     pub versions: VersionsConfig,
+    /// Robots localizing on a map version (`[localization]`).
+    pub localization: crate::localization::LocalizationConfig,
     /// Snapshots of the fleets' maps in the store (`[store]`).
     pub store: StoreConfig,
 }
@@ -62,6 +64,7 @@ impl Default for MapperConfig {
             mapping: fleet_mapping_params(),
             ros2_out: None,
             versions: VersionsConfig::default(),
+            localization: Default::default(),
             store: StoreConfig::default(),
         }
     }

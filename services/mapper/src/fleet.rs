@@ -75,6 +75,12 @@ impl NodeRecord {
     }
 }
 
+/// A node's leveled scan as matching uses it: its returns, cut at `max_range_m`.
+pub fn matching_scan(node: &NodeInput, max_range_m: f32) -> Scan2 {
+    let (bearings, ranges): (Vec<f32>, Vec<f32>) = node.scan.returns().unzip();
+    Scan2::from_polar(&bearings, &ranges, max_range_m).expect("returns come in pairs")
+}
+
 /// Most robots one fleet takes: per-robot state is bounded (a node of one more is rejected,
 /// `too_many_robots`).
 pub const MAX_ROBOTS_PER_FLEET: usize = 1024;
@@ -181,6 +187,11 @@ pub struct FleetMap {
     network_chains: usize,
     /// Solves applied and numbered ([`SolvePoint`]).
     solve_points: u64,
+    /// Robot chains' nodes that were localized on a map version, or passed over covered
+    /// ground, instead of mapped.
+    localized: localized::LocalizedChains,
+    /// Each chain's last node, for the next one's prediction over covered ground.
+    covers: HashMap<(String, u64), coverage::Cover>,
 }
 
 impl FleetMap {
@@ -209,6 +220,8 @@ impl FleetMap {
             nodes: Vec::new(),
             network_chains: 0,
             solve_points: 0,
+            localized: Default::default(),
+            covers: HashMap::new(),
         }
     }
 
@@ -262,13 +275,10 @@ impl FleetMap {
         self.mapper.node_scan(node)
     }
 
-    /// Where `node` stands against what the map took of its robot's chain.
+    /// Where `node` stands against what the map took of its robot's chain (mapped or
+    /// localized).
     pub fn sequence(&self, node: &NodeInput) -> Sequence {
-        let chain = self
-            .by_id
-            .get(&node.robot)
-            .and_then(|&r| self.robots[r].chain(node.chain_id));
-        let Some(chain) = chain else {
+        let Some(last) = self.chain_acked(&node.robot, node.chain_id) else {
             // A chain the map does not know starts where its robot says it still holds nodes
             // (0 for a new outbox): a lost first node is asked for, never skipped. Chain 0 is
             // a sender from before chains: its first node seen starts it, as it always did.
@@ -281,16 +291,27 @@ impl FleetMap {
             };
         };
         match node.node_seq {
-            seq if seq <= chain.last_node_seq => Sequence::Duplicate,
-            seq if seq == chain.last_node_seq + 1 => Sequence::Next,
-            _ => Sequence::Gap {
-                expected: chain.last_node_seq + 1,
-            },
+            seq if seq <= last => Sequence::Duplicate,
+            seq if seq == last + 1 => Sequence::Next,
+            _ => Sequence::Gap { expected: last + 1 },
         }
     }
 
-    /// The highest node_seq taken of a robot's chain, if any.
+    /// The highest node_seq taken of a robot's chain (mapped or localized), if any.
     pub fn chain_acked(&self, robot: &str, chain_id: u64) -> Option<u64> {
+        let mapped = self.chain_mapped(robot, chain_id);
+        let localized = self.localized.last_seq(robot, chain_id);
+        mapped.max(localized)
+    }
+
+    /// The network's odometry chain that a robot's chain goes on in, once it has a node.
+    fn network_chain_of(&self, robot: &str, chain_id: u64) -> Option<usize> {
+        let r = *self.by_id.get(robot)?;
+        Some(self.robots[r].chain(chain_id)?.network_chain)
+    }
+
+    /// The highest node_seq mapped of a robot's chain, if any.
+    fn chain_mapped(&self, robot: &str, chain_id: u64) -> Option<u64> {
         let r = *self.by_id.get(robot)?;
         Some(self.robots[r].chain(chain_id)?.last_node_seq)
     }
@@ -338,6 +359,14 @@ impl FleetMap {
             .iter()
             .position(|c| c.chain_id == node.chain_id)
         {
+            // Nodes localized since the chain's last mapped one: its odometry link spans a
+            // drive the network never saw, so the chain goes on as a new part of the network
+            // (it joins the map by scan matching or GPS, like a robot's first node).
+            if self.localized.breaks(&node.robot, node.chain_id) {
+                self.robots[robot].chains[c].network_chain = self.network_chains;
+                self.network_chains += 1;
+                return Ok((robot, c, None));
+            }
             let last = &self.nodes[record.chains[c].last_node];
             let xy = |p: &Pose2| [p.x, p.y];
             let from = (last.stamp_ns, xy(&last.robot_odometry));
@@ -390,6 +419,7 @@ impl FleetMap {
         let slam::Placed::Node(index) = placed else {
             unreachable!("node distance 0: every scan is a node")
         };
+        self.localized.close_span(&node.robot, node.chain_id);
         let robot_record = &mut self.robots[robot];
         robot_record.last_node_seq = node.node_seq;
         robot_record.chains[chain].last_node_seq = node.node_seq;
@@ -408,9 +438,7 @@ impl FleetMap {
         let robot_odometry = Pose2::from_isometry3(&node.odometry.pose);
         let scan_frame = robot_odometry.compose(&node.scan_origin);
         let (bearings_rad, ranges_m) = node.polar();
-        let (bearings, ranges): (Vec<f32>, Vec<f32>) = node.scan.returns().unzip();
-        let scan =
-            Scan2::from_polar(&bearings, &ranges, self.max_range_m).expect("returns come in pairs");
+        let scan = matching_scan(node, self.max_range_m);
         let attitude = node.odometry.pose.rotation;
         let gps: Vec<GpsObservation> = node
             .gps
@@ -500,6 +528,10 @@ impl FleetMap {
             .collect()
     }
 }
+
+mod coverage;
+mod localized;
+pub use localized::{LocalizedSpan, SpanReplay};
 
 #[path = "fleet_snapshot.rs"]
 pub(crate) mod snapshot;

@@ -6,7 +6,7 @@
 //! format, a wrong checksum, or one that does not fit the stored nodes is refused: the fleet
 //! is then replayed from its nodes, as a store without snapshots is.
 
-use super::{ChainRecord, FleetMap, RobotRecord};
+use super::{ChainRecord, FleetMap, RobotRecord, SpanReplay};
 use serde::{Deserialize, Serialize};
 use slam::geodesy::GeoDatum;
 use std::sync::Arc;
@@ -108,11 +108,14 @@ impl FleetMap {
     }
 
     /// This map (empty, as the configuration makes it) restored from `bytes`, with the
-    /// stored nodes it covers (the first of `stored`, encoded); how many it covers.
+    /// stored nodes it covers (the first of `stored`, encoded); how many it covers. The
+    /// localized spans are not in the snapshot: `spans` takes those before the covered nodes
+    /// in their place, as a replay does.
     pub fn restore(
         mut self,
         bytes: &[u8],
         stored: &[Vec<u8>],
+        spans: &mut SpanReplay,
     ) -> Result<(FleetMap, usize), SnapshotError> {
         let mismatch = |what: String| SnapshotError::Mismatch(what);
         let saved = read(bytes)?;
@@ -157,6 +160,8 @@ impl FleetMap {
                     node.robot
                 ))
             })?;
+            spans.before(&mut self, &node);
+            self.localized.close_span(&node.robot, node.chain_id);
             let (record, scan) = self.read_node(&node, robot);
             self.robots[robot].nodes.push(arrival);
             self.nodes.push(Arc::new(record));

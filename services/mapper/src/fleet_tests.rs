@@ -128,3 +128,63 @@ fn robots_and_chains_are_bounded() {
         "{err}"
     );
 }
+
+#[test]
+fn localized_nodes_are_taken_in_sequence_without_growing_the_network() {
+    let mut map = map();
+    for seq in 0..3 {
+        map.ingest(&node("r", 7, seq, 0, seq as f64)).unwrap();
+    }
+    // Localizing: 3..=5 are taken (acked), one span, no node added.
+    let mut spans = Vec::new();
+    for seq in 3..6 {
+        spans.push(
+            map.take_localized(&node("r", 7, seq, 3, seq as f64), false)
+                .unwrap(),
+        );
+    }
+    assert_eq!(map.nodes().len(), 3);
+    assert_eq!(map.chain_acked("r", 7), Some(5));
+    let last = spans.last().unwrap();
+    assert_eq!((last.first_seq, last.last_seq), (3, 5));
+    assert_eq!(map.sequence(&node("r", 7, 4, 3, 4.0)), Sequence::Duplicate);
+    assert!(
+        map.take_localized(&node("r", 7, 7, 7, 7.0), false).is_err(),
+        "a gap"
+    );
+    // Mapping again: node 6 is taken, as a new part of the network (its odometry link
+    // would span the drive the network never saw), however far the robot went.
+    map.ingest(&node("r", 7, 6, 6, 60.0)).unwrap();
+    assert_ne!(map.mapper.node_robot(2).0, map.mapper.node_robot(3).0);
+    // A second run of localized nodes is a second span.
+    let again = map
+        .take_localized(&node("r", 7, 7, 7, 61.0), false)
+        .unwrap();
+    assert_eq!((again.first_seq, again.last_seq), (7, 7));
+    spans.push(again);
+    // A robot that only ever localized: its chain is known to the sequence, not as a robot.
+    let only = map.take_localized(&node("q", 1, 0, 0, 0.0), false).unwrap();
+    spans.push(only);
+    assert_eq!(map.robots().len(), 1);
+    assert_eq!(map.chain_acked("q", 1), Some(0));
+
+    // A replay of the mapped nodes with the stored spans (the last of each run) ends where
+    // the live map did: same network, same sequence.
+    let stored: Vec<LocalizedSpan> = vec![spans[2].clone(), spans[3].clone(), spans[4].clone()];
+    let mut replayed = self::map();
+    let mut replay = SpanReplay::new(stored);
+    for (seq, x) in [(0, 0.0), (1, 1.0), (2, 2.0), (6, 60.0)] {
+        let n = node("r", 7, seq, if seq == 6 { 6 } else { 0 }, x);
+        replay.before(&mut replayed, &n);
+        replayed.ingest(&n).unwrap();
+    }
+    replay.rest(&mut replayed);
+    assert_eq!(replayed.graph().edges, map.graph().edges);
+    assert_eq!(replayed.chain_acked("r", 7), Some(7));
+    assert_eq!(replayed.chain_acked("q", 1), Some(0));
+    // The open run goes on in the same span.
+    let next = replayed
+        .take_localized(&node("r", 7, 8, 8, 62.0), false)
+        .unwrap();
+    assert_eq!((next.first_seq, next.last_seq), (7, 8));
+}

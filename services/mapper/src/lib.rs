@@ -13,6 +13,7 @@ pub mod bus;
 pub mod config;
 pub mod fleet;
 pub mod live;
+pub mod localization;
 pub mod marginals;
 pub mod odometry;
 pub mod recording;

@@ -138,7 +138,7 @@ fn feed_in_order(
                 crate::odometry::on_live_scan(shared, served, &message.key, &message.payload);
                 report.live_scans += 1;
             }
-            Ok((_, _, Topic::Ack)) | Err(_) => report.ignored += 1,
+            Ok((_, _, Topic::Ack | Topic::Localization)) | Err(_) => report.ignored += 1,
         }
     }
     for fleet in unsolved {

@@ -9,7 +9,7 @@
 //! its snapshot restores.
 
 use crate::config::MapperConfig;
-use crate::fleet::FleetMap;
+use crate::fleet::{FleetMap, SpanReplay};
 use crate::state::Shared;
 use crate::store::{SolvePoint, Store, StoredFleet};
 use anyhow::{Context, Result};
@@ -94,8 +94,13 @@ pub fn from_snapshot(
     bytes: &[u8],
 ) -> Result<(FleetMap, usize)> {
     let restoring = std::panic::AssertUnwindSafe(|| -> Result<(FleetMap, usize)> {
-        let (mut map, covered) = config.new_fleet(&stored.id).restore(bytes, &stored.nodes)?;
-        replay_tail(&mut map, stored, covered)?;
+        let mut spans = SpanReplay::new(stored.localized.clone());
+        let (mut map, covered) =
+            config
+                .new_fleet(&stored.id)
+                .restore(bytes, &stored.nodes, &mut spans)?;
+        replay_tail(&mut map, stored, covered, &mut spans)?;
+        spans.rest(&mut map);
         check_edges(&map, stored)?;
         Ok((map, covered))
     });
@@ -106,15 +111,23 @@ pub fn from_snapshot(
 /// One fleet's map replayed from all of its nodes; its edges checked against the stored ones.
 pub fn replay(config: &MapperConfig, stored: &StoredFleet) -> Result<FleetMap> {
     let mut map = config.new_fleet(&stored.id);
-    replay_tail(&mut map, stored, 0)?;
+    let mut spans = SpanReplay::new(stored.localized.clone());
+    replay_tail(&mut map, stored, 0, &mut spans)?;
+    spans.rest(&mut map);
     check_edges(&map, stored)?;
     Ok(map)
 }
 
 /// Maps the stored nodes from arrival index `from` on into `map`, which holds the first
 /// `from` of them and the solves applied among them; each stored solve is taken and applied
-/// at the nodes where it was.
-fn replay_tail(map: &mut FleetMap, stored: &StoredFleet, from: usize) -> Result<()> {
+/// at the nodes where it was; the localized spans of their chains before them (`spans`, which
+/// the caller ends with [`SpanReplay::rest`]).
+fn replay_tail(
+    map: &mut FleetMap,
+    stored: &StoredFleet,
+    from: usize,
+    spans: &mut SpanReplay,
+) -> Result<()> {
     let id = &stored.id;
     let applied = map.solves_applied() as usize;
     anyhow::ensure!(
@@ -138,6 +151,7 @@ fn replay_tail(map: &mut FleetMap, stored: &StoredFleet, from: usize) -> Result<
         let arrival = arrival as u64;
         let (node, _) = wire::decode_node_input(bytes)
             .with_context(|| format!("store: node {arrival} of fleet {id} is unreadable"))?;
+        spans.before(map, &node);
         map.ingest(&node)
             .with_context(|| format!("store: replaying node {arrival} of fleet {id}"))?;
         if legacy.next_if_eq(&&arrival).is_some() {

@@ -7,6 +7,7 @@
 
 use crate::bus::Bus;
 use crate::config::MapperConfig;
+use crate::localization::MapCache;
 use crate::recording::FeedReport;
 use crate::state::Shared;
 use crate::store::Store;
@@ -91,6 +92,8 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     let store = Arc::new(store);
     let shared = Arc::new(Shared::new(config.token.clone(), now_ns()));
     let (fleets, snapshots) = crate::restore::restore(&config, &store, &shared)?;
+    let maps = Arc::new(MapCache::new(&config.localization, config.max_range_m));
+    let localizing = crate::localization::restore(&store, &maps)?;
 
     let session = config.zenoh.open(wire::session::Role::Router).await?;
     let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
@@ -100,6 +103,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             config.clone(),
             store.clone(),
             fleets,
+            localizing,
             shared.clone(),
             Bus::new(session.clone()),
         )
@@ -120,7 +124,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
-    let app = crate::api::router(shared.clone(), work_tx.clone(), store, &config);
+    let app = crate::api::router(shared.clone(), work_tx.clone(), store, maps, &config);
     let mut stopping = shared.stopping.subscribe();
     let http = tokio::spawn(async move {
         let stopped = async move {

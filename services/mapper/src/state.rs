@@ -151,10 +151,17 @@ pub struct Metrics {
     pub nodes_accepted: AtomicU64,
     /// Re-sent nodes taken already (re-acked).
     pub nodes_duplicate: AtomicU64,
+    /// Nodes of localizing robots localized and stored (as spans), not mapped.
+    pub nodes_localized: AtomicU64,
+    /// Nodes of mapping robots passed over covered ground: located, stored as spans, not
+    /// mapped.
+    pub nodes_passed: AtomicU64,
     /// Live odometry messages taken.
     pub odometry_received: AtomicU64,
     /// Acks published.
     pub acks_sent: AtomicU64,
+    /// Localizations published to localizing robots.
+    pub localizations_sent: AtomicU64,
     /// Network solves run.
     pub optimizations: AtomicU64,
     /// Rejections by (topic, reason).
@@ -216,6 +223,8 @@ pub struct Shared {
     /// Set while a recording is fed (`crate::recording`): the worker solves only when the
     /// feed asks, where the recorded mapper solved, not on its own timer.
     pub feeding: std::sync::atomic::AtomicBool,
+    /// Localizing robots' recent localizations.
+    pub localizations: crate::localization::LocalizationLog,
 }
 
 impl Shared {
@@ -233,6 +242,7 @@ impl Shared {
             quarantined: RwLock::default(),
             stopping: tokio::sync::watch::Sender::new(false),
             feeding: Default::default(),
+            localizations: Default::default(),
         }
     }
 

@@ -23,7 +23,9 @@ use std::path::Path;
 use std::sync::{Mutex, RwLock};
 use wire::{Message, v1};
 
+mod localization;
 mod versions;
+pub use localization::{ModeError, StoredModes};
 pub use versions::{AddVersionError, VersionRows};
 
 /// (fleet, arrival index) → encoded `v1::Node`, without `Node.cloud`.
@@ -101,6 +103,8 @@ pub struct StoredFleet {
     pub legacy_solves: Vec<u64>,
     /// The solves, in order.
     pub solve_points: Vec<SolvePoint>,
+    /// Runs of nodes localized instead of mapped.
+    pub localized: Vec<crate::fleet::LocalizedSpan>,
 }
 
 /// What one batch of work adds to a fleet.
@@ -118,6 +122,8 @@ pub struct FleetBatch<'a> {
     pub edges: Vec<Vec<u8>>,
     /// A solve applied with this batch.
     pub solved: Option<SolvePoint>,
+    /// Runs of localized nodes that this batch started or extended.
+    pub localized: Vec<crate::fleet::LocalizedSpan>,
 }
 
 /// Edges as the store keeps them: one JSON document each.
@@ -223,6 +229,10 @@ impl Store {
             };
             ids.push(id);
         }
+        // A fleet whose robots only localized has spans and no node.
+        ids.extend(localization::span_fleets(&txn)?);
+        ids.sort_unstable();
+        ids.dedup();
         Ok(ids)
     }
 
@@ -267,6 +277,7 @@ impl Store {
                 applied_after,
             });
         }
+        stored.localized = localization::read_spans(&txn, id)?;
         Ok(stored)
     }
 }
@@ -281,6 +292,7 @@ fn with_tables(db: Database) -> Result<Database, StoreError> {
     txn.open_table(CLOUDS)?;
     txn.open_table(SNAPSHOTS)?;
     versions::open_tables(&txn)?;
+    localization::open_tables(&txn)?;
     txn.commit()?;
     Ok(db)
 }
@@ -307,6 +319,9 @@ fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
                 solves.insert((batch.fleet, point.seq), at)?;
             }
         }
+    }
+    for batch in batches.iter().filter(|b| !b.localized.is_empty()) {
+        localization::write_spans(&txn, batch.fleet, &batch.localized)?;
     }
     txn.commit()?;
     Ok(())

@@ -24,6 +24,7 @@ use std::time::{Duration, Instant};
 use wire::NodeInput;
 
 mod commit;
+mod localizing;
 mod snapshots;
 mod solving;
 
@@ -70,6 +71,18 @@ pub enum Work {
         fleet: String,
         /// Where the report goes.
         reply: OptimizeReply,
+    },
+    /// New modes of a fleet's robots (stored already), with the maps of the versions they
+    /// localize on (built off the worker).
+    SetModes {
+        /// The fleet.
+        fleet: String,
+        /// Its modes.
+        modes: crate::localization::FleetModes,
+        /// The map of each version the modes name.
+        maps: HashMap<u64, Arc<slam::localize::LocalizationMap>>,
+        /// Answered once the worker uses them.
+        reply: tokio::sync::oneshot::Sender<()>,
     },
 }
 
@@ -153,6 +166,8 @@ struct Reack {
 struct Batch {
     accepted: Vec<Accepted>,
     reacks: Vec<Reack>,
+    /// Nodes of localizing robots: taken, not mapped.
+    localized: Vec<localizing::LocalizedNode>,
     requests: Vec<(String, SolveRequest)>,
     /// A stop was asked for: this is the last turn.
     stop: bool,
@@ -173,16 +188,20 @@ pub struct Worker {
     unstored: Option<Unstored>,
     /// When to try the failed commit again.
     retry_at: Instant,
+    /// Per fleet, robots' modes and the trackers of those that localize.
+    localizing: HashMap<String, crate::localization::Localizing>,
     /// Per fleet, the nodes its stored snapshot covers.
     snapshots: HashMap<String, usize>,
 }
 
 impl Worker {
-    /// A worker over the restored `fleets` (all of it stored).
+    /// A worker over the restored `fleets` (all of it stored), their robots' modes in
+    /// `localizing`.
     pub fn new(
         config: MapperConfig,
         store: Arc<Store>,
         fleets: HashMap<String, FleetMap>,
+        localizing: HashMap<String, crate::localization::Localizing>,
         shared: Arc<Shared>,
         bus: Bus,
     ) -> Worker {
@@ -200,6 +219,7 @@ impl Worker {
             solving: Solving::start(),
             unstored: None,
             retry_at: Instant::now(),
+            localizing,
             snapshots: HashMap::new(),
         }
     }
@@ -248,9 +268,7 @@ impl Worker {
                 }
                 Work::Node { key, payload } => {
                     if let Some(checked) = self.check(&key, payload) {
-                        batch
-                            .accepted
-                            .extend(self.map(&key, checked, &mut batch.reacks));
+                        self.map(&key, checked, &mut batch);
                     }
                 }
                 Work::Optimize { fleet, reply } => {
@@ -261,6 +279,15 @@ impl Worker {
                 }
                 Work::ApplySolve { fleet, reply } => {
                     batch.requests.push((fleet, SolveRequest::Apply(reply)))
+                }
+                Work::SetModes {
+                    fleet,
+                    modes,
+                    maps,
+                    reply,
+                } => {
+                    self.set_modes(&fleet, modes, maps);
+                    let _ = reply.send(());
                 }
                 Work::Stop => batch.stop = true,
             }
@@ -301,9 +328,11 @@ impl Worker {
         })
     }
 
-    /// Maps a checked node if it is the next of its robot; a duplicate or a node after a gap
-    /// is not mapped, and its robot is re-acked (the ack says where to re-send from).
-    fn map(&mut self, key: &str, checked: Checked, reacks: &mut Vec<Reack>) -> Option<Accepted> {
+    /// Maps a checked node if it is the next of its robot (or localizes it, if its robot
+    /// localizes); a duplicate or a node after a gap is not mapped, and its robot is
+    /// re-acked (the ack says where to re-send from).
+    fn map(&mut self, key: &str, checked: Checked, batch: &mut Batch) {
+        let reacks = &mut batch.reacks;
         let Checked {
             input,
             payload,
@@ -327,17 +356,27 @@ impl Worker {
                 // Taken already: its ack was lost, so ack again once this batch is durable.
                 Metrics::bump(&self.shared.metrics.nodes_duplicate);
                 reacks.push(reack(None));
-                return None;
+                return;
             }
             Sequence::Gap { expected } => {
                 let why = format!("node {} before {expected}", input.node_seq);
                 self.reject("out_of_order", key, &why);
                 reacks.push(reack(Some(expected)));
-                return None;
+                return;
             }
         }
+        if let Some(version) = self.localizes(&fleet, &robot) {
+            self.localize(key, &input, version, batch);
+            return;
+        }
+        let map = self.fleets.get_mut(&fleet).expect("made above");
+        if let Some(pose) = map.pass(&input) {
+            self.take_passed(key, &input, pose, batch);
+            return;
+        }
+        let map = self.fleets.get_mut(&fleet).expect("made above");
         let arrival = map.nodes().len() as u64;
-        match map.ingest(&input) {
+        let accepted = match map.ingest(&input) {
             Ok(ingested) => {
                 if let Some(e) = &ingested.odometry_break {
                     // Taken, but its odometry link is not: counted under the reason.
@@ -368,7 +407,8 @@ impl Worker {
                 self.reject("invalid_value", key, &e);
                 None
             }
-        }
+        };
+        batch.accepted.extend(accepted);
     }
 
     /// Whether `key` is a node of a quarantined fleet.
@@ -388,6 +428,9 @@ impl Worker {
         for a in &batch.accepted {
             Metrics::bump(&self.shared.metrics.nodes_accepted);
             resend.entry((&a.fleet, &a.robot, a.chain_id)).or_default();
+        }
+        for l in &batch.localized {
+            resend.entry((&l.fleet, &l.robot, l.chain_id)).or_default();
         }
         for ((fleet, robot, chain_id), resend_from) in resend {
             let acked = self.fleets[fleet].chain_acked(robot, chain_id);

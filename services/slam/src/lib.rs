@@ -12,6 +12,7 @@
 pub mod geodesy;
 pub mod gnss;
 pub mod grid;
+pub mod localize;
 pub mod matching;
 pub mod network;
 pub mod parts;
@@ -42,8 +43,9 @@ pub mod optimize;
 pub use init::{Init, InitError, initialize};
 #[cfg(feature = "solver")]
 pub use mapping2d::{
-    BackgroundSolve, ConsistencyParams, FirstContactParams, Mapper2d, Mapper2dParams, MapperStats,
-    Placed, RestoreError, SavedMapper, SolvedInBackground, SubmapSearchParams, WrongClosures,
+    BackgroundSolve, ConsistencyParams, CoverageParams, FirstContactParams, Mapper2d,
+    Mapper2dParams, MapperStats, Passed, Placed, RestoreError, SavedMapper, SolvedInBackground,
+    SubmapSearchParams, WrongClosures,
 };
 #[cfg(feature = "solver")]
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

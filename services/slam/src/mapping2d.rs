@@ -20,6 +20,7 @@
 
 mod closures;
 pub mod consistency;
+mod coverage;
 mod edges;
 mod first_contact;
 mod local;
@@ -34,6 +35,7 @@ mod submaps;
 mod support;
 mod wrong_closures;
 
+pub use coverage::{CoverageParams, Passed};
 pub use first_contact::FirstContactParams;
 pub use params::{ConsistencyParams, Mapper2dParams};
 pub use saved::{RestoreError, SavedMapper};
@@ -119,6 +121,8 @@ struct Chain {
     last_odometry: Pose2,
     /// Nodes in the chain so far.
     length: usize,
+    /// Nodes passed since the last (`coverage.rs`).
+    passed: coverage::Passed,
 }
 
 /// The incremental 2D mapper. Its serde form ([`Self::saved`], [`SavedMapper`]) is all of its
@@ -251,7 +255,10 @@ impl Mapper2d {
             return Ok(Placed::Attached { node: last, offset });
         }
         let estimate = self.graph.poses[last].compose(&matched.as_ref().map_or(step, |m| m.pose));
-        let path = self.node_path_m[last] + step.x.hypot(step.y);
+        // Through the nodes passed since the last, if any.
+        let from = chain.passed.odometry.unwrap_or(chain.last_odometry);
+        let to_here = from.between(&odometry);
+        let path = self.node_path_m[last] + chain.passed.path_m + to_here.x.hypot(to_here.y);
         let node = self.push_node(robot, estimate, odometry, path, scan);
         // The scan match when the gate accepts it, else odometry. Where both exist the match
         // alone is kept unless `fuse_odometry`: with wheel odometry the match is far more
@@ -307,11 +314,12 @@ impl Mapper2d {
         scan: Scan2,
     ) -> usize {
         let node = self.graph.poses.len();
-        let length = self.chains[robot].map_or(0, |c| c.length);
+        let length = self.chains[robot].map_or(0, |c| c.length + c.passed.nodes);
         self.chains[robot] = Some(Chain {
             last_node: node,
             last_odometry: odometry,
             length: length + 1,
+            passed: coverage::Passed::default(),
         });
         self.node_robot.push((robot, length));
         self.node_path_m.push(path_m);

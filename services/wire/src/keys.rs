@@ -22,6 +22,9 @@ pub enum Topic {
     /// `.../scan`: the latest leveled scan for live views ([`crate::v1::LiveScan`]); best
     /// effort.
     Scan,
+    /// `.../localization`: the mapper's pose of the robot's node on a map version
+    /// ([`crate::v1::Localization`]), when the robot localizes instead of mapping.
+    Localization,
 }
 
 impl Topic {
@@ -32,6 +35,7 @@ impl Topic {
             Topic::Odom => "odom",
             Topic::Ack => "ack",
             Topic::Scan => "scan",
+            Topic::Localization => "localization",
         }
     }
 
@@ -41,6 +45,7 @@ impl Topic {
             "odom" => Some(Topic::Odom),
             "ack" => Some(Topic::Ack),
             "scan" => Some(Topic::Scan),
+            "localization" => Some(Topic::Localization),
             _ => None,
         }
     }
@@ -89,6 +94,12 @@ pub fn odom_key(fleet: &str, robot: &str) -> Result<String, WireError> {
 /// `levelmap/{fleet}/robots/{robot}/scan`: the robot's live leveled scans (best effort).
 pub fn scan_key(fleet: &str, robot: &str) -> Result<String, WireError> {
     robot_key(fleet, robot, Topic::Scan)
+}
+
+/// `levelmap/{fleet}/robots/{robot}/localization`: the mapper's localizations of the
+/// robot's nodes on a map version.
+pub fn localization_key(fleet: &str, robot: &str) -> Result<String, WireError> {
+    robot_key(fleet, robot, Topic::Localization)
 }
 
 /// `levelmap/{fleet}/robots/{robot}/ack`: the mapper's acknowledgements to the robot.
@@ -163,6 +174,7 @@ pub fn message_name_of_key(key: &str) -> Option<&'static str> {
             Topic::Odom => "levelmap.v1.Odometry",
             Topic::Ack => "levelmap.v1.Ack",
             Topic::Scan => "levelmap.v1.LiveScan",
+            Topic::Localization => "levelmap.v1.Localization",
         });
     }
     let chunks: Vec<&str> = key.split('/').collect();

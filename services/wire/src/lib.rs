@@ -27,8 +27,9 @@ pub mod v1 {
 pub use convert::*;
 pub use error::{MAX_NODE_BYTES, MAX_POSITION_M, MAX_RANGE_M, MAX_SPEED_M_PER_S, WireError};
 pub use keys::{
-    KEY_ROOT, RobotKey, Topic, ack_key, all_robots_key_expr, map_key, map_key_expr,
-    message_name_of_key, node_key, odom_key, parse_robot_key, robot_key, scan_key, validate_id,
+    KEY_ROOT, RobotKey, Topic, ack_key, all_robots_key_expr, localization_key, map_key,
+    map_key_expr, message_name_of_key, node_key, odom_key, parse_robot_key, robot_key, scan_key,
+    validate_id,
 };
 /// Re-exported so users can encode and decode without depending on prost themselves.
 pub use prost::Message;

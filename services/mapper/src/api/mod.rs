@@ -12,6 +12,7 @@ mod fleets;
 mod graph;
 mod limits;
 mod live;
+mod localize;
 mod map;
 mod nodes;
 mod service;
@@ -56,6 +57,10 @@ struct Api {
     served: Arc<[String]>,
     /// Versions a fleet keeps at most (`[versions] max_versions`).
     max_versions: usize,
+    /// Versions' localization maps, shared with the worker.
+    maps: Arc<crate::localization::MapCache>,
+    /// Held while a fleet's modes change: stored and handed to the worker in one order.
+    modes_lock: Arc<tokio::sync::Mutex<()>>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -192,6 +197,7 @@ impl Api {
         (name = "map", description = "The occupancy grid and map products"),
         (name = "nodes", description = "One node of the network"),
         (name = "versions", description = "Map versions: the map frozen, as one file"),
+        (name = "localization", description = "Robots localizing on a map version; a scan found on one"),
         (name = "events", description = "The event stream"),
         (name = "web", description = "The dashboard"),
     )
@@ -249,6 +255,9 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(versions::version_import))
         .routes(routes!(versions::version_summary, versions::version_delete))
         .routes(routes!(versions::version_file))
+        .routes(routes!(localize::modes, localize::set_modes))
+        .routes(routes!(localize::robot_localizations))
+        .routes(routes!(localize::localize))
         .routes(routes!(events::events))
 }
 
@@ -279,6 +288,7 @@ pub fn router(
     shared: Arc<Shared>,
     work: mpsc::SyncSender<Work>,
     store: Arc<Store>,
+    maps: Arc<crate::localization::MapCache>,
     config: &MapperConfig,
 ) -> Router {
     let api = Api {
@@ -292,6 +302,8 @@ pub fn router(
         tiles: Arc::default(),
         served: config.fleets.clone().into(),
         max_versions: config.versions.max_versions.get(),
+        maps,
+        modes_lock: Arc::default(),
     };
     let (router, doc) = parts(Some(&api));
     let _ = api

@@ -79,6 +79,21 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
             &m.nodes_duplicate,
         ),
         (
+            "levelmap_nodes_localized_total",
+            "Nodes of localizing robots found on a map version (not mapped).",
+            &m.nodes_localized,
+        ),
+        (
+            "levelmap_nodes_passed_total",
+            "Nodes of mapping robots passed over covered ground (located, not mapped).",
+            &m.nodes_passed,
+        ),
+        (
+            "levelmap_localizations_sent_total",
+            "Localizations published to localizing robots.",
+            &m.localizations_sent,
+        ),
+        (
             "levelmap_odometry_received_total",
             "Live odometry messages taken.",
             &m.odometry_received,

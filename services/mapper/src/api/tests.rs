@@ -18,7 +18,7 @@ fn the_document_lists_every_route_with_its_parameters() {
     let paths = doc["paths"].as_object().unwrap();
     let mut listed: Vec<&str> = paths.keys().map(String::as_str).collect();
     listed.sort_unstable();
-    assert_eq!(listed.len(), 29, "{listed:?}");
+    assert_eq!(listed.len(), 32, "{listed:?}");
     // Operation ids are the handlers' names: two modules' `summary` would clash.
     let mut ids = std::collections::HashSet::new();
     for (path, item) in paths {
@@ -90,7 +90,11 @@ fn app(config: MapperConfig) -> Router {
     // The file can go: the open database keeps what it needs.
     std::fs::remove_file(&path).ok();
     let shared = Arc::new(Shared::new(config.token.clone(), 0));
-    router(shared, mpsc::sync_channel(1).0, store, &config)
+    let maps = Arc::new(crate::localization::MapCache::new(
+        &config.localization,
+        config.max_range_m,
+    ));
+    router(shared, mpsc::sync_channel(1).0, store, maps, &config)
 }
 
 fn tokens() -> MapperConfig {

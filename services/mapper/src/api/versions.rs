@@ -4,7 +4,7 @@
 
 use super::access::authorized;
 use super::{Api, ApiError, Reply};
-use crate::store::AddVersionError;
+use crate::store::{AddVersionError, ModeError};
 use crate::versions::{VersionError, VersionSummary};
 use axum::Json;
 use axum::body::Body;
@@ -31,7 +31,7 @@ pub(super) struct VersionList {
 
 impl Api {
     /// 503 for a quarantined fleet, 404 for one this mapper does not serve.
-    fn versions_of(&self, fleet: &str) -> Reply<()> {
+    pub(super) fn versions_of(&self, fleet: &str) -> Reply<()> {
         self.available(fleet)?;
         if self.served.iter().any(|f| f == fleet) {
             Ok(())
@@ -281,6 +281,7 @@ pub(super) async fn version_file(
         (status = 401, description = "No valid bearer token", body = String),
         (status = 403, description = "Write routes are off, or the token only reads", body = String),
         (status = 404, description = "No such fleet or version", body = String),
+        (status = 409, description = "Robots localize on the version (set them to map or to another version first)", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
@@ -297,7 +298,9 @@ pub(super) async fn version_delete(
             move || match api.store.delete_version(&fleet, version) {
                 Ok(true) => Ok(StatusCode::NO_CONTENT),
                 Ok(false) => Err(Api::no_version(&fleet, version)),
-                Err(e) => Err(api.store_error(e)),
+                Err(e @ ModeError::InUse { .. }) => Err(ApiError::Conflict(e.to_string())),
+                Err(ModeError::Store(e)) => Err(api.store_error(e)),
+                Err(e @ ModeError::NoVersion { .. }) => Err(ApiError::NotFound(e.to_string())),
             }
         })
         .await

@@ -278,8 +278,14 @@ fn an_unreadable_or_unfit_snapshot_falls_back_to_the_full_replay() {
 fn a_kernel_keeps_its_text_form_and_reads_back_from_postcard() {
     let kernel = slam::Robust::Cauchy { c: 10.0 };
     let text = serde_json::to_string(&kernel).unwrap();
-    assert_eq!(text, r#"{"kernel":"cauchy","c":10.0}"#, "the stored edges' form");
+    assert_eq!(
+        text, r#"{"kernel":"cauchy","c":10.0}"#,
+        "the stored edges' form"
+    );
     assert_eq!(serde_json::from_str::<slam::Robust>(&text).unwrap(), kernel);
     let binary = postcard::to_stdvec(&kernel).unwrap();
-    assert_eq!(postcard::from_bytes::<slam::Robust>(&binary).unwrap(), kernel);
+    assert_eq!(
+        postcard::from_bytes::<slam::Robust>(&binary).unwrap(),
+        kernel
+    );
 }

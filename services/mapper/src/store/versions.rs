@@ -82,16 +82,25 @@ impl Store {
         Ok(number)
     }
 
-    /// Deletes a version; false when there is none. Its number is not given again.
-    pub fn delete_version(&self, fleet: &str, number: u64) -> Result<bool, StoreError> {
+    /// Deletes a version; false when there is none. Its number is not given again. Refused
+    /// while robots localize on it (`[super::ModeError::InUse]`).
+    pub fn delete_version(&self, fleet: &str, number: u64) -> Result<bool, super::ModeError> {
         let _one_at_a_time = self.versions.lock().expect("versions lock");
-        self.write(|db| {
+        let users = self.version_users(fleet, number)?;
+        if users > 0 {
+            return Err(super::ModeError::InUse {
+                fleet: fleet.to_owned(),
+                version: number,
+                robots: users,
+            });
+        }
+        Ok(self.write(|db| {
             let txn = db.begin_write()?;
             let found = txn.open_table(VERSIONS)?.remove((fleet, number))?.is_some();
             txn.open_table(VERSION_SUMMARIES)?.remove((fleet, number))?;
             txn.commit()?;
             Ok(found)
-        })
+        })?)
     }
 
     /// A version's file, as exported.
@@ -131,14 +140,14 @@ impl Store {
         Ok((kept, last))
     }
 
-    fn read_txn(&self) -> Result<ReadTransaction, StoreError> {
+    pub(super) fn read_txn(&self) -> Result<ReadTransaction, StoreError> {
         let db = self.db.read().expect("store lock");
         Ok(db.as_ref().ok_or(StoreError::Closed)?.begin_read()?)
     }
 
     /// Runs a write on the open database (closed after a failed commit: the worker's next
     /// commit opens it again). A failure closes it, as a failed commit does.
-    fn write<T>(
+    pub(super) fn write<T>(
         &self,
         f: impl FnOnce(&Database) -> Result<T, StoreError>,
     ) -> Result<T, StoreError> {

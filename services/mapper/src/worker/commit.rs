@@ -30,6 +30,7 @@ impl Worker {
         }
         self.ack(&work.batch);
         self.publish(&work.batch.accepted, started);
+        self.publish_localized(&work.batch.localized);
         for (fleet, point) in &work.solves {
             self.publish_solve(fleet, started, point);
         }
@@ -50,7 +51,11 @@ impl Worker {
     /// points in one transaction.
     pub(super) fn commit(&mut self, work: &Unstored) -> Result<(), StoreError> {
         let accepted = &work.batch.accepted;
-        let touched = fleets_of(accepted);
+        let localized = &work.batch.localized;
+        let mut touched = fleets_of(accepted);
+        touched.extend(localized.iter().map(|l| l.fleet.as_str()));
+        touched.sort_unstable();
+        touched.dedup();
         if touched.is_empty() && work.solves.is_empty() {
             return Ok(());
         }
@@ -70,6 +75,11 @@ impl Worker {
                         .collect(),
                     first_edge: stored as u64,
                     edges: crate::store::encode_edges(&self.fleets[fleet].graph().edges[stored..]),
+                    localized: localized
+                        .iter()
+                        .filter(|l| l.fleet == fleet)
+                        .map(|l| l.span.clone())
+                        .collect(),
                 }
             })
             .collect();
@@ -85,7 +95,7 @@ impl Worker {
             }
         }
         drop(batches);
-        self.note_store(&result, accepted.len());
+        self.note_store(&result, accepted.len() + localized.len());
         result
     }
 
@@ -113,6 +123,7 @@ impl Worker {
         let kept = self.unstored.get_or_insert_default();
         kept.batch.accepted.extend(work.batch.accepted);
         kept.batch.reacks.extend(work.batch.reacks);
+        kept.batch.localized.extend(work.batch.localized);
         kept.solves.extend(work.solves);
     }
 }

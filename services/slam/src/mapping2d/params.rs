@@ -74,6 +74,8 @@ pub struct Mapper2dParams {
     pub submaps: super::SubmapSearchParams,
     /// A lone robot (no GPS, no closure with another) looked for in the others' submaps.
     pub first_contact: super::FirstContactParams,
+    /// Bounded growth: when a place counts as covered (the fleet's map passes over it).
+    pub coverage: super::CoverageParams,
 }
 
 impl Default for Mapper2dParams {
@@ -105,6 +107,7 @@ impl Default for Mapper2dParams {
             optimize: OptimizeParams::default(),
             submaps: super::SubmapSearchParams::default(),
             first_contact: super::FirstContactParams::default(),
+            coverage: super::CoverageParams::default(),
         }
     }
 }

@@ -47,11 +47,6 @@ impl Mapper2d {
     pub fn saved(&self) -> Option<impl Serialize + '_> {
         self.background.solver.is_some().then_some(Saving(self))
     }
-
-    /// The parameters it maps with.
-    pub fn params(&self) -> &Mapper2dParams {
-        &self.params
-    }
 }
 
 impl SavedMapper {

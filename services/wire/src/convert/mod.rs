@@ -6,6 +6,7 @@ mod cloud;
 mod fixtures;
 mod gps;
 mod input;
+mod localization;
 mod map;
 mod node;
 mod odometry;
@@ -21,6 +22,10 @@ pub use gps::{fix_status_to_wire, gps_fix_from_wire, gps_fix_to_wire, validate_g
 pub use input::{
     LiveScanInput, NodeInput, OdometryInput, check_step, decode_node_input, live_scan_from_wire,
     live_scan_input, node_input, odometry_input,
+};
+pub use localization::{
+    DEFAULT_PRIOR_SIGMA, LocalizeQuery, Localized, decode_localization, decode_localize_request,
+    localization_to_wire,
 };
 pub use map::{MapPose, decode_map_poses, decode_map_summary, map_poses_to_wire};
 pub use node::{decode_ack, decode_node, decode_odometry, validate_ack, validate_node};

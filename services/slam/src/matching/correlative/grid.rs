@@ -100,6 +100,11 @@ impl ProbabilityGrid {
         ]
     }
 
+    /// Its size in cells: width (along x) and height.
+    pub(super) fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
     /// Cell size (m).
     pub fn resolution_m(&self) -> f64 {
         self.resolution_m
@@ -244,6 +249,11 @@ impl PrecomputedGrids {
     /// The grid at level 0.
     pub fn grid(&self) -> &ProbabilityGrid {
         &self.grid
+    }
+
+    /// Bytes its cells take (the grid and every pooled level).
+    pub fn cell_bytes(&self) -> usize {
+        self.grid.cells.len() + self.levels.iter().map(|l| l.cells.len()).sum::<usize>()
     }
 
     /// The deepest level (windows of 2^depth cells).

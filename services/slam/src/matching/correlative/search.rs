@@ -90,7 +90,7 @@ impl<'a> Problem<'a> {
         let r = grids.grid().resolution_m();
         let max_range = points.iter().map(|p| p[0].hypot(p[1])).fold(0.0, f64::max);
         let angles = angles(initial.theta, window, r, max_range);
-        let cells = angles
+        let cells: Vec<Vec<(i64, i64)>> = angles
             .iter()
             .map(|&theta| {
                 let pose = Pose2::new(initial.x, initial.y, theta);
@@ -101,12 +101,31 @@ impl<'a> Problem<'a> {
             })
             .collect();
         let full = FULL as f64 * points.len() as f64;
+        // An offset that puts no return in the grid scores 0, whatever the window: the search
+        // need not reach beyond the farthest offset that puts one in. Without this bound a
+        // window far larger than the grid (a localize request's prior, σ = 10⁵ m: 10¹⁰ roots
+        // per angle) enumerated its roots without end, holding each in memory, and beyond
+        // 10¹⁸ m its offsets overflowed (the `localize` fuzz target).
+        let (width, height) = grids.grid().size();
+        let (width, height) = (width as i64, height as i64);
+        let useful = cells
+            .iter()
+            .flatten()
+            .map(|&(i, j)| {
+                let far = |c: i64, n: i64| {
+                    c.saturating_abs()
+                        .max((n - 1).saturating_sub(c).saturating_abs())
+                };
+                far(i, width).max(far(j, height))
+            })
+            .max()
+            .unwrap_or(0);
         Some(Problem {
             grids,
             angles,
             cells,
             initial,
-            reach: (window.linear_m / r).ceil().max(0.0) as i64,
+            reach: ((window.linear_m / r).ceil().max(0.0) as i64).min(useful),
             min_sum: (min_score.max(0.0) * full).ceil().min(u32::MAX as f64) as u32,
             nodes: 0,
             excluded: None,

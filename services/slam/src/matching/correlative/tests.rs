@@ -125,6 +125,42 @@ fn a_whole_submap_search_finds_a_scan_moved_far_away() {
     );
 }
 
+/// A window far larger than the grid (a localize request's prior of σ = 10⁵ m: 3·10⁶ cells
+/// each way, 10¹⁰ roots per angle) is searched as far as an offset puts a return in the
+/// grid: the same search whatever the window beyond it, and still the true pose. It ran
+/// out of memory before.
+#[test]
+fn a_window_beyond_the_grid_is_searched_as_far_as_the_grid() {
+    let params = coarse();
+    let (scene, grids) = park_submap(&params);
+    let truth = Pose2::new(-1.0, 1.5, 2.0);
+    let scan = scan_at(&scene, &truth, 5);
+    let initial = Pose2::new(-0.6, 1.2, 1.95);
+    let (lo, hi) = grids.grid().bounds();
+    let window = |linear_m| SearchWindow {
+        linear_m,
+        angular_rad: 0.1,
+    };
+    // Wide enough to put the scan anywhere in the grid.
+    let grid_wide = 2.0 * (hi[0] - lo[0]).max(hi[1] - lo[1]);
+    let m = search(&grids, &scan, initial, &window(grid_wide), 0.5, &params).expect("found");
+    assert!(
+        (m.pose.x - truth.x).abs() <= params.resolution_m
+            && (m.pose.y - truth.y).abs() <= params.resolution_m,
+        "{m:?}"
+    );
+    for linear_m in [1e5, 3e6, f64::MAX, f64::INFINITY] {
+        let far = search(&grids, &scan, initial, &window(linear_m), 0.5, &params);
+        assert_eq!(far, Some(m), "window {linear_m} m");
+        let excluded = Exclusion {
+            pose: m.pose,
+            radius_m: 1.0,
+        };
+        let rival = |w| runner_up(&grids, &scan, initial, &w, &excluded, 0.3, &params);
+        assert_eq!(rival(window(linear_m)), rival(window(grid_wide)));
+    }
+}
+
 #[test]
 fn nothing_to_match_gives_none() {
     let params = coarse();

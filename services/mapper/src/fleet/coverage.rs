@@ -1,0 +1,105 @@
+//! Bounded growth (docs/services.md, "Bounded growth"): a robot mapping where the map already
+//! has nodes passes over them. Its node is predicted from the chain's last node (added or
+//! passed) by odometry; when the place is covered (`slam::CoverageParams`) and the chain's
+//! last node was covered too, the node is located by IDC against the nearest covering node
+//! and taken like a localized node (numbered, acked, a span in the store), not added. The
+//! first covered node of a stretch is added: its loop closures tie the chain to the map.
+
+use super::{FleetMap, Sequence};
+use slam::Pose2;
+use wire::NodeInput;
+
+/// Where a chain's last node stood, for the next one's prediction.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Cover {
+    /// Its node_seq.
+    seq: u64,
+    /// Its scan frame in the odometry frame.
+    odometry: Pose2,
+    /// Its map pose when passed; `None` when added (the node's estimate, as solved since).
+    located: Option<Pose2>,
+    /// Whether its place was covered.
+    covered: bool,
+    /// Path driven since the chain's last node located or added (m).
+    unlocated_m: f64,
+}
+
+impl FleetMap {
+    /// The map pose of `node` when it passes over covered ground (it is then taken with
+    /// [`FleetMap::take_localized`], not [`FleetMap::ingest`]); `None` when it is to be added.
+    pub fn pass(&mut self, node: &NodeInput) -> Option<Pose2> {
+        if !self.mapper.params().coverage.enabled || self.sequence(node) != Sequence::Next {
+            return None;
+        }
+        let r = *self.by_id.get(&node.robot)?;
+        let chain = self.robots[r].chain(node.chain_id)?;
+        let last_node = chain.last_node;
+        let key = (node.robot.clone(), node.chain_id);
+        let odometry = Pose2::from_isometry3(&node.odometry.pose).compose(&node.scan_origin);
+        // From the chain's last node, added or passed; after a restart (no state), from its
+        // last added node, and the first covered node is added.
+        let last = self.covers.get(&key).filter(|c| c.seq + 1 == node.node_seq);
+        let (from_odometry, from_map, was_covered, unlocated_m) = match last {
+            Some(c) => (
+                c.odometry,
+                c.located.unwrap_or(self.poses()[last_node]),
+                c.covered,
+                c.unlocated_m,
+            ),
+            None => (
+                self.nodes[last_node].odometry,
+                self.poses()[last_node],
+                false,
+                0.0,
+            ),
+        };
+        let step = from_odometry.between(&odometry);
+        let predicted = from_map.compose(&step);
+        let covering = self.mapper.covering(&predicted, last_node);
+        let p = &self.mapper.params().coverage;
+        let covered = covering.len() >= p.max_nodes;
+        let passes = covered && was_covered;
+        let located = passes
+            .then(|| {
+                let scan = super::matching_scan(node, self.max_range_m);
+                self.mapper.locate_against(covering[0], &predicted, &scan)
+            })
+            .flatten();
+        // A pass not located goes on by the odometry of the last one located, for a while.
+        let unlocated_m = match located {
+            Some(_) => 0.0,
+            None => unlocated_m + step.x.hypot(step.y),
+        };
+        let passed = located.or((passes && unlocated_m <= p.max_unlocated_m).then_some(predicted));
+        if std::env::var_os("LEVELMAP_DEBUG").is_some() {
+            let d = covering.first().map(|&n| {
+                let q = self.poses()[n];
+                (
+                    (q.x - predicted.x).hypot(q.y - predicted.y),
+                    slam::wrap_angle(q.theta - predicted.theta),
+                )
+            });
+            eprintln!(
+                "DEBUGCOV seq {} covered {covered} was {was_covered} n {} near {d:?} located {} passed {} unloc {unlocated_m:.1} at {:.1},{:.1},{:.2}",
+                node.node_seq,
+                covering.len(),
+                located.is_some(),
+                passed.is_some(),
+                predicted.x,
+                predicted.y,
+                predicted.theta
+            );
+        }
+        self.covers.insert(
+            key,
+            Cover {
+                seq: node.node_seq,
+                odometry,
+                located: passed,
+                covered,
+                unlocated_m: if passed.is_some() { unlocated_m } else { 0.0 },
+            },
+        );
+        passed
+    }
+}

@@ -1,0 +1,151 @@
+//! Bounded growth: where the map already has nodes, a robot passing again adds nothing. A
+//! place is *covered* when the map has `max_nodes` nodes within `radius_m` of it, heading
+//! within `heading_rad`, in the same part of the network. The caller (the fleet's map)
+//! decides per node: the first covered node of a stretch is added (its loop closures tie the
+//! chain to the map and correct its drift); the covered ones after it are only located,
+//! by IDC against the nearest covering node, and not added; a node that cannot be located
+//! is added. So the network's nodes per area stay bounded however often a place is passed.
+
+use super::Mapper2d;
+use crate::matching::correlative::{SearchWindow, search};
+use crate::matching::{Scan2, accept, idc};
+use crate::se2::{Pose2, wrap_angle};
+use serde::{Deserialize, Serialize};
+
+/// When a place counts as covered, and how a pass is located.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct CoverageParams {
+    /// Pass over covered places at all (the fleet's map decides; the mapper only answers).
+    pub enabled: bool,
+    /// A place is covered by nodes within this distance (m)…
+    pub radius_m: f64,
+    /// …whose heading is within this of the robot's (rad): a place seen the other way is
+    /// another view…
+    pub heading_rad: f64,
+    /// …when there are this many.
+    pub max_nodes: usize,
+    /// A pass located by IDC must lie within this of where odometry put it (m); the
+    /// correlative search looks this far…
+    pub max_shift_m: f64,
+    /// …and turns this far (rad)…
+    pub max_turn_rad: f64,
+    /// …for a pose that scores at least this (mean cell value under the returns).
+    pub min_score: f64,
+    /// Passes not located go on by odometry from the last one located for at most this
+    /// path (m); the next is added (its closures tie the chain again).
+    pub max_unlocated_m: f64,
+}
+
+impl Default for CoverageParams {
+    fn default() -> Self {
+        CoverageParams {
+            enabled: true,
+            radius_m: 3.0,
+            heading_rad: 45f64.to_radians(),
+            max_nodes: 1,
+            max_shift_m: 0.5,
+            max_turn_rad: 5f64.to_radians(),
+            min_score: 0.6,
+            max_unlocated_m: 15.0,
+        }
+    }
+}
+
+/// A chain's nodes passed since its last node: how many, the path they drove, the last one's
+/// odometry. The chain's next node counts them in its path and place, so that its loop
+/// closures see how far the robot went (a lap passed is a lap driven).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Passed {
+    /// Nodes passed.
+    pub nodes: usize,
+    /// Path from the chain's last node through them (m).
+    pub path_m: f64,
+    /// The last one's odometry pose (scan frame in the odometry frame).
+    pub odometry: Option<Pose2>,
+}
+
+impl Mapper2d {
+    /// Counts a node of `robot`'s chain passed at `odometry`; the chain's passes so far.
+    pub fn note_pass(&mut self, robot: usize, odometry: Pose2) -> Passed {
+        let Some(chain) = self.chains.get_mut(robot).and_then(Option::as_mut) else {
+            return Passed::default();
+        };
+        let from = chain.passed.odometry.unwrap_or(chain.last_odometry);
+        let step = from.between(&odometry);
+        chain.passed = Passed {
+            nodes: chain.passed.nodes + 1,
+            path_m: chain.passed.path_m + step.x.hypot(step.y),
+            odometry: Some(odometry),
+        };
+        chain.passed
+    }
+
+    /// A chain's passes as stored (a replay).
+    pub fn restore_passed(&mut self, robot: usize, passed: Passed) {
+        if let Some(chain) = self.chains.get_mut(robot).and_then(Option::as_mut) {
+            chain.passed = passed;
+        }
+    }
+
+    /// The nodes that cover `pose` in `node`'s part of the network, nearest first; the place
+    /// is covered when there are `coverage.max_nodes` of them.
+    pub fn covering(&self, pose: &Pose2, node: usize) -> Vec<usize> {
+        let p = &self.params.coverage;
+        let mut near: Vec<(f64, usize)> = self
+            .near
+            .near(pose, p.radius_m)
+            .filter(|&n| self.parts.same_part(n, node))
+            .filter_map(|n| {
+                let q = &self.graph.poses[n];
+                let d = (q.x - pose.x).hypot(q.y - pose.y);
+                let turn = wrap_angle(q.theta - pose.theta).abs();
+                (d <= p.radius_m && turn <= p.heading_rad).then_some((d, n))
+            })
+            .collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        near.into_iter().map(|(_, n)| n).collect()
+    }
+
+    /// Where `scan`, predicted at `predicted`, lies: IDC against node `near` from the
+    /// prediction, gated like a sequential match and within `coverage.max_shift_m` of it;
+    /// failing that, the correlative search in the finished submap holding `near`, in a
+    /// window of that size (sparse scans a metre or two from a node often fail IDC's gate).
+    pub fn locate_against(&self, near: usize, predicted: &Pose2, scan: &Scan2) -> Option<Pose2> {
+        let p = &self.params.coverage;
+        let frame = self.graph.poses[near];
+        let guess = frame.between(predicted);
+        // Not asking for convergence: the prediction is odometry's, centimetres off.
+        let gate = crate::matching::QualityGate {
+            require_converged: false,
+            ..self.params.gate.clone()
+        };
+        let by_idc = idc(&self.node_scans[near], scan, guess, &self.params.idc)
+            .ok()
+            .filter(|m| accept(m, &gate))
+            .map(|m| frame.compose(&m.pose))
+            .filter(|pose| (pose.x - predicted.x).hypot(pose.y - predicted.y) <= p.max_shift_m);
+        by_idc.or_else(|| {
+            let k = self
+                .submaps
+                .done
+                .iter()
+                .position(|s| s.nodes.iter().any(|&(n, _)| n == near))?;
+            let anchor = self.graph.poses[self.submaps.done[k].anchor];
+            let window = SearchWindow {
+                linear_m: p.max_shift_m,
+                angular_rad: p.max_turn_rad,
+            };
+            let grids = self.pooled_grids(k);
+            let initial = anchor.between(predicted);
+            let grid = &self.params.submaps.grid;
+            let found = search(&grids, scan, initial, &window, p.min_score, grid)?;
+            Some(anchor.compose(&found.pose))
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &super::Mapper2dParams {
+        &self.params
+    }
+}

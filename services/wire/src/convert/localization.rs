@@ -1,0 +1,252 @@
+//! Localization on a map version: the mapper's answer per node (and per HTTP request), and
+//! the HTTP request's scan and prior.
+
+use super::decode;
+use super::pose::{pose2_from_wire, pose2_to_wire};
+use super::scan::leveled_scan_from_wire;
+use crate::error::finite;
+use crate::{WIRE_VERSION, WireError, v1, validate_id};
+use leveling::LeveledScan;
+use slam::Pose2;
+use slam::localize::{SearchKind, TrackStatus};
+
+/// Where a robot's node (or a requested scan) is on a map version.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Localized {
+    /// The fleet.
+    pub fleet: String,
+    /// The robot ("" in an HTTP answer).
+    pub robot: String,
+    /// Its node's chain and number (0 in an HTTP answer).
+    pub chain_id: u64,
+    /// See `chain_id`.
+    pub node_seq: u64,
+    /// The map version.
+    pub map_version: u64,
+    /// Found, carried forward by odometry, or lost.
+    pub status: TrackStatus,
+    /// The scan frame in the map frame, unless lost.
+    pub pose: Option<Pose2>,
+    /// Covariance of (x, y, yaw) when found.
+    pub covariance: Option<[[f64; 3]; 3]>,
+    /// The correlative score when found (0–1).
+    pub score: f64,
+    /// The search that found it.
+    pub search: Option<SearchKind>,
+    /// When the mapper made it (ns since the Unix epoch).
+    pub sent_ns: u64,
+    /// Why not found, when not.
+    pub reason: String,
+}
+
+/// A localization on the wire.
+pub fn localization_to_wire(l: &Localized) -> v1::Localization {
+    use v1::localization::{Search, Status};
+    v1::Localization {
+        version: WIRE_VERSION,
+        fleet_id: l.fleet.clone(),
+        robot_id: l.robot.clone(),
+        chain_id: l.chain_id,
+        node_seq: l.node_seq,
+        map_version: l.map_version,
+        status: match l.status {
+            TrackStatus::Localized => Status::Localized,
+            TrackStatus::DeadReckoned => Status::DeadReckoned,
+            TrackStatus::Lost => Status::Lost,
+        } as i32,
+        pose: l.pose.as_ref().map(pose2_to_wire),
+        covariance: l
+            .covariance
+            .map(|c| c.iter().flatten().copied().collect())
+            .unwrap_or_default(),
+        score: l.score,
+        search: match l.search {
+            None => Search::Unspecified,
+            Some(SearchKind::Window) => Search::Window,
+            Some(SearchKind::Global) => Search::Global,
+        } as i32,
+        sent_ns: l.sent_ns,
+        reason: l.reason.clone(),
+    }
+}
+
+/// Decodes and checks a localization: this wire version, valid ids, a known status, a
+/// finite pose (required unless lost) and a finite 3×3 covariance (or none).
+pub fn decode_localization(bytes: &[u8]) -> Result<Localized, WireError> {
+    use v1::localization::{Search, Status};
+    let msg: v1::Localization = decode("Localization", bytes)?;
+    if msg.version != WIRE_VERSION {
+        return Err(WireError::Version {
+            field: "Localization.version",
+            found: msg.version,
+        });
+    }
+    validate_id("fleet", &msg.fleet_id)?;
+    if !msg.robot_id.is_empty() {
+        validate_id("robot", &msg.robot_id)?;
+    }
+    let invalid = |field, detail: &str| WireError::Invalid {
+        field,
+        detail: detail.to_owned(),
+    };
+    let status = match Status::try_from(msg.status) {
+        Ok(Status::Localized) => TrackStatus::Localized,
+        Ok(Status::DeadReckoned) => TrackStatus::DeadReckoned,
+        Ok(Status::Lost) => TrackStatus::Lost,
+        _ => return Err(invalid("Localization.status", "unknown status")),
+    };
+    let pose = msg.pose.as_ref().map(pose2_from_wire).transpose()?;
+    if pose.is_none() && status != TrackStatus::Lost {
+        return Err(WireError::Missing {
+            field: "Localization.pose",
+        });
+    }
+    let covariance = match msg.covariance.len() {
+        0 => None,
+        9 => {
+            for (i, &v) in msg.covariance.iter().enumerate() {
+                finite("Localization.covariance", Some(i), v)?;
+            }
+            Some(std::array::from_fn(|i| {
+                std::array::from_fn(|j| msg.covariance[3 * i + j])
+            }))
+        }
+        _ => return Err(invalid("Localization.covariance", "not 9 values")),
+    };
+    let search = match Search::try_from(msg.search) {
+        Ok(Search::Window) => Some(SearchKind::Window),
+        Ok(Search::Global) => Some(SearchKind::Global),
+        _ => None,
+    };
+    Ok(Localized {
+        fleet: msg.fleet_id,
+        robot: msg.robot_id,
+        chain_id: msg.chain_id,
+        node_seq: msg.node_seq,
+        map_version: msg.map_version,
+        status,
+        pose,
+        covariance,
+        score: finite("Localization.score", None, msg.score)?,
+        search,
+        sent_ns: msg.sent_ns,
+        reason: msg.reason,
+    })
+}
+
+/// A request to find a scan on a map version.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LocalizeQuery {
+    /// The scan.
+    pub scan: LeveledScan,
+    /// The guess and its 1σ in x and y (m) and yaw (rad), if any.
+    pub prior: Option<(Pose2, f64, f64)>,
+    /// The map version; 0: the newest.
+    pub map_version: u64,
+}
+
+/// A prior's σ when the request gives none: 0.5 m and 0.1 rad.
+pub const DEFAULT_PRIOR_SIGMA: (f64, f64) = (0.5, 0.1);
+
+/// Decodes and checks a localize request: this wire version, a valid leveled scan, a finite
+/// prior, σ finite and not negative (0: the default).
+pub fn decode_localize_request(bytes: &[u8]) -> Result<LocalizeQuery, WireError> {
+    let msg: v1::LocalizeRequest = decode("LocalizeRequest", bytes)?;
+    if msg.version != WIRE_VERSION {
+        return Err(WireError::Version {
+            field: "LocalizeRequest.version",
+            found: msg.version,
+        });
+    }
+    let scan = msg.scan.as_ref().ok_or(WireError::Missing {
+        field: "LocalizeRequest.scan",
+    })?;
+    let scan = leveled_scan_from_wire(scan)?;
+    let sigma = |field, v: f64, default: f64| -> Result<f64, WireError> {
+        let v = finite(field, None, v)?;
+        if v < 0.0 {
+            return Err(WireError::Invalid {
+                field,
+                detail: format!("{v} is negative"),
+            });
+        }
+        Ok(if v == 0.0 { default } else { v })
+    };
+    let prior = match &msg.prior {
+        None => None,
+        Some(p) => Some((
+            pose2_from_wire(p)?,
+            sigma(
+                "LocalizeRequest.prior_sigma_xy_m",
+                msg.prior_sigma_xy_m,
+                DEFAULT_PRIOR_SIGMA.0,
+            )?,
+            sigma(
+                "LocalizeRequest.prior_sigma_yaw_rad",
+                msg.prior_sigma_yaw_rad,
+                DEFAULT_PRIOR_SIGMA.1,
+            )?,
+        )),
+    };
+    Ok(LocalizeQuery {
+        scan,
+        prior,
+        map_version: msg.map_version,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Message;
+
+    fn found() -> Localized {
+        Localized {
+            fleet: "park".into(),
+            robot: "r4".into(),
+            chain_id: 7,
+            node_seq: 42,
+            map_version: 1,
+            status: TrackStatus::Localized,
+            pose: Some(Pose2::new(1.0, -2.0, 0.5)),
+            covariance: Some([[1e-4, 0.0, 0.0], [0.0, 2e-4, 1e-6], [0.0, 1e-6, 1e-5]]),
+            score: 0.71,
+            search: Some(SearchKind::Window),
+            sent_ns: 123,
+            reason: String::new(),
+        }
+    }
+
+    #[test]
+    fn a_localization_survives_the_wire() {
+        let l = found();
+        let bytes = localization_to_wire(&l).encode_to_vec();
+        assert_eq!(decode_localization(&bytes).unwrap(), l);
+        let lost = Localized {
+            status: TrackStatus::Lost,
+            pose: None,
+            covariance: None,
+            search: None,
+            reason: "not found".into(),
+            ..found()
+        };
+        let bytes = localization_to_wire(&lost).encode_to_vec();
+        assert_eq!(decode_localization(&bytes).unwrap(), lost);
+    }
+
+    #[test]
+    fn a_bad_localization_is_refused() {
+        let mut msg = localization_to_wire(&found());
+        msg.covariance.pop();
+        assert!(decode_localization(&msg.encode_to_vec()).is_err());
+        let mut msg = localization_to_wire(&found());
+        msg.pose = None;
+        assert!(decode_localization(&msg.encode_to_vec()).is_err());
+        let mut msg = localization_to_wire(&found());
+        msg.robot_id = "r/*".into();
+        assert!(decode_localization(&msg.encode_to_vec()).is_err());
+        let mut msg = localization_to_wire(&found());
+        msg.covariance[4] = f64::NAN;
+        assert!(decode_localization(&msg.encode_to_vec()).is_err());
+    }
+}
