@@ -18,7 +18,14 @@ const DATUM: Geodetic = Geodetic {
     height_m: 55.0,
 };
 
+/// Every node mapped: no passes over covered ground (`coverage_config` has them).
 fn config(dir: &std::path::Path) -> MapperConfig {
+    let mut config = coverage_config(dir);
+    config.mapping.coverage.enabled = false;
+    config
+}
+
+fn coverage_config(dir: &std::path::Path) -> MapperConfig {
     MapperConfig {
         store_path: dir.join("mapper.redb"),
         datum: Some(DATUM),
@@ -127,8 +134,22 @@ fn map_as_the_worker(
     let mut map = config.new_fleet("park");
     let mut out: Option<(u64, slam::BackgroundSolve)> = None;
     let mut edges = 0;
-    for (arrival, bytes) in nodes.iter().enumerate() {
+    let mut arrival = 0;
+    for bytes in nodes {
         let (input, _) = wire::decode_node_input(bytes).unwrap();
+        // Over covered ground: a span, as the worker takes it.
+        if map.pass(&input).is_some() {
+            let span = map.take_localized(&input, true).unwrap();
+            let localized = vec![span];
+            store
+                .commit(&[FleetBatch {
+                    fleet: "park",
+                    localized,
+                    ..Default::default()
+                }])
+                .unwrap();
+            continue;
+        }
         map.ingest(&input).unwrap();
         let new = encode_edges(&map.graph().edges[edges..]);
         store
@@ -141,6 +162,8 @@ fn map_as_the_worker(
             }])
             .unwrap();
         edges = map.graph().edges.len();
+        arrival += 1;
+        let arrival = arrival - 1;
         if let Some((taken_after, _)) = &out
             && arrival as u64 >= taken_after + 5
         {
@@ -228,6 +251,41 @@ fn a_snapshot_and_the_nodes_after_it_restore_what_a_full_replay_maps() {
     a.finish_solve(sa.run()).unwrap();
     b.finish_solve(sb.run()).unwrap();
     assert_eq!(differences(&a, &b), Vec::<String>::new());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn passes_over_covered_ground_restore_from_a_snapshot_as_in_a_full_replay() {
+    let (scratch, store) = temp_store("passes-count");
+    let config = coverage_config(&scratch);
+    let nodes = nodes(110);
+    // How many nodes are mapped (the rest pass), then a snapshot about half-way, between
+    // the harness's solves.
+    let mapped = map_as_the_worker(&store, &config, &nodes, usize::MAX)
+        .nodes()
+        .len();
+    drop(store);
+    let _ = std::fs::remove_dir_all(&scratch);
+    let (dir, store) = temp_store("passes");
+    let half = (mapped / 2) / 17 * 17 + 9;
+    map_as_the_worker(&store, &config, &nodes, half);
+    let stored = store.load_fleet("park").unwrap();
+    assert!(
+        stored.localized.len() > 3,
+        "{} spans passed",
+        stored.localized.len()
+    );
+    let full = replay(&config, &stored).unwrap();
+    let bytes = store.snapshot("park").unwrap().unwrap();
+    let (restored, covered) = from_snapshot(&config, &stored, &bytes).unwrap();
+    assert_eq!(covered, half + 1);
+    assert_eq!(differences(&restored, &full), Vec::<String>::new());
+    for (robot, chain) in stored.localized.iter().map(|s| (&s.robot, s.chain_id)) {
+        assert_eq!(
+            restored.chain_acked(robot, chain),
+            full.chain_acked(robot, chain)
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
