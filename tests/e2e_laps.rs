@@ -71,3 +71,39 @@ fn ten_laps_of_one_loop_keep_the_map_the_size_of_one() {
     assert!(r["nodes_passed"].as_u64().unwrap() > 200, "{r}");
     assert_eq!(r["outbox_pending"], 0, "every node acked");
 }
+
+/// Cloud retention (`[clouds]`): with room for about two clouds, the oldest nodes' clouds are
+/// dropped in the background while nodes are taken; the newest stays.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_oldest_clouds_are_dropped_beyond_the_fleets_bound() {
+    let dir = temp_dir("clouds");
+    let nodes = real_nodes(6);
+    let cloud_bytes = wire::Message::encoded_len(nodes[0].cloud.as_ref().expect("a cloud")) as u64;
+    let config = mapper::MapperConfig {
+        clouds: mapper::config::CloudsConfig {
+            max_bytes: 2 * cloud_bytes + cloud_bytes / 2,
+            prune_every_s: std::num::NonZeroU64::new(1).unwrap(),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let (mapper, session, http) = in_process_mapper_with(&dir, config).await;
+    put_until_mapped(&session, &http, None, &nodes).await;
+    let h = http.clone();
+    let (kept, metrics) = tokio::task::spawn_blocking(move || {
+        let cloud =
+            |n: usize| http_get(&h, &format!("/api/v1/fleets/park/nodes/{n}/cloud")).map(|a| a.0);
+        let kept = wait_for(std::time::Duration::from_secs(20), || {
+            let kept: Vec<usize> = (0..6).filter(|&n| cloud(n) == Some(200)).collect();
+            (kept.len() <= 2).then_some(kept)
+        });
+        (kept, http_get(&h, "/metrics").unwrap().1)
+    })
+    .await
+    .unwrap();
+    assert_eq!(kept, Some(vec![4, 5]), "the two newest clouds kept");
+    assert_eq!(metric(&metrics, "levelmap_clouds_pruned_total"), 4);
+    session.close().await.unwrap();
+    mapper.stop().await.unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+}

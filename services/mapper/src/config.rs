@@ -44,6 +44,8 @@ pub struct MapperConfig {
     pub versions: VersionsConfig,
     /// Robots localizing on a map version (`[localization]`).
     pub localization: crate::localization::LocalizationConfig,
+    /// How long 3D clouds are kept (`[clouds]`).
+    pub clouds: CloudsConfig,
 }
 
 impl Default for MapperConfig {
@@ -63,6 +65,7 @@ impl Default for MapperConfig {
             ros2_out: None,
             versions: VersionsConfig::default(),
             localization: Default::default(),
+            clouds: CloudsConfig::default(),
         }
     }
 }
@@ -110,6 +113,29 @@ impl Default for HttpConfig {
             heavy_timeout_ms: NonZeroU64::new(10_000).expect("nonzero"),
             event_streams: NonZeroUsize::new(256).expect("nonzero"),
             cors_origins: Vec::new(),
+        }
+    }
+}
+
+/// Cloud retention (`[clouds]`): each fleet's 3D clouds (for viewing; never mapped) are
+/// dropped oldest first, off the worker.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CloudsConfig {
+    /// Drop clouds of nodes older than this (s); 0 keeps them however old.
+    pub max_age_s: u64,
+    /// Drop the oldest beyond this many bytes of clouds per fleet; 0: no bound.
+    pub max_bytes: u64,
+    /// Apply the two every this many seconds.
+    pub prune_every_s: NonZeroU64,
+}
+
+impl Default for CloudsConfig {
+    fn default() -> Self {
+        CloudsConfig {
+            max_age_s: 0,
+            max_bytes: 2 << 30,
+            prune_every_s: NonZeroU64::new(60).expect("nonzero"),
         }
     }
 }
