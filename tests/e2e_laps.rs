@@ -107,3 +107,52 @@ async fn the_oldest_clouds_are_dropped_beyond_the_fleets_bound() {
     mapper.stop().await.unwrap();
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Passes are stored as spans, their path included: a mapper started again on the store of
+/// two laps replays it to the same network (a difference would quarantine the fleet).
+#[test]
+fn a_store_with_passes_replays_to_the_same_map() {
+    let dir = temp_dir("laps-replay");
+    let run = dir.join("run");
+    let out = levelmap()
+        .args([
+            "demo",
+            "--robots",
+            "1",
+            "--laps",
+            "2",
+            "--no-baseline",
+            "--speed",
+            "0",
+        ])
+        .args(["--json", "--http", "127.0.0.1:0"])
+        .args(["--zenoh", &format!("tcp/127.0.0.1:{}", free_port())])
+        .arg("--dir")
+        .arg(&run)
+        .output()
+        .expect("levelmap demo runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert!(report["nodes_passed"].as_u64().unwrap() > 10, "{report}");
+    // The demo's mapping: slam::Mapper2dParams::precise_dead_reckoning() and the park's datum.
+    let config = format!(
+        "store_path = {:?}\ndatum = {{ latitude_deg = 52.39, longitude_deg = 9.71, height_m = 55.0 }}\n\
+         [mapping]\nodometry_sigma_xy_m = 0.01\nodometry_sigma_xy_per_m = 0.01\n\
+         odometry_sigma_theta_rad = 0.002\nodometry_sigma_theta_per_rad = 0.01\n\
+         match_odometry_max_chi2 = 16.0\nfuse_odometry = true\n\
+         [mapping.loop_consistency]\nenabled = false\n[mapping.idc]\nmin_correspondences = 10\n",
+        run.join("mapper.redb")
+    );
+    let mapper = MapperProcess::start_with(&dir, format!("tcp/127.0.0.1:{}", free_port()), &config);
+    let fleets = get_json(&mapper.http, "/api/v1/fleets").unwrap();
+    assert_eq!(fleets["quarantined"], serde_json::json!([]), "{fleets}");
+    let summary = get_json(&mapper.http, "/api/v1/fleets/park/summary").unwrap();
+    assert_eq!(summary["nodes"], report["nodes"], "{summary}");
+    assert_eq!(summary["edges"], report["edges"], "{summary}");
+    drop(mapper);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -36,7 +36,9 @@ pub struct MapperConfig {
     /// Solve a fleet's network at most this often (ms); nodes arriving between solves are
     /// placed by scan matching and odometry at once and corrected at the next solve.
     pub solve_interval_ms: u64,
-    /// The pose network and scan matching.
+    /// The pose network and scan matching. Keys a file leaves out keep the fleet's defaults
+    /// ([`fleet_mapping_params`]), also inside a table it gives in part.
+    #[serde(deserialize_with = "over_fleet_mapping")]
     pub mapping: Mapper2dParams,
     /// Where each fleet's map goes to ROS 2 (`/levelmap/<fleet>/map`); unset: nowhere.
     pub ros2_out: Option<wire::ros2::RosOutConfig>,
@@ -201,6 +203,36 @@ impl From<CorsOrigin> for String {
     }
 }
 
+/// `[mapping]` as given, over the fleet's defaults: a table given in part (`[mapping.coverage]`
+/// alone) keeps the fleet's values for the keys it leaves out, not the library's.
+fn over_fleet_mapping<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Mapper2dParams, D::Error> {
+    use serde::de::Error;
+    let given = toml::Value::deserialize(d)?;
+    let mut merged = toml::Value::try_from(fleet_mapping_params()).map_err(D::Error::custom)?;
+    merge_over(&mut merged, given);
+    merged.try_into().map_err(D::Error::custom)
+}
+
+/// `over` laid on `base`, table by table. A table that shares no key with the one it lands
+/// on (an enum's other variant: `{ Huber = … }` for `{ Cauchy = … }`) replaces it.
+fn merge_over(base: &mut toml::Value, over: toml::Value) {
+    match (base, over) {
+        (toml::Value::Table(base), toml::Value::Table(over))
+            if over.keys().any(|k| base.contains_key(k)) =>
+        {
+            for (key, value) in over {
+                match base.get_mut(&key) {
+                    Some(slot) => merge_over(slot, value),
+                    None => {
+                        base.insert(key, value);
+                    }
+                }
+            }
+        }
+        (base, over) => *base = over,
+    }
+}
+
 /// The mapping parameters for fleets of robots sending a node every metre or so (measured on
 /// the simulated park: `services/sim/tests/fleet_mapping.rs`).
 pub fn fleet_mapping_params() -> Mapper2dParams {
@@ -292,6 +324,24 @@ mod tests {
                 ..MapperConfig::default()
             }
         );
+    }
+
+    #[test]
+    fn a_mapping_table_given_in_part_keeps_the_fleets_defaults() {
+        let config: MapperConfig = toml::from_str(
+            "[mapping.coverage]\nenabled = false\n[mapping.loop_robust]\nkernel = \"huber\"\ndelta = 2.0\n",
+        )
+        .unwrap();
+        let fleet = fleet_mapping_params();
+        assert!(!config.mapping.coverage.enabled);
+        assert_eq!(
+            config.mapping.loop_robust,
+            slam::Robust::Huber { delta: 2.0 }
+        );
+        // The keys it leaves out: the fleet's, not the library's.
+        assert_eq!(config.mapping.idc, fleet.idc);
+        assert_eq!(config.mapping.odometry_sigma_xy_per_m, 0.02);
+        assert_eq!(config.mapping.coverage.radius_m, fleet.coverage.radius_m);
     }
 
     #[test]
