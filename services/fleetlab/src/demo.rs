@@ -27,6 +27,10 @@ pub struct DemoArgs {
     /// Skip the fixed-2D baseline (minutes for a long drive).
     #[arg(long)]
     pub no_baseline: bool,
+    /// Add every node, even where the map has nodes already (no bounded growth:
+    /// `[mapping.coverage] enabled = false`), for comparison.
+    #[arg(long)]
+    pub keep_every_node: bool,
     /// Robots (1 to 3: the park's loops).
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
     pub robots: u8,
@@ -138,7 +142,13 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         http_listen: args.http.clone(),
         store_path: args.dir.join("mapper.redb"),
         datum: Some(sim::PARK_DATUM.origin),
-        mapping: sim_mapping_params(),
+        mapping: slam::Mapper2dParams {
+            coverage: slam::CoverageParams {
+                enabled: !args.keep_every_node,
+                ..Default::default()
+            },
+            ..sim_mapping_params()
+        },
         token: args.token.clone(),
         read_token: args.read_token.clone(),
         ..MapperConfig::default()

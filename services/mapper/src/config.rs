@@ -36,7 +36,9 @@ pub struct MapperConfig {
     /// Solve a fleet's network at most this often (ms); nodes arriving between solves are
     /// placed by scan matching and odometry at once and corrected at the next solve.
     pub solve_interval_ms: u64,
-    /// The pose network and scan matching.
+    /// The pose network and scan matching. Keys a file leaves out keep the fleet's defaults
+    /// ([`fleet_mapping_params`]), also inside a table it gives in part.
+    #[serde(deserialize_with = "over_fleet_mapping")]
     pub mapping: Mapper2dParams,
     /// Where each fleet's map goes to ROS 2 (`/levelmap/<fleet>/map`); unset: nowhere.
     pub ros2_out: Option<wire::ros2::RosOutConfig>,
@@ -44,6 +46,8 @@ pub struct MapperConfig {
     pub versions: VersionsConfig,
     /// Robots localizing on a map version (`[localization]`).
     pub localization: crate::localization::LocalizationConfig,
+    /// How long 3D clouds are kept (`[clouds]`).
+    pub clouds: CloudsConfig,
     /// Snapshots of the fleets' maps in the store (`[store]`).
     pub store: StoreConfig,
 }
@@ -65,6 +69,7 @@ impl Default for MapperConfig {
             ros2_out: None,
             versions: VersionsConfig::default(),
             localization: Default::default(),
+            clouds: CloudsConfig::default(),
             store: StoreConfig::default(),
         }
     }
@@ -113,6 +118,29 @@ impl Default for HttpConfig {
             heavy_timeout_ms: NonZeroU64::new(10_000).expect("nonzero"),
             event_streams: NonZeroUsize::new(256).expect("nonzero"),
             cors_origins: Vec::new(),
+        }
+    }
+}
+
+/// Cloud retention (`[clouds]`): each fleet's 3D clouds (for viewing; never mapped) are
+/// dropped oldest first, off the worker.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CloudsConfig {
+    /// Drop clouds of nodes older than this (s); 0 keeps them however old.
+    pub max_age_s: u64,
+    /// Drop the oldest beyond this many bytes of clouds per fleet; 0: no bound.
+    pub max_bytes: u64,
+    /// Apply the two every this many seconds.
+    pub prune_every_s: NonZeroU64,
+}
+
+impl Default for CloudsConfig {
+    fn default() -> Self {
+        CloudsConfig {
+            max_age_s: 0,
+            max_bytes: 2 << 30,
+            prune_every_s: NonZeroU64::new(60).expect("nonzero"),
         }
     }
 }
@@ -195,6 +223,36 @@ impl TryFrom<String> for CorsOrigin {
 impl From<CorsOrigin> for String {
     fn from(o: CorsOrigin) -> String {
         o.0
+    }
+}
+
+/// `[mapping]` as given, over the fleet's defaults: a table given in part (`[mapping.coverage]`
+/// alone) keeps the fleet's values for the keys it leaves out, not the library's.
+fn over_fleet_mapping<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Mapper2dParams, D::Error> {
+    use serde::de::Error;
+    let given = toml::Value::deserialize(d)?;
+    let mut merged = toml::Value::try_from(fleet_mapping_params()).map_err(D::Error::custom)?;
+    merge_over(&mut merged, given);
+    merged.try_into().map_err(D::Error::custom)
+}
+
+/// `over` laid on `base`, table by table. A table that shares no key with the one it lands
+/// on (an enum's other variant: `{ Huber = … }` for `{ Cauchy = … }`) replaces it.
+fn merge_over(base: &mut toml::Value, over: toml::Value) {
+    match (base, over) {
+        (toml::Value::Table(base), toml::Value::Table(over))
+            if over.keys().any(|k| base.contains_key(k)) =>
+        {
+            for (key, value) in over {
+                match base.get_mut(&key) {
+                    Some(slot) => merge_over(slot, value),
+                    None => {
+                        base.insert(key, value);
+                    }
+                }
+            }
+        }
+        (base, over) => *base = over,
     }
 }
 
@@ -289,6 +347,24 @@ mod tests {
                 ..MapperConfig::default()
             }
         );
+    }
+
+    #[test]
+    fn a_mapping_table_given_in_part_keeps_the_fleets_defaults() {
+        let config: MapperConfig = toml::from_str(
+            "[mapping.coverage]\nenabled = false\n[mapping.loop_robust]\nkernel = \"huber\"\ndelta = 2.0\n",
+        )
+        .unwrap();
+        let fleet = fleet_mapping_params();
+        assert!(!config.mapping.coverage.enabled);
+        assert_eq!(
+            config.mapping.loop_robust,
+            slam::Robust::Huber { delta: 2.0 }
+        );
+        // The keys it leaves out: the fleet's, not the library's.
+        assert_eq!(config.mapping.idc, fleet.idc);
+        assert_eq!(config.mapping.odometry_sigma_xy_per_m, 0.02);
+        assert_eq!(config.mapping.coverage.radius_m, fleet.coverage.radius_m);
     }
 
     #[test]

@@ -117,6 +117,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             })?
     };
 
+    prune_clouds(config.clouds.clone(), store.clone(), shared.clone());
     if let Some(ros) = &config.ros2_out {
         crate::ros_out::start_when_reachable(ros.clone(), shared.clone(), config.fleets.clone());
     }
@@ -226,4 +227,55 @@ async fn declare_live(
         })
         .await
         .map_err(anyhow::Error::from_boxed)
+}
+
+/// Applies the cloud retention policy (`[clouds]`) to every fleet every `prune_every_s`, on
+/// the blocking pool, until the mapper stops.
+fn prune_clouds(config: crate::config::CloudsConfig, store: Arc<Store>, shared: Arc<Shared>) {
+    if config.max_age_s == 0 && config.max_bytes == 0 {
+        return;
+    }
+    let mut stopping = shared.stopping.subscribe();
+    tokio::spawn(async move {
+        let every = Duration::from_secs(config.prune_every_s.get());
+        loop {
+            tokio::select! {
+                _ = stopping.wait_for(|s| *s) => return,
+                _ = tokio::time::sleep(every) => {}
+            }
+            let (store, shared, config) = (store.clone(), shared.clone(), config.clone());
+            let pruned = tokio::task::spawn_blocking(move || {
+                let views: Vec<_> = shared
+                    .fleets
+                    .read()
+                    .expect("views lock")
+                    .values()
+                    .cloned()
+                    .collect();
+                let oldest_ns =
+                    now_ns().saturating_sub(config.max_age_s.saturating_mul(1_000_000_000));
+                for view in views {
+                    let too_old = |node: u64| {
+                        config.max_age_s > 0
+                            && view
+                                .nodes
+                                .get(node as usize)
+                                .is_some_and(|n| n.stamp_ns < oldest_ns)
+                    };
+                    match store.prune_clouds(&view.id, too_old, config.max_bytes) {
+                        Ok(p) if p.clouds > 0 => {
+                            shared
+                                .metrics
+                                .clouds_pruned
+                                .fetch_add(p.clouds as u64, std::sync::atomic::Ordering::Relaxed);
+                            tracing::info!(fleet = %view.id, clouds = p.clouds, bytes = p.bytes, kept_bytes = p.kept_bytes, "clouds dropped by [clouds] retention");
+                        }
+                        Ok(_) => {}
+                        Err(e) => tracing::warn!(fleet = %view.id, "cloud retention: {e}"),
+                    }
+                }
+            });
+            let _ = pruned.await;
+        }
+    });
 }

@@ -156,6 +156,8 @@ pub struct Metrics {
     /// Nodes of mapping robots passed over covered ground: located, stored as spans, not
     /// mapped.
     pub nodes_passed: AtomicU64,
+    /// Clouds dropped by the retention policy (`[clouds]`).
+    pub clouds_pruned: AtomicU64,
     /// Live odometry messages taken.
     pub odometry_received: AtomicU64,
     /// Acks published.

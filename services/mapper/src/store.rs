@@ -24,8 +24,10 @@ use std::sync::{Mutex, RwLock};
 use wire::{Message, v1};
 
 mod localization;
+mod retention;
 mod versions;
 pub use localization::{ModeError, StoredModes};
+pub use retention::Pruned;
 pub use versions::{AddVersionError, VersionRows};
 
 /// (fleet, arrival index) → encoded `v1::Node`, without `Node.cloud`.

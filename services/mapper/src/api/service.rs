@@ -89,6 +89,11 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
             &m.nodes_passed,
         ),
         (
+            "levelmap_clouds_pruned_total",
+            "3D clouds dropped by the retention policy ([clouds]).",
+            &m.clouds_pruned,
+        ),
+        (
             "levelmap_localizations_sent_total",
             "Localizations published to localizing robots.",
             &m.localizations_sent,

@@ -55,7 +55,9 @@ impl FleetMap {
         };
         let step = from_odometry.between(&odometry);
         let predicted = from_map.compose(&step);
-        let covering = self.mapper.covering(&predicted, last_node);
+        let network_chain = chain.network_chain;
+        let path_m = self.mapper.path_at(network_chain, &odometry);
+        let covering = self.mapper.covering(&predicted, network_chain, path_m);
         let p = &self.mapper.params().coverage;
         let covered = covering.len() >= p.max_nodes;
         let passes = covered && was_covered;

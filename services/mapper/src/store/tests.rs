@@ -196,3 +196,49 @@ fn solve_points_read_back_in_order_and_a_missing_one_is_damage() {
     drop(store);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn clouds_are_dropped_oldest_first_by_age_then_by_bytes_per_fleet() {
+    let dir = std::env::temp_dir().join(format!("levelmap-prune-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("prune.redb");
+    let _ = std::fs::remove_file(&path);
+    let store = Store::open(&path).unwrap();
+    let cloud = [7u8; 100];
+    let clouds: Vec<(u64, &[u8])> = (0..10).map(|n| (n, &cloud[..])).collect();
+    for fleet in ["park", "campus"] {
+        store
+            .commit(&[FleetBatch {
+                fleet,
+                clouds: clouds.clone(),
+                ..Default::default()
+            }])
+            .unwrap();
+    }
+    // Nodes 0 and 1 too old; then at most 500 bytes: 2 and 3 go too.
+    let pruned = store.prune_clouds("park", |node| node < 2, 500).unwrap();
+    assert_eq!(
+        pruned,
+        Pruned {
+            clouds: 5,
+            bytes: 500,
+            kept_bytes: 500
+        }
+    );
+    let kept: Vec<u64> = (0..10)
+        .filter(|&n| store.cloud("park", n).unwrap().is_some())
+        .collect();
+    assert_eq!(kept, [5, 6, 7, 8, 9]);
+    // Another fleet's are its own; nothing more to drop is a no-op.
+    assert!((0..10).all(|n| store.cloud("campus", n).unwrap().is_some()));
+    assert_eq!(
+        store.prune_clouds("park", |_| false, 500).unwrap().clouds,
+        0
+    );
+    assert_eq!(
+        store.prune_clouds("park", |_| false, 0).unwrap().kept_bytes,
+        500
+    );
+    drop(store);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -23,8 +23,11 @@ pub struct CoverageParams {
     /// …whose heading is within this of the robot's (rad): a place seen the other way is
     /// another view…
     pub heading_rad: f64,
-    /// …when there are this many.
+    /// …when there are this many. A robot's own nodes count once it has driven
+    /// `min_path_gap_m` (m) since them.
     pub max_nodes: usize,
+    /// See `max_nodes` (m).
+    pub min_path_gap_m: f64,
     /// A pass located by IDC must lie within this of where odometry put it (m); the
     /// correlative search looks this far…
     pub max_shift_m: f64,
@@ -44,6 +47,7 @@ impl Default for CoverageParams {
             radius_m: 3.0,
             heading_rad: 45f64.to_radians(),
             max_nodes: 1,
+            min_path_gap_m: 20.0,
             max_shift_m: 0.5,
             max_turn_rad: 5f64.to_radians(),
             min_score: 0.6,
@@ -88,14 +92,34 @@ impl Mapper2d {
         }
     }
 
-    /// The nodes that cover `pose` in `node`'s part of the network, nearest first; the place
-    /// is covered when there are `coverage.max_nodes` of them.
-    pub fn covering(&self, pose: &Pose2, node: usize) -> Vec<usize> {
+    /// The path `robot`'s chain will have driven at a node at `odometry` (m): what
+    /// [`Mapper2d::add_robot_scan`] gives it, passes included.
+    pub fn path_at(&self, robot: usize, odometry: &Pose2) -> f64 {
+        let Some(chain) = self.chains.get(robot).copied().flatten() else {
+            return 0.0;
+        };
+        let from = chain.passed.odometry.unwrap_or(chain.last_odometry);
+        let step = from.between(odometry);
+        self.node_path_m[chain.last_node] + chain.passed.path_m + step.x.hypot(step.y)
+    }
+
+    /// The nodes that cover `pose` (a node of `robot`'s chain after `path_m` of driving) in
+    /// its part of the network, nearest first; the place is covered when there are
+    /// `coverage.max_nodes` of them. The chain's own nodes count once it has driven
+    /// `min_path_gap_m` since them: the nodes just behind a robot are not a place it passes
+    /// again.
+    pub fn covering(&self, pose: &Pose2, robot: usize, path_m: f64) -> Vec<usize> {
         let p = &self.params.coverage;
+        let Some(chain) = self.chains.get(robot).copied().flatten() else {
+            return Vec::new();
+        };
         let mut near: Vec<(f64, usize)> = self
             .near
             .near(pose, p.radius_m)
-            .filter(|&n| self.parts.same_part(n, node))
+            .filter(|&n| self.parts.same_part(n, chain.last_node))
+            .filter(|&n| {
+                self.node_robot[n].0 != robot || path_m - self.node_path_m[n] >= p.min_path_gap_m
+            })
             .filter_map(|n| {
                 let q = &self.graph.poses[n];
                 let d = (q.x - pose.x).hypot(q.y - pose.y);
