@@ -73,25 +73,6 @@ impl FleetMap {
             None => unlocated_m + step.x.hypot(step.y),
         };
         let passed = located.or((passes && unlocated_m <= p.max_unlocated_m).then_some(predicted));
-        if std::env::var_os("LEVELMAP_DEBUG").is_some() {
-            let d = covering.first().map(|&n| {
-                let q = self.poses()[n];
-                (
-                    (q.x - predicted.x).hypot(q.y - predicted.y),
-                    slam::wrap_angle(q.theta - predicted.theta),
-                )
-            });
-            eprintln!(
-                "DEBUGCOV seq {} covered {covered} was {was_covered} n {} near {d:?} located {} passed {} unloc {unlocated_m:.1} at {:.1},{:.1},{:.2}",
-                node.node_seq,
-                covering.len(),
-                located.is_some(),
-                passed.is_some(),
-                predicted.x,
-                predicted.y,
-                predicted.theta
-            );
-        }
         self.covers.insert(
             key,
             Cover {
