@@ -138,6 +138,7 @@ pub(super) async fn set_modes(
 
 /// Which localizations to list.
 #[derive(Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct Since {
     /// Only nodes from this node_seq on.
     #[serde(default)]
