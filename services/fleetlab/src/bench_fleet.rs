@@ -112,6 +112,9 @@ struct BenchReport {
     pose_query_rate_achieved: f64,
     pose_query_errors: u64,
     map_nodes: usize,
+    /// Nodes passed over covered ground (located, not added: docs/services.md, "Bounded
+    /// growth").
+    nodes_passed: u64,
     map_edges: usize,
     optimizations: u64,
     /// The live feeds' clients (`--live-clients`).
@@ -399,6 +402,11 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
         cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
         nodes_published: published,
         nodes_visible: latencies.len(),
+        nodes_passed: mapper
+            .shared
+            .metrics
+            .nodes_passed
+            .load(std::sync::atomic::Ordering::Relaxed),
         odometry_published,
         publish_to_http: Percentiles::of(latencies),
         pose_query_rate_achieved: query_ms.len() as f64 / query_time,
@@ -475,7 +483,9 @@ fn follow_events(http: &str, seen: &Mutex<HashMap<(String, u64), Instant>>, stop
         let Ok(event) = serde_json::from_str::<serde_json::Value>(data) else {
             continue;
         };
-        if event["type"] == "node" {
+        // A node mapped, or passed over covered ground and answered (docs/services.md,
+        // "Bounded growth"): either way the robot's node is on the map now.
+        if event["type"] == "node" || event["type"] == "localization" {
             let robot = event["robot"].as_str().unwrap_or_default().to_owned();
             let seq = event["node_seq"].as_u64().unwrap_or_default();
             seen.lock()
