@@ -33,13 +33,7 @@ fn every_acked_node_survives_a_mapper_kill_and_every_node_arrives() {
 
     // Restored from the store: everything seen before the kill (a node is in the map's view
     // only after its commit).
-    for (r, seen) in before.iter().enumerate() {
-        let restored = node_seqs(&mapper.http, "park", &format!("robot{r}"));
-        assert!(
-            restored.len() >= seen.len() && restored[..seen.len()] == seen[..],
-            "robot{r}: before the kill {seen:?}, after the restart {restored:?}"
-        );
-    }
+    assert_restored(&mapper.http, &before);
     for (r, edge) in edges.into_iter().enumerate() {
         let report = edge_report(edge, Duration::from_secs(120));
         let made = report["nodes"].as_u64().expect("nodes");

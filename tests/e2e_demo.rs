@@ -11,30 +11,23 @@ use common::*;
 /// `levelmap demo --duration 120 --speed 0 --json` with `extra` arguments: its report.
 fn demo(name: &str, extra: &[&str]) -> serde_json::Value {
     let dir = temp_dir(name);
-    let out = levelmap()
-        .args([
-            "demo",
-            "--duration",
-            "120",
-            "--speed",
-            "0",
-            "--json",
-            "--http",
-            "127.0.0.1:0",
-        ])
-        .args(extra)
-        .args(["--zenoh", &format!("tcp/127.0.0.1:{}", free_port())])
-        .arg("--dir")
-        .arg(dir.join("run"))
-        .output()
-        .expect("levelmap demo runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let report = json_report(
+        levelmap()
+            .args([
+                "demo",
+                "--duration",
+                "120",
+                "--speed",
+                "0",
+                "--json",
+                "--http",
+                "127.0.0.1:0",
+            ])
+            .args(extra)
+            .args(["--zenoh", &format!("tcp/127.0.0.1:{}", free_port())])
+            .arg("--dir")
+            .arg(dir.join("run")),
     );
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
-    eprintln!("{report:#}");
     std::fs::remove_dir_all(&dir).ok();
     report
 }

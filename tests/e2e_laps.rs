@@ -1,47 +1,38 @@
 //! Bounded growth (docs/services.md, "Bounded growth"): one robot drives ten laps of the same
 //! loop; where the map has nodes already it passes over them. The network's nodes and the
 //! store after ten laps are within 1.2× of what they were after the first, and the map's ATE
-//! is no worse. The same drive keeping every node grows tenfold.
+//! is no worse. A store with passes replays to the same network; clouds beyond a fleet's bound
+//! are dropped oldest first.
 
 mod common;
 
 use common::*;
 use serde_json::Value;
 
-fn laps(name: &str, extra: &[&str]) -> Value {
-    let dir = temp_dir(name);
-    let out = levelmap()
-        .args([
-            "demo",
-            "--robots",
-            "1",
-            "--laps",
-            "10",
-            "--no-baseline",
-            "--speed",
-            "0",
-        ])
-        .args(["--json", "--http", "127.0.0.1:0"])
-        .args(["--zenoh", &format!("tcp/127.0.0.1:{}", free_port())])
-        .args(extra)
-        .arg("--dir")
-        .arg(dir.join("run"))
-        .output()
-        .expect("levelmap demo runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: Value = serde_json::from_slice(&out.stdout).expect("JSON");
-    eprintln!("{report:#}");
-    std::fs::remove_dir_all(&dir).ok();
-    report
+/// `levelmap demo` of one robot driving `laps` laps as fast as it goes, in `dir`: its report.
+fn laps(laps: u32, dir: &std::path::Path) -> Value {
+    json_report(
+        levelmap()
+            .args(["demo", "--robots", "1", "--laps", &laps.to_string()])
+            .args([
+                "--no-baseline",
+                "--speed",
+                "0",
+                "--json",
+                "--http",
+                "127.0.0.1:0",
+            ])
+            .args(["--zenoh", &format!("tcp/127.0.0.1:{}", free_port())])
+            .arg("--dir")
+            .arg(dir),
+    )
 }
 
 #[test]
 fn ten_laps_of_one_loop_keep_the_map_the_size_of_one() {
-    let r = laps("laps", &[]);
+    let dir = temp_dir("laps");
+    let r = laps(10, &dir.join("run"));
+    std::fs::remove_dir_all(&dir).ok();
     let first = &r["first_lap"];
     let (nodes, nodes_1) = (
         r["nodes"].as_f64().unwrap(),
@@ -114,29 +105,7 @@ async fn the_oldest_clouds_are_dropped_beyond_the_fleets_bound() {
 fn a_store_with_passes_replays_to_the_same_map() {
     let dir = temp_dir("laps-replay");
     let run = dir.join("run");
-    let out = levelmap()
-        .args([
-            "demo",
-            "--robots",
-            "1",
-            "--laps",
-            "2",
-            "--no-baseline",
-            "--speed",
-            "0",
-        ])
-        .args(["--json", "--http", "127.0.0.1:0"])
-        .args(["--zenoh", &format!("tcp/127.0.0.1:{}", free_port())])
-        .arg("--dir")
-        .arg(&run)
-        .output()
-        .expect("levelmap demo runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let report = laps(2, &run);
     assert!(report["nodes_passed"].as_u64().unwrap() > 10, "{report}");
     // The demo's mapping: slam::Mapper2dParams::precise_dead_reckoning() and the park's datum.
     let config = format!(

@@ -16,20 +16,13 @@ use wire::Message;
 #[test]
 fn a_fourth_robot_localizes_on_the_surveyed_park_without_growing_the_network() {
     let dir = temp_dir("demo-localize");
-    let out = levelmap()
-        .args(["demo-localize", "--json", "--http", "127.0.0.1:0"])
-        .args(["--zenoh", &format!("tcp/127.0.0.1:{}", free_port())])
-        .arg("--dir")
-        .arg(dir.join("run"))
-        .output()
-        .expect("levelmap demo-localize runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let r = json_report(
+        levelmap()
+            .args(["demo-localize", "--json", "--http", "127.0.0.1:0"])
+            .args(["--zenoh", &format!("tcp/127.0.0.1:{}", free_port())])
+            .arg("--dir")
+            .arg(dir.join("run")),
     );
-    let r: Value = serde_json::from_slice(&out.stdout).expect("JSON");
-    eprintln!("{r:#}");
     std::fs::remove_dir_all(&dir).ok();
 
     assert_eq!(r["version"], 1);

@@ -90,14 +90,6 @@ fn start_recorder(connect: &str, out: &std::path::Path) -> Child {
     child
 }
 
-fn sigterm(child: &Child) {
-    let sent = std::process::Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(sent.success(), "SIGTERM not sent");
-}
-
 #[test]
 fn a_recorded_run_reads_back_in_python_and_replays_to_the_same_map() {
     let dir = temp_dir("record");

@@ -8,20 +8,11 @@ mod common;
 
 use common::*;
 use serde_json::Value;
-use std::process::Child;
 use std::time::Duration;
 
 const ROBOTS: usize = 2;
 /// Periodic snapshots off: the one written at the graceful stop is the only one.
 const CONFIG: &str = "[store]\nsnapshot_every_nodes = 100000\n";
-
-fn sigterm(child: &Child) {
-    let sent = std::process::Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(sent.success(), "SIGTERM not sent");
-}
 
 /// Every robot's node_seqs in the map, once each robot has at least `at_least`.
 fn nodes_in_map(http: &str, at_least: usize) -> Vec<Vec<u64>> {
@@ -95,13 +86,7 @@ fn a_mapper_killed_after_its_snapshot_restarts_to_what_a_full_replay_maps() {
 
     // Restored from the snapshot and the nodes after it: everything acked before the kill.
     let mapper = MapperProcess::restart(ports);
-    for (r, seen) in before.iter().enumerate() {
-        let restored = node_seqs(&mapper.http, "park", &format!("robot{r}"));
-        assert!(
-            restored.len() >= seen.len() && restored[..seen.len()] == seen[..],
-            "robot{r}: before the kill {seen:?}, after the restart {restored:?}"
-        );
-    }
+    assert_restored(&mapper.http, &before);
     for (r, edge) in edges.into_iter().enumerate() {
         let report = edge_report(edge, Duration::from_secs(120));
         let made = report["nodes"].as_u64().expect("nodes");

@@ -34,14 +34,6 @@ fn open_event_stream(http: &str) -> mpsc::Receiver<()> {
     rx
 }
 
-fn sigterm(child: &Child) {
-    let sent = std::process::Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(sent.success(), "SIGTERM not sent");
-}
-
 /// The child's exit within `timeout`; kills it and fails the test otherwise.
 fn exits_within(child: &mut Child, timeout: Duration, what: &str) -> ExitStatus {
     let deadline = Instant::now() + timeout;

@@ -1,6 +1,6 @@
 //! The bytes of a `POST …/localize` request (`levelmap.v1.LocalizeRequest`, decoded by
-//! `wire::decode_localize_request`), and what the mapper does with a request that passes: its
-//! scan and prior checked as the API checks them, the scan found on a small fixed map
+//! `wire::decode_localize_request`, the API's own check), and what the mapper does with a
+//! request that passes: the scan found on a small fixed map
 //! (`LocalizationMap::relocalize`: the prior's window, then the whole map), and the answer put
 //! on the wire as the API puts it. The same bytes also go to the edge's decoder of the
 //! mapper's localizations (`wire::decode_localization`).
@@ -20,19 +20,9 @@ const MAX_RANGE_M: f32 = 40.0;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(query) = wire::decode_localize_request(data) {
-        let (bearings, ranges): (Vec<f32>, Vec<f32>) = query
-            .scan
-            .beams
-            .iter()
-            .map(|b| (b.bearing_rad, b.range_m.unwrap_or(0.0)))
-            .unzip();
-        // A prior given but refused is a 400, as a scan refused: nothing is searched.
-        let prior = query.prior.map(checked_prior);
-        if let Some(scan) = checked_scan(&bearings, &ranges)
-            && let Some(prior) = prior.map_or(Some(None), |p| p.map(Some))
-        {
-            localized(&scan, prior.as_ref());
-        }
+        // What the API does with a request that passes: its scan cut at the mapper's range,
+        // its prior's 3σ window.
+        localized(&query.scan2(MAX_RANGE_M), query.prior_window().as_ref());
     }
     if let Ok(l) = wire::decode_localization(data) {
         let bytes = wire::localization_to_wire(&l).encode_to_vec();
@@ -93,37 +83,6 @@ fn localized(scan: &Scan2, prior: Option<&Prior>) {
     let bytes = wire::localization_to_wire(&answer).encode_to_vec();
     let back = wire::decode_localization(&bytes).expect("the API's answer passes the edge");
     assert_eq!(back, answer, "the API's answer differs at the edge");
-}
-
-/// As the API's `checked_scan` (services/mapper/src/api/localize.rs, private to the mapper):
-/// as many bearings as ranges, at least one, each finite, ranges not negative; cut at the
-/// mapper's range. `None` where the API answers 400.
-fn checked_scan(bearings: &[f32], ranges: &[f32]) -> Option<Scan2> {
-    if bearings.len() != ranges.len() || bearings.is_empty() {
-        return None;
-    }
-    if bearings
-        .iter()
-        .zip(ranges)
-        .any(|(b, r)| !b.is_finite() || !r.is_finite() || *r < 0.0)
-    {
-        return None;
-    }
-    Scan2::from_polar(bearings, ranges, MAX_RANGE_M).ok()
-}
-
-/// As the API's `checked_prior`: a finite pose and σ > 0; the window is 3σ. `None` where the
-/// API answers 400.
-fn checked_prior((pose, sigma_xy, sigma_yaw): (Pose2, f64, f64)) -> Option<Prior> {
-    let ok = pose.is_finite()
-        && [sigma_xy, sigma_yaw]
-            .iter()
-            .all(|s| s.is_finite() && *s > 0.0);
-    ok.then(|| Prior {
-        pose,
-        linear_m: 3.0 * sigma_xy,
-        angular_rad: 3.0 * sigma_yaw,
-    })
 }
 
 /// The poses of the map's scans in the synthetic park (`Scene::park`), in its free middle.

@@ -16,6 +16,40 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+/// Sends SIGTERM to `child` (a graceful stop).
+pub fn sigterm(child: &Child) {
+    let sent = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(sent.success(), "SIGTERM not sent");
+}
+
+/// Runs `command` (a `levelmap … --json`), which must succeed; its report, printed.
+pub fn json_report(command: &mut Command) -> Value {
+    let out = command.output().expect("levelmap runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    eprintln!("{report:#}");
+    report
+}
+
+/// Every robot's nodes the map had (`before`, robot by robot) are still its first after a
+/// restart.
+pub fn assert_restored(http: &str, before: &[Vec<u64>]) {
+    for (r, seen) in before.iter().enumerate() {
+        let restored = node_seqs(http, "park", &format!("robot{r}"));
+        assert!(
+            restored.len() >= seen.len() && restored[..seen.len()] == seen[..],
+            "robot{r}: before the kill {seen:?}, after the restart {restored:?}"
+        );
+    }
+}
+
 /// A port nobody listens on right now.
 pub fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0")

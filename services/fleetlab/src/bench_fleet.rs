@@ -8,7 +8,6 @@ use crate::FLEET;
 use anyhow::{Context, Result};
 use clap::Args;
 use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
-use mapper::MapperConfig;
 use serde::Serialize;
 use slam::geodesy::Geodetic;
 use std::collections::HashMap;
@@ -211,18 +210,11 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     let clouds = args.clouds;
     let pool = tokio::task::spawn_blocking(move || node_pool(nodes_per_robot, clouds)).await?;
 
-    if args.dir.exists() {
-        std::fs::remove_dir_all(&args.dir)?;
-    }
-    std::fs::create_dir_all(&args.dir)?;
-    let mapper = mapper::start(MapperConfig {
-        zenoh: SessionConfig::router(&args.zenoh),
-        http_listen: args.http.clone(),
-        store_path: args.dir.join("mapper.redb"),
-        datum: Some(sim::PARK_DATUM.origin),
-        mapping: slam::Mapper2dParams::precise_dead_reckoning(),
-        ..MapperConfig::default()
-    })
+    let mapper = mapper::start(crate::park_mapper_config(
+        &args.dir,
+        &args.http,
+        &args.zenoh,
+    )?)
     .await?;
     let http = mapper.http_addr.to_string();
 

@@ -3,7 +3,7 @@
 //! map against the simulator's ground truth, and scores the same run mapped from each robot's
 //! fixed horizontal 2D scanner (the paper's baseline, [`crate::fixed2d`]) for comparison.
 
-use crate::{FLEET, sim_mapping_params};
+use crate::FLEET;
 use anyhow::{Context, Result};
 use clap::Args;
 use edge::{EdgeConfig, SimSourceConfig, SourceConfig};
@@ -131,27 +131,18 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
 async fn run_async(args: &DemoArgs) -> Result<()> {
     let started = Instant::now();
-    if args.dir.exists() {
-        std::fs::remove_dir_all(&args.dir)
-            .with_context(|| format!("{}: cannot empty", args.dir.display()))?;
-    }
-    std::fs::create_dir_all(&args.dir)
-        .with_context(|| format!("{}: cannot create", args.dir.display()))?;
+    let park = crate::park_mapper_config(&args.dir, &args.http, &args.zenoh)?;
     let mapper = mapper::start(MapperConfig {
-        zenoh: SessionConfig::router(&args.zenoh),
-        http_listen: args.http.clone(),
-        store_path: args.dir.join("mapper.redb"),
-        datum: Some(sim::PARK_DATUM.origin),
         mapping: slam::Mapper2dParams {
             coverage: slam::CoverageParams {
                 enabled: !args.keep_every_node,
                 ..Default::default()
             },
-            ..sim_mapping_params()
+            ..park.mapping.clone()
         },
         token: args.token.clone(),
         read_token: args.read_token.clone(),
-        ..MapperConfig::default()
+        ..park
     })
     .await?;
     let api = format!("http://{}/api/v1/fleets/{FLEET}", mapper.http_addr);

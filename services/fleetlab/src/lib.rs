@@ -26,6 +26,29 @@ pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
         .build()?)
 }
 
+/// A mapper of the park for a lab run: its store in `dir` (emptied first, made if missing),
+/// the park's datum, the simulated robots' mapping ([`sim_mapping_params`]), HTTP on `http`,
+/// a Zenoh router on `zenoh`. Callers add their tokens.
+pub fn park_mapper_config(
+    dir: &std::path::Path,
+    http: &str,
+    zenoh: &str,
+) -> anyhow::Result<mapper::MapperConfig> {
+    use anyhow::Context;
+    if dir.exists() {
+        std::fs::remove_dir_all(dir).with_context(|| format!("{}: cannot empty", dir.display()))?;
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    Ok(mapper::MapperConfig {
+        zenoh: wire::session::SessionConfig::router(zenoh),
+        http_listen: http.to_owned(),
+        store_path: dir.join("mapper.redb"),
+        datum: Some(sim::PARK_DATUM.origin),
+        mapping: sim_mapping_params(),
+        ..mapper::MapperConfig::default()
+    })
+}
+
 /// The simulated robots' dead reckoning is precise (a fibre-optic-class gyro).
 pub fn sim_mapping_params() -> slam::Mapper2dParams {
     slam::Mapper2dParams::precise_dead_reckoning()

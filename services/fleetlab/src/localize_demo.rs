@@ -6,7 +6,7 @@
 //! captured scans are sent to `POST …/localize` with a prior near the truth, with none, and
 //! with one 20 m off (a lost robot), each answer scored against the truth.
 
-use crate::{FLEET, sim_mapping_params};
+use crate::FLEET;
 use anyhow::{Context, Result, ensure};
 use clap::Args;
 use edge::{EdgeConfig, SimSourceConfig, SourceConfig};
@@ -210,19 +210,9 @@ fn distance(a: &Pose2, b: &Pose2) -> f64 {
 
 async fn run_async(args: &LocalizeDemoArgs) -> Result<()> {
     let started = Instant::now();
-    if args.dir.exists() {
-        std::fs::remove_dir_all(&args.dir)
-            .with_context(|| format!("{}: cannot empty", args.dir.display()))?;
-    }
-    std::fs::create_dir_all(&args.dir)?;
     let mapper = mapper::start(MapperConfig {
-        zenoh: SessionConfig::router(&args.zenoh),
-        http_listen: args.http.clone(),
-        store_path: args.dir.join("mapper.redb"),
-        datum: Some(sim::PARK_DATUM.origin),
-        mapping: sim_mapping_params(),
         token: TOKEN.into(),
-        ..MapperConfig::default()
+        ..crate::park_mapper_config(&args.dir, &args.http, &args.zenoh)?
     })
     .await?;
     let http = format!("http://{}/api/v1/fleets/{FLEET}", mapper.http_addr);

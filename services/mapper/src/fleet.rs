@@ -75,12 +75,6 @@ impl NodeRecord {
     }
 }
 
-/// A node's leveled scan as matching uses it: its returns, cut at `max_range_m`.
-pub fn matching_scan(node: &NodeInput, max_range_m: f32) -> Scan2 {
-    let (bearings, ranges): (Vec<f32>, Vec<f32>) = node.scan.returns().unzip();
-    Scan2::from_polar(&bearings, &ranges, max_range_m).expect("returns come in pairs")
-}
-
 /// Most robots one fleet takes: per-robot state is bounded (a node of one more is rejected,
 /// `too_many_robots`).
 pub const MAX_ROBOTS_PER_FLEET: usize = 1024;
@@ -438,7 +432,7 @@ impl FleetMap {
         let robot_odometry = Pose2::from_isometry3(&node.odometry.pose);
         let scan_frame = robot_odometry.compose(&node.scan_origin);
         let (bearings_rad, ranges_m) = node.polar();
-        let scan = matching_scan(node, self.max_range_m);
+        let scan = wire::matching_scan(&node.scan, self.max_range_m);
         let attitude = node.odometry.pose.rotation;
         let gps: Vec<GpsObservation> = node
             .gps

@@ -326,6 +326,57 @@ pub fn restore(
     Ok(fleets)
 }
 
+/// One node's outcome on a map (a version, or 0: the live map a pass is located on).
+pub struct Outcome {
+    /// The map version.
+    pub version: u64,
+    /// Found, carried forward by odometry, or lost.
+    pub status: TrackStatus,
+    /// The node's scan frame on the map, unless lost.
+    pub pose: Option<Pose2>,
+    /// The match, when the localizer found it.
+    pub found: Option<slam::localize::Localization>,
+    /// The search that placed it.
+    pub search: Option<slam::localize::SearchKind>,
+    /// Why not found, when not.
+    pub reason: Option<String>,
+}
+
+impl Outcome {
+    /// The answer to `node`'s robot and what the API lists of it.
+    pub fn answers(&self, node: &NodeInput, took_ms: f64) -> (Localized, NodeLocalization) {
+        let found = self.found.as_ref();
+        let message = Localized {
+            fleet: node.fleet.clone(),
+            robot: node.robot.clone(),
+            chain_id: node.chain_id,
+            node_seq: node.node_seq,
+            map_version: self.version,
+            status: self.status,
+            pose: self.pose,
+            covariance: found.map(|f| f.covariance),
+            score: found.map_or(0.0, |f| f.score),
+            search: self.search,
+            sent_ns: wire::session::now_ns(),
+            reason: self.reason.clone().unwrap_or_default(),
+        };
+        let entry = NodeLocalization {
+            chain_id: node.chain_id,
+            node_seq: node.node_seq,
+            stamp_ns: node.stamp_ns,
+            version: self.version,
+            status: self.status,
+            pose: self.pose,
+            covariance: message.covariance,
+            score: found.map(|f| f.score),
+            search: self.search,
+            reason: self.reason.clone(),
+            took_ms,
+        };
+        (message, entry)
+    }
+}
+
 /// The worker's side of one fleet: its modes, the maps they name, each robot's tracker.
 #[derive(Default)]
 pub struct Localizing {
@@ -369,7 +420,7 @@ impl Localizing {
             *tracked = version;
             *tracker = Tracker::new();
         }
-        let scan = crate::fleet::matching_scan(node, max_range_m);
+        let scan = wire::matching_scan(&node.scan, max_range_m);
         let odometry = Pose2::from_isometry3(&node.odometry.pose).compose(&node.scan_origin);
         let step = match map {
             Some(map) => tracker.step(map, params, odometry, &scan),
@@ -380,39 +431,19 @@ impl Localizing {
                 error: None,
             },
         };
-        let found = step.found.as_ref();
         let reason = match (&step.error, map) {
             (_, None) => Some(format!("version {version}'s map is not loaded")),
             (Some(e), _) => Some(e.to_string()),
             (None, _) => None,
         };
-        let message = Localized {
-            fleet: node.fleet.clone(),
-            robot: node.robot.clone(),
-            chain_id: node.chain_id,
-            node_seq: node.node_seq,
-            map_version: version,
-            status: step.status,
-            pose: step.pose,
-            covariance: found.map(|f| f.covariance),
-            score: found.map_or(0.0, |f| f.score),
-            search: found.map(|f| f.search),
-            sent_ns: wire::session::now_ns(),
-            reason: reason.clone().unwrap_or_default(),
-        };
-        let entry = NodeLocalization {
-            chain_id: node.chain_id,
-            node_seq: node.node_seq,
-            stamp_ns: node.stamp_ns,
+        let outcome = Outcome {
             version,
             status: step.status,
             pose: step.pose,
-            covariance: message.covariance,
-            score: found.map(|f| f.score),
-            search: message.search,
+            search: step.found.as_ref().map(|f| f.search),
+            found: step.found,
             reason,
-            took_ms: started.elapsed().as_secs_f64() * 1e3,
         };
-        (message, entry)
+        outcome.answers(node, started.elapsed().as_secs_f64() * 1e3)
     }
 }

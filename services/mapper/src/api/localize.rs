@@ -13,8 +13,7 @@ use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use slam::Pose2;
-use slam::localize::{LocalizeError, Prior, SearchKind, TrackStatus};
-use slam::matching::Scan2;
+use slam::localize::{LocalizeError, SearchKind, TrackStatus};
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 use utoipa::{IntoParams, ToSchema};
@@ -251,36 +250,19 @@ pub(super) async fn localize(
     let protobuf = headers
         .get(header::CONTENT_TYPE)
         .is_some_and(|v| v.as_bytes().starts_with(PROTOBUF.as_bytes()));
-    let (bearings, ranges, prior, version) = if protobuf {
-        let query = wire::decode_localize_request(&bytes)
-            .map_err(|e| ApiError::BadRequest(e.to_string()))?;
-        let (bearings, ranges) = query
-            .scan
-            .beams
-            .iter()
-            .map(|b| (b.bearing_rad, b.range_m.unwrap_or(0.0)))
-            .unzip();
-        (bearings, ranges, query.prior, query.map_version)
+    // Either form is checked once, by wire: the same checks.
+    let query = if protobuf {
+        wire::decode_localize_request(&bytes)
     } else {
         let body: LocalizeBody = serde_json::from_slice(&bytes)
             .map_err(|e| ApiError::BadRequest(format!("not a localize request: {e}")))?;
-        let prior = body.prior.map(|p| {
-            let (sxy, syaw) = wire::DEFAULT_PRIOR_SIGMA;
-            (
-                p.pose,
-                p.sigma_xy_m.unwrap_or(sxy),
-                p.sigma_yaw_rad.unwrap_or(syaw),
-            )
-        });
-        (
-            body.bearings_rad,
-            body.ranges_m,
-            prior,
-            body.version.unwrap_or(0),
-        )
-    };
-    let scan = checked_scan(&bearings, &ranges, api.maps.max_range_m())?;
-    let prior = prior.map(checked_prior).transpose()?;
+        let prior = body.prior.map(|p| (p.pose, p.sigma_xy_m, p.sigma_yaw_rad));
+        let version = body.version.unwrap_or(0);
+        wire::localize_query(&body.bearings_rad, &body.ranges_m, prior, version)
+    }
+    .map_err(|e| ApiError::BadRequest(e.to_string()))?;
+    let scan = query.scan2(api.maps.max_range_m());
+    let (prior, version) = (query.prior_window(), query.map_version);
     let fleet_id = fleet.clone();
     let answer = api
         .limits
@@ -360,47 +342,6 @@ fn answer(
             took_ms,
         },
     }
-}
-
-/// The beams as a scan: as many bearings as ranges, each finite, ranges not negative.
-fn checked_scan(bearings: &[f32], ranges: &[f32], max_range_m: f32) -> Reply<Scan2> {
-    if bearings.len() != ranges.len() || bearings.is_empty() {
-        return Err(ApiError::BadRequest(format!(
-            "{} bearings and {} ranges: give one range per bearing, at least one",
-            bearings.len(),
-            ranges.len()
-        )));
-    }
-    if let Some((i, _)) = bearings
-        .iter()
-        .zip(ranges)
-        .enumerate()
-        .find(|(_, (b, r))| !b.is_finite() || !r.is_finite() || **r < 0.0)
-    {
-        return Err(ApiError::BadRequest(format!(
-            "beam {i}: bearings and ranges must be finite, ranges not negative"
-        )));
-    }
-    Scan2::from_polar(bearings, ranges, max_range_m)
-        .map_err(|e| ApiError::BadRequest(e.to_string()))
-}
-
-/// A prior with a finite pose and σ > 0: the window of 3σ.
-fn checked_prior((pose, sigma_xy, sigma_yaw): (Pose2, f64, f64)) -> Reply<Prior> {
-    let ok = pose.is_finite()
-        && [sigma_xy, sigma_yaw]
-            .iter()
-            .all(|s| s.is_finite() && *s > 0.0);
-    if !ok {
-        return Err(ApiError::BadRequest(
-            "the prior's pose must be finite and its sigmas positive".into(),
-        ));
-    }
-    Ok(Prior {
-        pose,
-        linear_m: 3.0 * sigma_xy,
-        angular_rad: 3.0 * sigma_yaw,
-    })
 }
 
 fn map_error(api: &Api, e: crate::localization::MapError) -> ApiError {

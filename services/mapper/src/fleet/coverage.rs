@@ -63,7 +63,7 @@ impl FleetMap {
         let passes = covered && was_covered;
         let located = passes
             .then(|| {
-                let scan = super::matching_scan(node, self.max_range_m);
+                let scan = wire::matching_scan(&node.scan, self.max_range_m);
                 self.mapper.locate_against(covering[0], &predicted, &scan)
             })
             .flatten();

@@ -5,7 +5,7 @@
 
 use super::{Batch, Worker};
 use crate::fleet::{IngestError, LocalizedSpan};
-use crate::localization::{FleetModes, NodeLocalization, RobotMode};
+use crate::localization::{FleetModes, NodeLocalization, Outcome, RobotMode};
 use slam::Pose2;
 use slam::localize::{LocalizationMap, SearchKind, TrackStatus};
 use std::collections::HashMap;
@@ -25,6 +25,23 @@ pub(super) struct LocalizedNode {
     pub(super) entry: NodeLocalization,
 }
 
+impl LocalizedNode {
+    fn new(
+        input: &NodeInput,
+        span: LocalizedSpan,
+        (message, entry): (Localized, NodeLocalization),
+    ) -> Self {
+        LocalizedNode {
+            fleet: input.fleet.clone(),
+            robot: input.robot.clone(),
+            chain_id: input.chain_id,
+            span,
+            message,
+            entry,
+        }
+    }
+}
+
 impl Worker {
     /// The version `robot` localizes on, if it does.
     pub(super) fn localizes(&self, fleet: &str, robot: &str) -> Option<u64> {
@@ -42,39 +59,22 @@ impl Worker {
         version: u64,
         batch: &mut Batch,
     ) {
-        let map = self
-            .fleets
-            .get_mut(&input.fleet)
-            .expect("made by the caller");
-        let span = match map.take_localized(input, false) {
-            Ok(span) => span,
-            Err(IngestError::Refused { source, .. }) => {
-                self.reject(source.reason(), key, &source);
-                return;
-            }
-            Err(e) => {
-                self.reject("invalid_value", key, &e);
-                return;
-            }
+        let Some(span) = self.take_span(key, input, false) else {
+            return;
         };
         let localizing = self
             .localizing
             .get_mut(&input.fleet)
             .expect("the robot localizes");
-        let (message, entry) = localizing.localize(
+        let answers = localizing.localize(
             input,
             version,
             &self.config.localization.track,
             self.config.max_range_m,
         );
-        batch.localized.push(LocalizedNode {
-            fleet: input.fleet.clone(),
-            robot: input.robot.clone(),
-            chain_id: input.chain_id,
-            span,
-            message,
-            entry,
-        });
+        batch
+            .localized
+            .push(LocalizedNode::new(input, span, answers));
     }
 
     /// Takes `input` as passed over covered ground, at `pose` on the live map (docs/services.md,
@@ -88,53 +88,42 @@ impl Worker {
         batch: &mut Batch,
     ) {
         let started = std::time::Instant::now();
+        let Some(span) = self.take_span(key, input, true) else {
+            return;
+        };
+        crate::state::Metrics::bump(&self.shared.metrics.nodes_passed);
+        let outcome = Outcome {
+            version: 0,
+            status: TrackStatus::Localized,
+            pose: Some(pose),
+            found: None,
+            search: Some(SearchKind::Window),
+            reason: None,
+        };
+        let answers = outcome.answers(input, started.elapsed().as_secs_f64() * 1e3);
+        batch
+            .localized
+            .push(LocalizedNode::new(input, span, answers));
+    }
+
+    /// The span `input` (the next node of its chain) extends, localized or `passed`; `None`
+    /// (counted, logged) when its fleet's map refuses it.
+    fn take_span(&mut self, key: &str, input: &NodeInput, passed: bool) -> Option<LocalizedSpan> {
         let map = self
             .fleets
             .get_mut(&input.fleet)
             .expect("made by the caller");
-        let span = match map.take_localized(input, true) {
-            Ok(span) => span,
+        match map.take_localized(input, passed) {
+            Ok(span) => Some(span),
+            Err(IngestError::Refused { source, .. }) => {
+                self.reject(source.reason(), key, &source);
+                None
+            }
             Err(e) => {
                 self.reject("invalid_value", key, &e);
-                return;
+                None
             }
-        };
-        crate::state::Metrics::bump(&self.shared.metrics.nodes_passed);
-        let message = Localized {
-            fleet: input.fleet.clone(),
-            robot: input.robot.clone(),
-            chain_id: input.chain_id,
-            node_seq: input.node_seq,
-            map_version: 0,
-            status: TrackStatus::Localized,
-            pose: Some(pose),
-            covariance: None,
-            score: 0.0,
-            search: Some(SearchKind::Window),
-            sent_ns: wire::session::now_ns(),
-            reason: String::new(),
-        };
-        let entry = NodeLocalization {
-            chain_id: input.chain_id,
-            node_seq: input.node_seq,
-            stamp_ns: input.stamp_ns,
-            version: 0,
-            status: TrackStatus::Localized,
-            pose: Some(pose),
-            covariance: None,
-            score: None,
-            search: Some(SearchKind::Window),
-            reason: None,
-            took_ms: started.elapsed().as_secs_f64() * 1e3,
-        };
-        batch.localized.push(LocalizedNode {
-            fleet: input.fleet.clone(),
-            robot: input.robot.clone(),
-            chain_id: input.chain_id,
-            span,
-            message,
-            entry,
-        });
+        }
     }
 
     /// A fleet's new modes.

@@ -3,12 +3,13 @@
 
 use super::decode;
 use super::pose::{pose2_from_wire, pose2_to_wire};
-use super::scan::leveled_scan_from_wire;
+use super::scan::{check_beam, leveled_scan_from_wire};
 use crate::error::finite;
 use crate::{WIRE_VERSION, WireError, v1, validate_id};
-use leveling::LeveledScan;
+use leveling::{Beam, LeveledScan};
 use slam::Pose2;
-use slam::localize::{SearchKind, TrackStatus};
+use slam::localize::{Prior, SearchKind, TrackStatus};
+use slam::matching::Scan2;
 
 /// Where a robot's node (or a requested scan) is on a map version.
 #[derive(Clone, Debug, PartialEq)]
@@ -134,7 +135,7 @@ pub fn decode_localization(bytes: &[u8]) -> Result<Localized, WireError> {
     })
 }
 
-/// A request to find a scan on a map version.
+/// A request to find a scan on a map version, checked.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LocalizeQuery {
     /// The scan.
@@ -145,8 +146,99 @@ pub struct LocalizeQuery {
     pub map_version: u64,
 }
 
+impl LocalizeQuery {
+    /// The scan as matching uses it, cut at `max_range_m`.
+    pub fn scan2(&self, max_range_m: f32) -> Scan2 {
+        matching_scan(&self.scan, max_range_m)
+    }
+
+    /// The prior as the window searched: 3σ around the guess.
+    pub fn prior_window(&self) -> Option<Prior> {
+        self.prior.map(|(pose, sigma_xy, sigma_yaw)| Prior {
+            pose,
+            linear_m: 3.0 * sigma_xy,
+            angular_rad: 3.0 * sigma_yaw,
+        })
+    }
+}
+
+/// A leveled scan's returns as matching uses them, cut at `max_range_m`.
+pub fn matching_scan(scan: &LeveledScan, max_range_m: f32) -> Scan2 {
+    let (bearings, ranges): (Vec<f32>, Vec<f32>) = scan.returns().unzip();
+    Scan2::from_polar(&bearings, &ranges, max_range_m).expect("returns come in pairs")
+}
+
 /// A prior's σ when the request gives none: 0.5 m and 0.1 rad.
 pub const DEFAULT_PRIOR_SIGMA: (f64, f64) = (0.5, 0.1);
+
+/// A prior's σ: finite and positive; none: `default`.
+fn prior_sigma(field: &'static str, sigma: Option<f64>, default: f64) -> Result<f64, WireError> {
+    let Some(v) = sigma else {
+        return Ok(default);
+    };
+    let v = finite(field, None, v)?;
+    if v <= 0.0 {
+        return Err(WireError::Invalid {
+            field,
+            detail: format!("{v} is not positive"),
+        });
+    }
+    Ok(v)
+}
+
+/// A localize request given as beams (the API's JSON): checked as a protobuf request is, each
+/// beam as a leveled scan's (a finite bearing, a range from 0, no return, to 1 km), at least
+/// one, as many ranges as bearings; a finite prior with σ positive (none: the defaults).
+pub fn localize_query(
+    bearings_rad: &[f32],
+    ranges_m: &[f32],
+    prior: Option<(Pose2, Option<f64>, Option<f64>)>,
+    map_version: u64,
+) -> Result<LocalizeQuery, WireError> {
+    if bearings_rad.len() != ranges_m.len() || bearings_rad.is_empty() {
+        return Err(WireError::Invalid {
+            field: "ranges_m",
+            detail: format!(
+                "{} bearings and {} ranges: give one range per bearing, at least one",
+                bearings_rad.len(),
+                ranges_m.len()
+            ),
+        });
+    }
+    let beams = bearings_rad
+        .iter()
+        .zip(ranges_m)
+        .enumerate()
+        .map(|(i, (&bearing_rad, &range_m))| {
+            check_beam(("bearings_rad", "ranges_m"), i, bearing_rad, range_m)?;
+            Ok(Beam {
+                bearing_rad,
+                range_m: (range_m > 0.0).then_some(range_m),
+            })
+        })
+        .collect::<Result<_, WireError>>()?;
+    let prior = match prior {
+        None => None,
+        Some((pose, sigma_xy, sigma_yaw)) => {
+            if !pose.is_finite() {
+                return Err(WireError::Invalid {
+                    field: "prior.pose",
+                    detail: "not finite".into(),
+                });
+            }
+            Some((
+                pose,
+                prior_sigma("prior.sigma_xy_m", sigma_xy, DEFAULT_PRIOR_SIGMA.0)?,
+                prior_sigma("prior.sigma_yaw_rad", sigma_yaw, DEFAULT_PRIOR_SIGMA.1)?,
+            ))
+        }
+    };
+    Ok(LocalizeQuery {
+        scan: LeveledScan { stamp_ns: 0, beams },
+        prior,
+        map_version,
+    })
+}
 
 /// Decodes and checks a localize request: this wire version, a valid leveled scan, a finite
 /// prior, σ finite and not negative (0: the default).
@@ -162,28 +254,20 @@ pub fn decode_localize_request(bytes: &[u8]) -> Result<LocalizeQuery, WireError>
         field: "LocalizeRequest.scan",
     })?;
     let scan = leveled_scan_from_wire(scan)?;
-    let sigma = |field, v: f64, default: f64| -> Result<f64, WireError> {
-        let v = finite(field, None, v)?;
-        if v < 0.0 {
-            return Err(WireError::Invalid {
-                field,
-                detail: format!("{v} is negative"),
-            });
-        }
-        Ok(if v == 0.0 { default } else { v })
-    };
+    // On the wire 0 is "not given": the default.
+    let given = |v: f64| (v != 0.0).then_some(v);
     let prior = match &msg.prior {
         None => None,
         Some(p) => Some((
             pose2_from_wire(p)?,
-            sigma(
+            prior_sigma(
                 "LocalizeRequest.prior_sigma_xy_m",
-                msg.prior_sigma_xy_m,
+                given(msg.prior_sigma_xy_m),
                 DEFAULT_PRIOR_SIGMA.0,
             )?,
-            sigma(
+            prior_sigma(
                 "LocalizeRequest.prior_sigma_yaw_rad",
-                msg.prior_sigma_yaw_rad,
+                given(msg.prior_sigma_yaw_rad),
                 DEFAULT_PRIOR_SIGMA.1,
             )?,
         )),
@@ -232,6 +316,42 @@ mod tests {
         };
         let bytes = localization_to_wire(&lost).encode_to_vec();
         assert_eq!(decode_localization(&bytes).unwrap(), lost);
+    }
+
+    #[test]
+    fn a_localize_query_of_beams_is_checked_as_a_leveled_scan_is() {
+        let pose = Pose2::new(1.0, 2.0, 0.3);
+        let q = localize_query(
+            &[0.0, 0.1, 0.2],
+            &[5.0, 0.0, 7.0],
+            Some((pose, None, Some(0.2))),
+            3,
+        )
+        .unwrap();
+        assert_eq!(q.scan.beams[1].range_m, None, "0 is no return");
+        assert_eq!(q.scan2(40.0).len(), 2);
+        assert_eq!(q.scan2(6.0).len(), 1, "cut at the range");
+        let w = q.prior_window().unwrap();
+        assert_eq!((w.pose, w.linear_m, w.angular_rad), (pose, 1.5, 3.0 * 0.2));
+        assert_eq!(q.map_version, 3);
+        let refused = [
+            localize_query(&[0.0], &[1.0, 2.0], None, 0),
+            localize_query(&[], &[], None, 0),
+            localize_query(&[f32::NAN], &[1.0], None, 0),
+            localize_query(&[0.0], &[-1.0], None, 0),
+            localize_query(&[0.0], &[2000.0], None, 0),
+            localize_query(&[0.0], &[1.0], Some((pose, Some(0.0), None)), 0),
+            localize_query(&[0.0], &[1.0], Some((pose, None, Some(f64::INFINITY))), 0),
+            localize_query(
+                &[0.0],
+                &[1.0],
+                Some((Pose2::new(f64::NAN, 0.0, 0.0), None, None)),
+                0,
+            ),
+        ];
+        for (i, r) in refused.iter().enumerate() {
+            assert!(r.is_err(), "case {i} taken: {r:?}");
+        }
     }
 
     #[test]
