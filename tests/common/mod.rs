@@ -215,6 +215,16 @@ impl MapperProcess {
         Self::start_configured(dir, zenoh, "", zenoh_toml)
     }
 
+    /// A mapper with `config_toml` as its whole config but `http_listen` (on a free port),
+    /// without the drills' defaults.
+    pub fn start_config(dir: &Path, zenoh: String, config_toml: &str) -> MapperProcess {
+        let http = format!("127.0.0.1:{}", free_port());
+        let config = dir.join("mapper.toml");
+        std::fs::write(&config, format!("http_listen = {http:?}\n{config_toml}"))
+            .expect("mapper config");
+        Self::spawn(http, zenoh, config)
+    }
+
     fn start_configured(dir: &Path, zenoh: String, extra: &str, zenoh_toml: &str) -> MapperProcess {
         let http = format!("127.0.0.1:{}", free_port());
         let config = dir.join("mapper.toml");

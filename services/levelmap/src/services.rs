@@ -120,16 +120,27 @@ fn verify_store(config: &mapper::MapperConfig, json: bool) -> Result<()> {
     if json {
         println!("{}", serde_json::to_string_pretty(&check)?);
     } else {
-        println!("store {}", path.display());
+        println!(
+            "store {} (format {}), running {}",
+            path.display(),
+            check.format,
+            check.mapping_version
+        );
         for f in &check.fleets {
-            let replay = match &f.replay_error {
-                None => "replays to the stored edges".to_owned(),
-                Some(e) => format!("DOES NOT REPLAY: {e}"),
+            let replay = match (&f.replay_error, &f.edges_differ) {
+                (Some(e), _) => format!("DOES NOT REPLAY (a start quarantines it): {e}"),
+                (None, None) => "replays to the stored edges".to_owned(),
+                (None, Some(d)) => d.clone(),
             };
             println!(
                 "fleet {}: {} nodes, {} edges, {} solves: {replay} ({:.0} ms)",
                 f.fleet, f.nodes, f.edges, f.solves, f.replay_ms
             );
+            let mapped_by = f.mapping_version.as_deref().unwrap_or("no mapping version");
+            match &f.rebuild {
+                Some(why) => println!("  a start REBUILDS it from its nodes: {why}"),
+                None => println!("  mapped by {mapped_by}: a start restores it"),
+            }
             let snapshot = match &f.snapshot {
                 None => "no snapshot".to_owned(),
                 Some(s) => match (&s.error, s.differences.is_empty()) {

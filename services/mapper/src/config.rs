@@ -86,6 +86,18 @@ impl MapperConfig {
         )
     }
 
+    /// The mapping version of this configuration: [`crate::MAPPING_CODE`] and a digest of
+    /// what it maps with (`[mapping]`, `datum`, `max_range_m`). A store's fleet mapped by
+    /// another version is rebuilt from its nodes at start (`crate::restore`).
+    pub fn mapping_version(&self) -> crate::store::MappingVersion {
+        let parameters = serde_json::to_vec(&(&self.mapping, &self.datum, self.max_range_m))
+            .expect("mapping parameters serialize");
+        crate::store::MappingVersion {
+            code: crate::MAPPING_CODE.to_owned(),
+            parameters: format!("{:08x}", crc32fast::hash(&parameters)),
+        }
+    }
+
     /// Reads a TOML file (none: the defaults), then the `LEVELMAP_…` environment variables
     /// (`wire::session::env`); unknown keys are errors.
     pub fn load(path: Option<&Path>) -> anyhow::Result<MapperConfig> {

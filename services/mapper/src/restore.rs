@@ -1,17 +1,27 @@
-//! The store read back at start: each fleet's map from its newest snapshot and the nodes
-//! stored after it, or, without a usable snapshot (an older store, another snapshot format,
-//! other mapping parameters), replayed from all of its nodes. Either way the nodes are
-//! mapped again through the same deterministic mapper, each stored solve taken and applied
-//! at its points, and the rebuilt edges are checked against the stored ones.
+//! The store read back at start. The nodes (with the spans, chains, modes and versions) are
+//! the record; the edges and the snapshot are derived from them by a mapping version
+//! (`crate::MAPPING_CODE` and the parameters, recorded per fleet in the store):
+//! - a fleet mapped by the running version is restored from its newest snapshot and the
+//!   nodes stored after it, or without a usable one replayed from all of its nodes; either
+//!   way the nodes are mapped again through the same deterministic mapper, each stored solve
+//!   taken and applied at its points, and the rebuilt edges are checked against the stored
+//!   ones;
+//! - a fleet mapped by another version (an upgrade, a changed `[mapping]` key, a store of
+//!   format 0), or whose replay does not give the stored edges, is **rebuilt**: replayed from
+//!   all of its nodes by the running version, and its edges, snapshot and mapping version
+//!   written anew. The solve points stay: they record when solves ran (a matter of the
+//!   clock, not of the nodes).
+//!
+//! Only rows that cannot be read or mapped quarantine a fleet.
 //!
 //! [`verify_store`] is the check behind `levelmap mapper --verify-store`: every fleet
 //! replayed in full, ignoring its snapshot, and compared with the stored edges and with what
-//! its snapshot restores.
+//! its snapshot restores; and which fleets a start would rebuild.
 
 use crate::config::MapperConfig;
 use crate::fleet::{FleetMap, SpanReplay};
-use crate::state::Shared;
-use crate::store::{SolvePoint, Store, StoredFleet};
+use crate::state::{Metrics, Shared};
+use crate::store::{MappingVersion, SolvePoint, Store, StoredFleet};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::collections::HashMap;
@@ -21,13 +31,19 @@ use std::time::Instant;
 /// full).
 pub type Restored = (HashMap<String, FleetMap>, HashMap<String, usize>);
 
-/// Restores the store, fleet by fleet. A fleet whose rows do not replay is quarantined (its
-/// reason kept in `shared`): the others are restored and served.
+/// Restores the store, fleet by fleet. A fleet whose rows cannot be read or mapped is
+/// quarantined (its reason kept in `shared`); one mapped by another version is rebuilt
+/// (counted in `shared`'s metrics). Every fleet served is then recorded as mapped by the
+/// running version.
 pub fn restore(config: &MapperConfig, store: &Store, shared: &Shared) -> Result<Restored> {
     let (mut fleets, mut covered) = (HashMap::new(), HashMap::new());
+    let running = config.mapping_version();
     for id in store.fleet_ids()? {
-        match load(config, store, &id) {
-            Ok((map, from)) => {
+        match load(config, store, &id, &running) {
+            Ok((map, from, rebuilt)) => {
+                if rebuilt {
+                    Metrics::bump(&shared.metrics.fleets_rebuilt);
+                }
                 shared.publish_map(&map, 0.0);
                 covered.insert(id.clone(), from);
                 fleets.insert(id, map);
@@ -43,46 +59,118 @@ pub fn restore(config: &MapperConfig, store: &Store, shared: &Shared) -> Result<
             }
         }
     }
+    // The configured fleets without rows yet will be mapped by this version too.
+    let mut served: Vec<&str> = fleets.keys().map(String::as_str).collect();
+    let quarantined = shared.quarantined.read().expect("quarantine lock");
+    served.extend(
+        config
+            .fleets
+            .iter()
+            .map(String::as_str)
+            .filter(|f| !fleets.contains_key(*f) && !quarantined.contains_key(*f)),
+    );
+    let mut due = Vec::new();
+    for id in served {
+        if store.mapping_version(id)?.as_ref() != Some(&running) {
+            due.push(id);
+        }
+    }
+    store.set_mapping_version(&due, &running)?;
+    drop(quarantined);
     Ok((fleets, covered))
 }
 
-/// One fleet's map: from its snapshot if it has a usable one, else replayed in full; and
-/// how many nodes the snapshot covered.
-fn load(config: &MapperConfig, store: &Store, id: &str) -> Result<(FleetMap, usize)> {
+/// Why a fleet must be rebuilt rather than restored, if it must: its recorded mapping
+/// version is not the running one.
+pub fn rebuild_reason(
+    recorded: Option<&MappingVersion>,
+    running: &MappingVersion,
+) -> Option<String> {
+    match recorded {
+        Some(version) if version == running => None,
+        Some(version) => Some(format!("mapped by {version}; running {running}")),
+        None => Some(format!(
+            "no mapping version recorded (a store of format 0); running {running}"
+        )),
+    }
+}
+
+/// One fleet's map: from its snapshot if it has a usable one, else replayed in full, else
+/// rebuilt; how many nodes its stored snapshot covers; whether it was rebuilt.
+fn load(
+    config: &MapperConfig,
+    store: &Store,
+    id: &str,
+    running: &MappingVersion,
+) -> Result<(FleetMap, usize, bool)> {
     let started = Instant::now();
     let stored = store.load_fleet(id)?;
-    // Snapshots off: none is trusted either (a way to replay every node on purpose).
-    let snapshots = config.store.snapshot_every_nodes > 0;
-    let snapshot = store.snapshot(id).unwrap_or_else(|e| {
-        tracing::warn!(fleet = %id, "snapshot unreadable, replaying every node: {e}");
-        None
-    });
-    let snapshot = snapshot.filter(|_| snapshots);
-    if let Some(bytes) = snapshot {
-        match from_snapshot(config, &stored, &bytes) {
+    let recorded = store.mapping_version(id)?;
+    let reason = match rebuild_reason(recorded.as_ref(), running) {
+        Some(reason) => reason,
+        None => match restore_same_version(config, store, &stored)? {
             Ok((map, covered)) => {
                 tracing::info!(
                     fleet = %id,
                     nodes = stored.nodes.len(),
                     snapshot_nodes = covered,
                     edges = stored.edges.len(),
-                    "restored from its snapshot in {:.0} ms",
+                    "restored in {:.0} ms",
                     started.elapsed().as_secs_f64() * 1e3
                 );
-                return Ok((map, covered));
+                return Ok((map, covered, false));
             }
+            Err(differ) => format!(
+                "{differ} under the same mapping version ({running}): the mapping code \
+                     changed without a new crate::MAPPING_CODE"
+            ),
+        },
+    };
+    let map = replay_unchecked(config, &stored)?;
+    let snapshot = (config.store.snapshot_every_nodes > 0)
+        .then(|| map.snapshot())
+        .flatten();
+    let edges = crate::store::encode_edges(&map.graph().edges);
+    store
+        .put_rebuilt(id, &edges, snapshot.as_deref(), running)
+        .with_context(|| format!("store: fleet {id}: writing its rebuilt map"))?;
+    tracing::warn!(
+        fleet = %id,
+        nodes = stored.nodes.len(),
+        stored_edges = stored.edges.len(),
+        edges = edges.len(),
+        "rebuilt from its nodes in {:.0} ms: {reason}",
+        started.elapsed().as_secs_f64() * 1e3
+    );
+    let covered = snapshot.map_or(0, |_| stored.nodes.len());
+    Ok((map, covered, true))
+}
+
+/// A fleet mapped by the running version: from its snapshot and the nodes after it, or
+/// replayed in full; the inner error says how its edges differ from the stored ones (the
+/// caller rebuilds it), the outer one that its rows cannot be read or mapped.
+fn restore_same_version(
+    config: &MapperConfig,
+    store: &Store,
+    stored: &StoredFleet,
+) -> Result<Result<(FleetMap, usize), String>> {
+    let id = &stored.id;
+    // Snapshots off: none is trusted either (a way to replay every node on purpose).
+    let snapshot = store.snapshot(id).unwrap_or_else(|e| {
+        tracing::warn!(fleet = %id, "snapshot unreadable, replaying every node: {e}");
+        None
+    });
+    if let Some(bytes) = snapshot.filter(|_| config.store.snapshot_every_nodes > 0) {
+        match from_snapshot(config, stored, &bytes) {
+            Ok(restored) => return Ok(Ok(restored)),
             Err(e) => tracing::warn!(fleet = %id, "snapshot not used, replaying every node: {e:#}"),
         }
     }
-    let map = replay(config, &stored)?;
-    tracing::info!(
-        fleet = %id,
-        nodes = stored.nodes.len(),
-        edges = stored.edges.len(),
-        "replayed in {:.0} ms",
-        started.elapsed().as_secs_f64() * 1e3
-    );
-    Ok((map, 0))
+    let map = replay_unchecked(config, stored)?;
+    Ok(match edges_differ(&map, stored) {
+        None => Ok((map, 0)),
+        Some(differ) => Err(differ),
+    })
 }
 
 /// A fleet's map from its snapshot and the nodes after it, its edges checked; how many
@@ -110,11 +198,18 @@ pub fn from_snapshot(
 
 /// One fleet's map replayed from all of its nodes; its edges checked against the stored ones.
 pub fn replay(config: &MapperConfig, stored: &StoredFleet) -> Result<FleetMap> {
+    let map = replay_unchecked(config, stored)?;
+    check_edges(&map, stored)?;
+    Ok(map)
+}
+
+/// One fleet's map replayed from all of its nodes by the running mapping version, whatever
+/// edges it stored.
+pub fn replay_unchecked(config: &MapperConfig, stored: &StoredFleet) -> Result<FleetMap> {
     let mut map = config.new_fleet(&stored.id);
     let mut spans = SpanReplay::new(stored.localized.clone());
     replay_tail(&mut map, stored, 0, &mut spans)?;
     spans.rest(&mut map);
-    check_edges(&map, stored)?;
     Ok(map)
 }
 
@@ -196,15 +291,22 @@ fn solve_points_at<'a>(
 
 /// The map's edges against the stored ones.
 fn check_edges(map: &FleetMap, stored: &StoredFleet) -> Result<()> {
+    match edges_differ(map, stored) {
+        None => Ok(()),
+        Some(differ) => Err(anyhow::anyhow!("store: fleet {}: {differ}", stored.id)),
+    }
+}
+
+/// How the map's edges differ from the stored ones, if they do.
+fn edges_differ(map: &FleetMap, stored: &StoredFleet) -> Option<String> {
     let rebuilt = crate::store::encode_edges(&map.graph().edges);
-    anyhow::ensure!(
-        rebuilt == stored.edges,
-        "store: fleet {} replays to {} edges that differ from the {} stored",
-        stored.id,
-        rebuilt.len(),
-        stored.edges.len()
-    );
-    Ok(())
+    (rebuilt != stored.edges).then(|| {
+        format!(
+            "replays to {} edges that differ from the {} stored",
+            rebuilt.len(),
+            stored.edges.len()
+        )
+    })
 }
 
 /// How two maps of a fleet differ: empty when they hold the same nodes, robots, edges, GPS
@@ -278,10 +380,16 @@ pub struct FleetCheck {
     pub edges: usize,
     /// See `nodes`.
     pub solves: usize,
+    /// The mapping version recorded for its edges (`None`: a store of format 0).
+    pub mapping_version: Option<String>,
+    /// Why a start of this mapper would rebuild it from its nodes; `None`: restored.
+    pub rebuild: Option<String>,
     /// The full replay's time (ms).
     pub replay_ms: f64,
-    /// Why the full replay failed or its edges differ from the stored ones; `None`: they match.
+    /// Why the full replay failed (a start quarantines the fleet); `None`: it replays.
     pub replay_error: Option<String>,
+    /// How the replayed edges differ from the stored ones; `None`: they match.
+    pub edges_differ: Option<String>,
     /// The snapshot, if the fleet has one.
     pub snapshot: Option<SnapshotCheck>,
 }
@@ -304,21 +412,39 @@ pub struct SnapshotCheck {
 /// The whole store's check: every fleet, and whether all of it matched.
 #[derive(Debug, Serialize)]
 pub struct StoreCheck {
+    /// The store's format number.
+    pub format: u64,
+    /// The running mapping version.
+    pub mapping_version: String,
     /// Every fleet of the store.
     pub fleets: Vec<FleetCheck>,
-    /// Every fleet replays to its stored edges, and every snapshot restores to its replay.
+    /// Every fleet replays; those of the running mapping version to their stored edges, and
+    /// their snapshots to the replay. A fleet of another version is rebuilt at start: that
+    /// is not a failure.
     pub ok: bool,
 }
 
 /// Replays every fleet of the store in full (its snapshot ignored), checks its edges against
-/// the stored ones and what its snapshot restores against the replay.
+/// the stored ones and what its snapshot restores against the replay, and says which fleets
+/// a start would rebuild.
 pub fn verify_store(config: &MapperConfig, store: &Store) -> Result<StoreCheck> {
+    let running = config.mapping_version();
     let mut fleets = Vec::new();
     for id in store.fleet_ids()? {
         let stored = store.load_fleet(&id)?;
+        let recorded = store.mapping_version(&id)?;
         let started = Instant::now();
-        let replayed = replay(config, &stored);
+        let replayed = replay_unchecked(config, &stored);
         let replay_ms = started.elapsed().as_secs_f64() * 1e3;
+        let edges_differ = replayed
+            .as_ref()
+            .ok()
+            .and_then(|m| edges_differ(m, &stored));
+        let rebuild = rebuild_reason(recorded.as_ref(), &running).or_else(|| {
+            edges_differ
+                .as_ref()
+                .map(|d| format!("{d} under the same mapping version"))
+        });
         let snapshot = store.snapshot(&id)?.map(|bytes| {
             let started = Instant::now();
             let restored = from_snapshot(config, &stored, &bytes);
@@ -343,18 +469,29 @@ pub fn verify_store(config: &MapperConfig, store: &Store) -> Result<StoreCheck> 
             edges: stored.edges.len(),
             solves: stored.solve_points.len() + stored.legacy_solves.len(),
             fleet: id,
+            mapping_version: recorded.map(|v| v.to_string()),
+            rebuild,
             replay_ms,
             replay_error: replayed.err().map(|e| format!("{e:#}")),
+            edges_differ,
             snapshot,
         });
     }
     let ok = fleets.iter().all(|f| {
+        let same_version = f.mapping_version.as_deref() == Some(running.to_string().as_str());
         f.replay_error.is_none()
-            && f.snapshot
-                .as_ref()
-                .is_none_or(|s| s.error.is_none() && s.differences.is_empty())
+            && (!same_version
+                || f.edges_differ.is_none()
+                    && f.snapshot
+                        .as_ref()
+                        .is_none_or(|s| s.error.is_none() && s.differences.is_empty()))
     });
-    Ok(StoreCheck { fleets, ok })
+    Ok(StoreCheck {
+        format: store.format()?,
+        mapping_version: running.to_string(),
+        fleets,
+        ok,
+    })
 }
 
 #[cfg(test)]

@@ -166,6 +166,8 @@ pub struct Metrics {
     pub localizations_sent: AtomicU64,
     /// Network solves run.
     pub optimizations: AtomicU64,
+    /// Fleets rebuilt from their nodes at start (mapped by another mapping version).
+    pub fleets_rebuilt: AtomicU64,
     /// Rejections by (topic, reason).
     pub rejected: Mutex<BTreeMap<(&'static str, &'static str), u64>>,
 }

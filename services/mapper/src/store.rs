@@ -24,9 +24,11 @@ use std::sync::{Mutex, RwLock};
 use wire::{Message, v1};
 
 mod localization;
+mod meta;
 mod retention;
 mod versions;
 pub use localization::{ModeError, StoredModes};
+pub use meta::{MappingVersion, STORE_FORMAT};
 pub use retention::Pruned;
 pub use versions::{AddVersionError, VersionRows};
 
@@ -59,6 +61,9 @@ pub enum StoreError {
     /// Rows that do not make a fleet's history (a gap in the indices).
     #[error("store: {0}")]
     Damaged(String),
+    /// A store format this build cannot read (`store::STORE_FORMAT`).
+    #[error("store: {0}")]
+    Format(String),
 }
 
 macro_rules! from_redb {
@@ -287,6 +292,7 @@ impl Store {
 /// The database, its tables made when missing.
 fn with_tables(db: Database) -> Result<Database, StoreError> {
     let txn = db.begin_write()?;
+    meta::check_format(&txn)?;
     txn.open_table(NODES)?;
     txn.open_table(EDGES)?;
     txn.open_table(SOLVES)?;

@@ -105,6 +105,11 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
         ),
         ("levelmap_acks_sent_total", "Acks published.", &m.acks_sent),
         (
+            "levelmap_fleets_rebuilt_total",
+            "Fleets rebuilt from their nodes at start (stored by another mapping version).",
+            &m.fleets_rebuilt,
+        ),
+        (
             "levelmap_optimizations_total",
             "Network optimizations run.",
             &m.optimizations,

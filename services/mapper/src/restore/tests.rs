@@ -9,6 +9,7 @@ use leveling::{Beam, LeveledScan, TimedPose};
 use slam::Pose2;
 use slam::geodesy::{GeoDatum, Geodetic};
 use slam::matching::synthetic::{Scene, uniform_bearings};
+use std::sync::atomic::Ordering;
 use wire::{Message, v1};
 
 const S: u64 = 1_000_000_000;
@@ -131,6 +132,10 @@ fn map_as_the_worker(
     nodes: &[Vec<u8>],
     snapshot_after: usize,
 ) -> FleetMap {
+    // As the mapper does at start: the fleet's rows are this version's.
+    store
+        .set_mapping_version(&["park"], &config.mapping_version())
+        .unwrap();
     let mut map = config.new_fleet("park");
     let mut out: Option<(u64, slam::BackgroundSolve)> = None;
     let mut edges = 0;
@@ -322,13 +327,118 @@ fn an_unreadable_or_unfit_snapshot_falls_back_to_the_full_replay() {
         assert!(!check.ok, "{what}: the check fails");
         assert!(check.fleets[0].replay_error.is_none(), "{what}");
     }
-    // Other mapping parameters: the snapshot does not map as a replay would.
-    store.put_snapshot("park", &good).unwrap();
+    assert_eq!(shared.metrics.fleets_rebuilt.load(Ordering::Relaxed), 0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_fleet_of_other_mapping_parameters_is_rebuilt_from_its_nodes_not_quarantined() {
+    let (dir, store) = temp_store("rebuilt");
+    let config = config(&dir);
+    let nodes = nodes(60);
+    map_as_the_worker(&store, &config, &nodes, 100);
+    let before = store.load_fleet("park").unwrap();
     let mut other = config.clone();
-    other.mapping.loop_search_radius_m += 1.0;
-    let (_, covered) = restore(&other, &store, &shared).unwrap();
-    assert_eq!(covered["park"], 0);
+    other.mapping.idc.final_max_distance_m *= 1.5;
+    other.mapping.odometry_sigma_xy_per_m *= 1.5;
+    assert_ne!(other.mapping_version(), config.mapping_version());
+    let expected = replay_unchecked(&other, &before).unwrap();
+    assert!(
+        edges_differ(&expected, &before).is_some(),
+        "the change maps the nodes to other edges"
+    );
+
+    // What a start with the changed `[mapping]` does: rebuilt, nothing quarantined.
+    let shared = Shared::new(String::new(), 0);
+    let (fleets, covered) = restore(&other, &store, &shared).unwrap();
     assert!(shared.quarantined.read().unwrap().is_empty());
+    assert_eq!(shared.metrics.fleets_rebuilt.load(Ordering::Relaxed), 1);
+    assert_eq!(
+        differences(&fleets["park"], &expected),
+        Vec::<String>::new()
+    );
+    assert_eq!(
+        covered["park"],
+        before.nodes.len(),
+        "a new snapshot of every node"
+    );
+    let after = store.load_fleet("park").unwrap();
+    assert_eq!(after.nodes, before.nodes, "the record untouched");
+    assert_eq!(after.solve_points, before.solve_points);
+    assert_eq!(after.edges, encode_edges(&expected.graph().edges));
+    assert_eq!(
+        store.mapping_version("park").unwrap(),
+        Some(other.mapping_version())
+    );
+    let check = verify_store(&other, &store).unwrap();
+    assert!(check.ok && check.fleets[0].rebuild.is_none(), "{check:?}");
+    let check = verify_store(&config, &store).unwrap();
+    assert!(
+        check.ok,
+        "another version's fleet is rebuilt, not failed: {check:?}"
+    );
+    assert!(check.fleets[0].rebuild.is_some(), "{check:?}");
+
+    // The next start restores the rebuilt map from its snapshot.
+    let shared = Shared::new(String::new(), 0);
+    let (fleets, covered) = restore(&other, &store, &shared).unwrap();
+    assert_eq!(shared.metrics.fleets_rebuilt.load(Ordering::Relaxed), 0);
+    assert_eq!(covered["park"], before.nodes.len());
+    assert_eq!(
+        differences(&fleets["park"], &expected),
+        Vec::<String>::new()
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn edges_that_do_not_replay_under_the_same_version_are_rebuilt_not_quarantined() {
+    let (dir, store) = temp_store("undeclared");
+    let mut config = config(&dir);
+    config.store.snapshot_every_nodes = 0;
+    let nodes = nodes(20);
+    let live = map_as_the_worker(&store, &config, &nodes, usize::MAX);
+    let stored = store.load_fleet("park").unwrap();
+    // As if an older build of the same declared version had stored another first edge.
+    let mut edge = live.graph().edges[0].clone();
+    edge.measurement.x += 0.25;
+    store
+        .commit(&[FleetBatch {
+            fleet: "park",
+            edges: encode_edges(&[edge]),
+            ..Default::default()
+        }])
+        .unwrap();
+    let shared = Shared::new(String::new(), 0);
+    let (fleets, _) = restore(&config, &store, &shared).unwrap();
+    assert!(shared.quarantined.read().unwrap().is_empty());
+    assert_eq!(shared.metrics.fleets_rebuilt.load(Ordering::Relaxed), 1);
+    assert_eq!(differences(&fleets["park"], &live), Vec::<String>::new());
+    assert_eq!(store.load_fleet("park").unwrap().edges, stored.edges);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_store_of_a_later_format_is_refused_with_the_reason() {
+    let (dir, store) = temp_store("later");
+    assert_eq!(store.format().unwrap(), crate::store::STORE_FORMAT);
+    drop(store);
+    let path = dir.join("mapper.redb");
+    {
+        let db = redb::Database::open(&path).unwrap();
+        let txn = db.begin_write().unwrap();
+        let meta: redb::TableDefinition<&str, u64> = redb::TableDefinition::new("store_meta");
+        txn.open_table(meta).unwrap().insert("format", 99).unwrap();
+        txn.commit().unwrap();
+    }
+    let Err(e) = Store::open(&path) else {
+        panic!("a store of format 99 opened");
+    };
+    let e = e.to_string();
+    assert!(
+        e.contains("store format 99") && e.contains("later levelmap"),
+        "{e}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
