@@ -14,8 +14,8 @@ async fn acks_that_name_other_chains_or_unmade_nodes_delete_nothing() {
     let dir = temp_dir("forged-ack");
     let mapper = MapperProcess::start(&dir);
     let http = mapper.http.clone();
-    let session = wire::session::SessionConfig::client(&mapper.zenoh)
-        .open(wire::session::Role::Client)
+    let session = runtime::session::SessionConfig::client(&mapper.zenoh)
+        .open(runtime::session::Role::Client)
         .await
         .expect("a client of the mapper's router");
     // 60 s of park at 4x: 15 s of driving.

@@ -20,7 +20,7 @@ impl Pauses {
         let seed = std::env::var("LEVELMAP_DRILL_SEED")
             .ok()
             .and_then(|s| s.parse().ok())
-            .unwrap_or_else(wire::session::now_ns);
+            .unwrap_or_else(runtime::session::now_ns);
         eprintln!("kill-loop seed: LEVELMAP_DRILL_SEED={seed}");
         Pauses(seed)
     }

@@ -307,7 +307,7 @@ fn robots_ride_out_loss_a_cut_and_a_half_open_link_by_themselves() {
     // The edges' logs are stamped in UTC: this is +0.0 s below.
     eprintln!(
         "partition drill: +0.0 s is {:.1} s after the Unix epoch",
-        wire::session::now_ns() as f64 * 1e-9
+        runtime::session::now_ns() as f64 * 1e-9
     );
     let mut edges: Vec<Edge> = (0..ROBOTS)
         .map(|r| net.spawn_edge(&dir, r, &zenoh))

@@ -8,10 +8,10 @@
 mod common;
 
 use common::*;
+use runtime::session::{Role, SessionConfig, TlsConfig, now_ns};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use wire::session::{Role, SessionConfig, TlsConfig, now_ns};
 use wire::{Message, v1};
 use zenoh::Wait;
 

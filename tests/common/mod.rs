@@ -477,15 +477,15 @@ pub async fn in_process_mapper_with(
 ) -> (mapper::Running, zenoh::Session, String) {
     let zenoh = format!("tcp/127.0.0.1:{}", free_port());
     let mapper = mapper::start(mapper::MapperConfig {
-        zenoh: wire::session::SessionConfig::router(&zenoh),
+        zenoh: runtime::session::SessionConfig::router(&zenoh),
         http_listen: "127.0.0.1:0".into(),
         store_path: dir.join("mapper.redb"),
         ..config
     })
     .await
     .expect("mapper starts");
-    let session = wire::session::SessionConfig::client(&zenoh)
-        .open(wire::session::Role::Client)
+    let session = runtime::session::SessionConfig::client(&zenoh)
+        .open(runtime::session::Role::Client)
         .await
         .expect("client session");
     let http = mapper.http_addr.to_string();

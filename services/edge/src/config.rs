@@ -5,9 +5,9 @@ use crate::cloud::CloudParams;
 use crate::node::NodeParams;
 use crate::source::{FilesSourceConfig, McapSourceConfig, Ros2SourceConfig, SimSourceConfig};
 use leveling::SegmentParams;
+use runtime::session::SessionConfig;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use wire::session::SessionConfig;
 
 /// The edge service's configuration (`deploy/edge.toml`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -43,7 +43,7 @@ pub struct EdgeConfig {
     pub source: SourceConfig,
     /// Where the map→odom transform goes back to the robot's ROS 2 stack (`/tf`); unset:
     /// nowhere.
-    pub ros2_out: Option<wire::ros2::RosOutConfig>,
+    pub ros2_out: Option<runtime::ros2::RosOutConfig>,
 }
 
 /// The measurement source.
@@ -89,10 +89,10 @@ impl Default for EdgeConfig {
 
 impl EdgeConfig {
     /// Reads a TOML file (none: the defaults), then the `LEVELMAP_…` environment variables
-    /// (`wire::session::env`); unknown keys are errors (a typo must not silently become a
+    /// (`runtime::session::env`); unknown keys are errors (a typo must not silently become a
     /// default).
     pub fn load(path: Option<&Path>) -> anyhow::Result<EdgeConfig> {
-        wire::session::load_toml(path)
+        runtime::session::load_toml(path)
     }
 }
 
@@ -103,7 +103,7 @@ mod tests {
     #[test]
     fn the_deploy_file_states_the_defaults() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/edge.toml");
-        let file = wire::session::load_toml_with(Some(&path), []).unwrap();
+        let file = runtime::session::load_toml_with(Some(&path), []).unwrap();
         assert_eq!(EdgeConfig::default(), file);
     }
 
@@ -116,7 +116,7 @@ mod tests {
             ("LEVELMAP_CLOUD__KEEP", "false"),
         ]
         .map(|(k, v)| (k.into(), v.into()));
-        let config: EdgeConfig = wire::session::load_toml_with(None, env).unwrap();
+        let config: EdgeConfig = runtime::session::load_toml_with(None, env).unwrap();
         // A numeric-looking id stays a string: the key holds one.
         assert_eq!(config.robot, "007");
         assert_eq!(config.zenoh.connect, Some(vec!["tcp/10.0.0.1:7447".into()]));
@@ -131,7 +131,7 @@ mod tests {
     #[test]
     fn a_mapper_key_is_not_an_edge_key() {
         let env = [("LEVELMAP_TOKEN".into(), "x".into())];
-        let e = wire::session::load_toml_with::<EdgeConfig>(None, env).unwrap_err();
+        let e = runtime::session::load_toml_with::<EdgeConfig>(None, env).unwrap_err();
         assert!(e.to_string().contains("LEVELMAP_TOKEN"), "{e}");
     }
 }

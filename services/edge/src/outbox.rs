@@ -167,7 +167,7 @@ impl Outbox {
 fn new_chain_id() -> u64 {
     use std::hash::{BuildHasher, Hasher};
     let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
-    hasher.write_u64(wire::session::now_ns());
+    hasher.write_u64(runtime::session::now_ns());
     hasher.write_u32(std::process::id());
     (hasher.finish() >> 11).max(1)
 }

@@ -6,9 +6,9 @@
 //! changes. Nothing is published before the first correction.
 
 use anyhow::Result;
+use runtime::ros2::{Durability, RosOut, RosOutConfig, RosPublisher};
 use slam::Pose2;
 use std::collections::VecDeque;
-use wire::ros2::{Durability, RosOut, RosOutConfig, RosPublisher};
 
 /// Nodes remembered for the mapper's corrections (the mapper answers within seconds; a
 /// correction of an older node is ignored).

@@ -11,13 +11,13 @@ use crate::outbox::Outbox;
 use crate::ros_out::{MapCorrection, NodeFrame, TfOut};
 use crate::source::Source;
 use anyhow::{Context, Result};
+use runtime::ros2::RosOutConfig;
+use runtime::session::now_ns;
 use serde::Serialize;
 use std::future::Future;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot};
-use wire::ros2::RosOutConfig;
-use wire::session::now_ns;
 use wire::{Message, v1};
 use zenoh::qos::{CongestionControl, Priority};
 
@@ -100,7 +100,7 @@ struct Link {
 impl Link {
     /// Nodes reliable (blocking under congestion), odometry best effort (dropped).
     async fn open(config: &EdgeConfig) -> Result<Link> {
-        let session = config.zenoh.open(wire::session::Role::Client).await?;
+        let session = config.zenoh.open(runtime::session::Role::Client).await?;
         let node_key = wire::node_key(&config.fleet, &config.robot)?;
         let odom_key = wire::odom_key(&config.fleet, &config.robot)?;
         let ack_key = wire::ack_key(&config.fleet, &config.robot)?;

@@ -7,10 +7,10 @@ mod common;
 
 use common::{play, recording, streams};
 use edge::{Ros2Source, Ros2SourceConfig, Source, SourceEvent};
+use runtime::ros2::KeyStyle;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use wire::ros2::KeyStyle;
 
 /// Odometry stamps, and each scan's column stamps and fix stamps.
 type Summary = (Vec<u64>, Vec<(Vec<u64>, Vec<u64>)>);

@@ -8,6 +8,7 @@ use crate::FLEET;
 use anyhow::{Context, Result};
 use clap::Args;
 use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
+use runtime::session::{Role, SessionConfig};
 use serde::Serialize;
 use slam::geodesy::Geodetic;
 use std::collections::HashMap;
@@ -15,7 +16,6 @@ use std::io::BufRead;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use wire::session::{Role, SessionConfig};
 use wire::{Message, v1};
 
 /// Load-test the mapper: N simulated robots publishing nodes and odometry over Zenoh, with
@@ -300,7 +300,7 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     }
     let sent: Arc<Mutex<HashMap<(String, u64), Instant>>> = Arc::default();
     let started = Instant::now();
-    let epoch = wire::session::now_ns();
+    let epoch = runtime::session::now_ns();
     let tick = Duration::from_secs_f64(1.0 / args.odometry_rate.max(args.node_rate));
     let node_every = (args.odometry_rate.max(args.node_rate) / args.node_rate).round() as u64;
     let mut odometry_published = 0u64;

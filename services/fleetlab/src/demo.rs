@@ -8,12 +8,12 @@ use anyhow::{Context, Result};
 use clap::Args;
 use edge::{EdgeConfig, SimSourceConfig, SourceConfig};
 use mapper::MapperConfig;
+use runtime::session::SessionConfig;
 use serde::Serialize;
 use sim::{FleetRobot, FleetStart};
 use slam::Pose2;
 use std::path::PathBuf;
 use std::time::Instant;
-use wire::session::SessionConfig;
 
 /// Run the fleet demo: a mapper and simulated robots over real Zenoh, the map over HTTP.
 #[derive(Args, Clone, Debug)]
@@ -149,7 +149,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
     if !args.json {
         println!("mapper: Zenoh {} · HTTP {api}/summary", args.zenoh);
     }
-    let epoch_ns = wire::session::now_ns();
+    let epoch_ns = runtime::session::now_ns();
     let duration_ns = (args.duration * 1e9) as u64;
     let start = if args.scatter_starts {
         FleetStart::Scattered
@@ -174,7 +174,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         })));
     }
     let ctrl_c = tokio::spawn(async move {
-        wire::session::shutdown_signal().await;
+        runtime::session::shutdown_signal().await;
         let _ = stop_tx.send(true);
     });
     // With --laps: the map as it was when the first robot finished its first lap.

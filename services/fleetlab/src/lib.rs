@@ -40,7 +40,7 @@ pub fn park_mapper_config(
     }
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     Ok(mapper::MapperConfig {
-        zenoh: wire::session::SessionConfig::router(zenoh),
+        zenoh: runtime::session::SessionConfig::router(zenoh),
         http_listen: http.to_owned(),
         store_path: dir.join("mapper.redb"),
         datum: Some(sim::PARK_DATUM.origin),

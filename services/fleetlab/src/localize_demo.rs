@@ -12,6 +12,7 @@ use clap::Args;
 use edge::{EdgeConfig, SimSourceConfig, SourceConfig};
 use http::{HttpFigures, MapErrors, get_json, localize_over_http, percentile, post_json, put_json};
 use mapper::MapperConfig;
+use runtime::session::SessionConfig;
 use serde::Serialize;
 use serde_json::{Value, json};
 use sim::FleetRobot;
@@ -20,7 +21,6 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use wire::session::SessionConfig;
 
 /// The write token of the lab's mapper (freeze a version, set modes).
 mod http;
@@ -46,7 +46,7 @@ async fn localize_drive<'w>(
     map_errors: &MapErrors,
     robots: &[&Localizer],
 ) -> Result<(Vec<Drive>, Vec<(String, (FleetRobot<'w>, u64))>)> {
-    let epoch_ns = wire::session::now_ns();
+    let epoch_ns = runtime::session::now_ns();
     let configs = robots
         .iter()
         .map(|r| {
@@ -221,7 +221,7 @@ async fn run_async(args: &LocalizeDemoArgs) -> Result<()> {
             println!("{line}");
         }
     };
-    let epoch_ns = wire::session::now_ns();
+    let epoch_ns = runtime::session::now_ns();
 
     // 1. The survey, frozen as a version.
     let survey: Vec<EdgeConfig> = (0..3)
@@ -282,7 +282,7 @@ async fn run_async(args: &LocalizeDemoArgs) -> Result<()> {
     // the fleet's mode. Every node they send is captured for step 3.
     let captured: Arc<Mutex<BTreeMap<(String, u64), wire::NodeInput>>> = Arc::default();
     let session = SessionConfig::client(&args.zenoh)
-        .open(wire::session::Role::Client)
+        .open(runtime::session::Role::Client)
         .await?;
     let _capture = {
         let captured = captured.clone();

@@ -1,10 +1,12 @@
 //! `levelmap record`: a fleet's levelmap traffic from Zenoh into an MCAP file
-//! (`wire::recording`: one channel per key, the protobuf schemas embedded), until SIGINT,
+//! (`runtime::recording`: one channel per key, the protobuf schemas embedded), until SIGINT,
 //! SIGTERM or `--duration`. Zenoh callbacks never wait on the disk: samples cross a bounded
 //! queue to a writer thread, and a full queue drops (and counts) them.
 
 use anyhow::{Context, Result};
 use clap::Args;
+use runtime::recording::RecordingWriter;
+use runtime::session::{DEFAULT_CLIENT_CONNECT, Role, SessionConfig, now_ns};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::io::{BufWriter, Seek, Write};
@@ -12,8 +14,6 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
-use wire::recording::RecordingWriter;
-use wire::session::{DEFAULT_CLIENT_CONNECT, Role, SessionConfig, now_ns};
 
 /// Samples waiting for the writer; one more is dropped. At the edge's default 10 Hz odometry
 /// and a node per second, 4,096 samples are minutes of a fleet of ten.
@@ -249,7 +249,7 @@ async fn record(
         }
     };
     let early = tokio::select! {
-        _ = wire::session::shutdown_signal() => None,
+        _ = runtime::session::shutdown_signal() => None,
         _ = until => None,
         ended = &mut writer => Some(ended),
     };
@@ -305,7 +305,7 @@ mod tests {
         assert_eq!((report.messages, report.skipped), (3, 1));
         assert_eq!(report.topics["levelmap/park/robots/r1/odom"], 2);
         assert_eq!(report.payload_bytes, 3);
-        let read = wire::recording::RecordingReader::new(
+        let read = runtime::recording::RecordingReader::new(
             std::io::Cursor::new(out.into_inner()),
             std::path::Path::new("t.mcap"),
         );

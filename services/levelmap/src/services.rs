@@ -69,7 +69,7 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
         return verify_store(&config, args.json);
     }
     // A bad Zenoh or TLS setting stops the mapper here, before its store is opened.
-    let zenoh = config.zenoh.to_zenoh(wire::session::Role::Router)?;
+    let zenoh = config.zenoh.to_zenoh(runtime::session::Role::Router)?;
     let listen = zenoh.get_json("listen/endpoints").unwrap_or_default();
     runtime()?.block_on(async {
         let running = mapper::start(config.clone()).await?;
@@ -103,7 +103,7 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
                 return fed.map(|_| ());
             }
         }
-        wire::session::shutdown_signal().await;
+        runtime::session::shutdown_signal().await;
         tracing::info!("stopping");
         running.stop().await
     })
@@ -173,10 +173,10 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
     let config = edge::EdgeConfig::load(args.config.as_deref())?;
     // The link is retried while the mapper is out of reach; a bad Zenoh or TLS setting must
     // stop the service instead.
-    config.zenoh.to_zenoh(wire::session::Role::Client)?;
+    config.zenoh.to_zenoh(runtime::session::Role::Client)?;
     let report = runtime()?.block_on(async {
-        let source = edge::open_source(&config, wire::session::now_ns())?;
-        edge::run(config, source, wire::session::shutdown_signal()).await
+        let source = edge::open_source(&config, runtime::session::now_ns())?;
+        edge::run(config, source, runtime::session::shutdown_signal()).await
     })?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

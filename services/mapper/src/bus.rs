@@ -3,7 +3,7 @@
 
 use crate::fleet::FleetMap;
 use crate::state::{Metrics, Shared};
-use wire::session::now_ns;
+use runtime::session::now_ns;
 use wire::{MapPose, Message, v1};
 use zenoh::Wait;
 

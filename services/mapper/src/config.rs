@@ -1,12 +1,12 @@
 //! The mapping server's configuration (TOML). Every field has a default; `deploy/mapper.toml`
 //! shows them all.
 
+use runtime::session::SessionConfig;
 use serde::{Deserialize, Serialize};
 use slam::Mapper2dParams;
 use slam::geodesy::Geodetic;
 use std::num::{NonZeroU64, NonZeroUsize};
 use std::path::{Path, PathBuf};
-use wire::session::SessionConfig;
 
 /// The mapping server's configuration (`deploy/mapper.toml`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -41,7 +41,7 @@ pub struct MapperConfig {
     #[serde(deserialize_with = "over_fleet_mapping")]
     pub mapping: Mapper2dParams,
     /// Where each fleet's map goes to ROS 2 (`/levelmap/<fleet>/map`); unset: nowhere.
-    pub ros2_out: Option<wire::ros2::RosOutConfig>,
+    pub ros2_out: Option<runtime::ros2::RosOutConfig>,
     /// Map versions: frozen maps kept in the store (`[versions]`).
     pub versions: VersionsConfig,
     /// Robots localizing on a map version (`[localization]`).
@@ -99,9 +99,9 @@ impl MapperConfig {
     }
 
     /// Reads a TOML file (none: the defaults), then the `LEVELMAP_…` environment variables
-    /// (`wire::session::env`); unknown keys are errors.
+    /// (`runtime::session::env`); unknown keys are errors.
     pub fn load(path: Option<&Path>) -> anyhow::Result<MapperConfig> {
-        wire::session::load_toml(path)
+        runtime::session::load_toml(path)
     }
 }
 
@@ -289,7 +289,7 @@ mod tests {
     #[test]
     fn the_deploy_file_states_the_defaults() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/mapper.toml");
-        let file = wire::session::load_toml_with(Some(&path), []).unwrap();
+        let file = runtime::session::load_toml_with(Some(&path), []).unwrap();
         assert_eq!(MapperConfig::default(), file);
     }
 
@@ -299,7 +299,7 @@ mod tests {
 
     #[test]
     fn every_key_can_come_from_the_environment_without_a_file() {
-        let config: MapperConfig = wire::session::load_toml_with(
+        let config: MapperConfig = runtime::session::load_toml_with(
             None,
             env(&[
                 ("LEVELMAP_HTTP_LISTEN", "0.0.0.0:8080"),
@@ -323,7 +323,10 @@ mod tests {
         );
         assert_eq!(config.zenoh.listen, Some(vec!["tcp/10.0.0.1:7447".into()]));
         // Still a router: the mapper's session falls back to its role's mode.
-        let zenoh = config.zenoh.to_zenoh(wire::session::Role::Router).unwrap();
+        let zenoh = config
+            .zenoh
+            .to_zenoh(runtime::session::Role::Router)
+            .unwrap();
         assert_eq!(zenoh.get_json("mode").unwrap(), r#""router""#);
         assert_eq!(config.mapping.idc.min_correspondences, 12);
         // The fleet's mapping defaults, not the library's, around the key that was set.
@@ -334,7 +337,7 @@ mod tests {
 
     #[test]
     fn a_variable_that_names_no_key_is_an_error() {
-        let load = |pairs| wire::session::load_toml_with::<MapperConfig>(None, env(pairs));
+        let load = |pairs| runtime::session::load_toml_with::<MapperConfig>(None, env(pairs));
         // A typo among the denied keys, and one among the mapping's (which serde ignores).
         let e = load(&[("LEVELMAP_HTTP_LISTN", "x")]).unwrap_err();
         assert!(e.to_string().contains("LEVELMAP_HTTP_LISTN"), "{e}");
@@ -350,7 +353,7 @@ mod tests {
     fn the_environment_wins_over_the_file() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/mapper.toml");
         let config: MapperConfig =
-            wire::session::load_toml_with(Some(&path), env(&[("LEVELMAP_TOKEN", "s3cret")]))
+            runtime::session::load_toml_with(Some(&path), env(&[("LEVELMAP_TOKEN", "s3cret")]))
                 .unwrap();
         assert_eq!(
             config,

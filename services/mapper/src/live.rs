@@ -5,13 +5,13 @@
 //! and nothing queues. Filled in the Zenoh callbacks, with no mapping work.
 
 use crate::state::Shared;
+use runtime::session::now_ns;
 use serde::Serialize;
 use slam::Pose2;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use tokio::sync::watch;
 use utoipa::ToSchema;
-use wire::session::now_ns;
 
 /// A robot's newest live leveled scan.
 #[derive(Clone, Debug, Serialize, ToSchema)]

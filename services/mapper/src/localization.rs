@@ -357,7 +357,7 @@ impl Outcome {
             covariance: found.map(|f| f.covariance),
             score: found.map_or(0.0, |f| f.score),
             search: self.search,
-            sent_ns: wire::session::now_ns(),
+            sent_ns: runtime::session::now_ns(),
             reason: self.reason.clone().unwrap_or_default(),
         };
         let entry = NodeLocalization {

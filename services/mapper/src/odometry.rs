@@ -3,9 +3,9 @@
 //! per robot, a `pose` event in the map frame.
 
 use crate::state::{LiveOdometry, Metrics, Shared};
+use runtime::session::now_ns;
 use serde_json::json;
 use slam::Pose2;
-use wire::session::now_ns;
 
 /// Live poses go on the event stream at most 2 Hz per robot (odometry arrives at 10 Hz or
 /// more; `GET …/robots` has every one).

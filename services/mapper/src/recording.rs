@@ -14,12 +14,12 @@
 
 use crate::state::Shared;
 use crate::worker::{OptimizeError, Work};
+use runtime::recording::RecordingReader;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::path::Path;
 use std::sync::atomic::Ordering;
 use std::sync::mpsc;
-use wire::recording::RecordingReader;
 use wire::{Message, Topic, v1};
 
 /// What a recording brought.
@@ -227,8 +227,8 @@ fn recorded_solves(path: &Path) -> anyhow::Result<HashMap<String, VecDeque<Solve
 #[cfg(test)]
 mod tests {
     use super::*;
+    use runtime::recording::RecordingWriter;
     use std::io::Cursor;
-    use wire::recording::RecordingWriter;
 
     #[test]
     fn a_recording_cut_mid_chunk_is_refused_naming_the_file_and_how_far_it_was_read() {

@@ -9,10 +9,10 @@
 
 use crate::state::{FleetView, Shared};
 use anyhow::Result;
+use runtime::ros2::{Durability, RosOut, RosOutConfig, RosPublisher, ros_name_token};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use wire::ros2::{Durability, RosOut, RosOutConfig, RosPublisher, ros_name_token};
 
 /// An unchanged grid goes out again after this many periods (for late joiners that do not
 /// query).

@@ -13,11 +13,11 @@ use crate::state::Shared;
 use crate::store::Store;
 use crate::worker::{Work, Worker};
 use anyhow::{Context, Result};
+use runtime::session::now_ns;
 use std::sync::Arc;
 use std::sync::mpsc;
 use std::time::Duration;
 use wire::Topic;
-use wire::session::now_ns;
 
 /// How long [`Running::stop`] lets open HTTP requests finish.
 pub const HTTP_DRAIN: Duration = Duration::from_secs(5);
@@ -95,7 +95,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     let maps = Arc::new(MapCache::new(&config.localization, config.max_range_m));
     let localizing = crate::localization::restore(&store, &maps)?;
 
-    let session = config.zenoh.open(wire::session::Role::Router).await?;
+    let session = config.zenoh.open(runtime::session::Role::Router).await?;
     let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
     let subscriptions = subscribe(&session, &config, &shared, work_tx.clone()).await?;
     let worker = {

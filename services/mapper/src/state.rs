@@ -3,6 +3,7 @@
 
 use crate::fleet::{FleetMap, NodeRecord};
 use crate::shared_log::SharedLog;
+use runtime::session::now_ns;
 use serde::Serialize;
 use slam::geodesy::GeoDatum;
 use slam::{GpsEdge, MapperStats, OptimizeReport, Pose2, RelativeEdge};
@@ -10,7 +11,6 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, RwLock};
 use tokio::sync::broadcast;
-use wire::session::now_ns;
 
 /// A robot as the map knows it.
 #[derive(Clone, Debug, Serialize)]

@@ -33,12 +33,6 @@ pub use keys::{
 };
 /// Re-exported so users can encode and decode without depending on prost themselves.
 pub use prost::Message;
-#[cfg(feature = "recording")]
-pub mod recording;
-#[cfg(feature = "session")]
-pub mod ros2;
-#[cfg(feature = "session")]
-pub mod session;
 
 /// Every file of `proto/levelmap/v1` and its imports as an encoded protobuf
 /// `FileDescriptorSet` (without comments): the schema data of a recording's channels, which

@@ -9,12 +9,12 @@ use super::ros::{
     TF_TYPE,
 };
 use super::{Source, SourceEvent};
+use runtime::ros2::{KeyStyle, RosKeys};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, sync_channel};
-use wire::ros2::{KeyStyle, RosKeys};
 use zenoh::Wait;
 
 /// See the module.
@@ -29,7 +29,7 @@ pub struct Ros2SourceConfig {
     pub namespace: String,
     /// The Zenoh session to the robot's ROS 2 network (rmw_zenohd, the bridge): a client
     /// of `tcp/localhost:7447` by default, as `[zenoh]`'s keys.
-    pub zenoh: wire::session::SessionConfig,
+    pub zenoh: runtime::session::SessionConfig,
     /// The topics and frames.
     #[serde(flatten)]
     pub streams: RosStreams,
@@ -68,7 +68,7 @@ impl Ros2Source {
     /// Subscribes to the configured topics.
     pub fn new(config: &Ros2SourceConfig) -> anyhow::Result<Ros2Source> {
         let inputs = config.streams.inputs("[source.ros2]", &config.unknown)?;
-        let zenoh = config.zenoh.to_zenoh(wire::session::Role::Client)?;
+        let zenoh = config.zenoh.to_zenoh(runtime::session::Role::Client)?;
         let session = zenoh::open(zenoh)
             .wait()
             .map_err(|e| anyhow::anyhow!("[source.ros2] zenoh session: {e}"))?;

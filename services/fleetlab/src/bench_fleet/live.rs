@@ -54,7 +54,7 @@ pub(super) fn follow_live(http: &str, robot: usize, stop: &AtomicBool) -> LiveCl
             let Some(data) = line.trim_end().strip_prefix("data: ") else {
                 continue;
             };
-            let now_ns = wire::session::now_ns();
+            let now_ns = runtime::session::now_ns();
             let Ok(sample) = serde_json::from_str::<serde_json::Value>(data) else {
                 continue;
             };

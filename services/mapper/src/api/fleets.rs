@@ -9,11 +9,11 @@ use axum::Json;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
+use runtime::session::now_ns;
 use serde::Serialize;
 use slam::geodesy::Geodetic;
 use slam::{MapperStats, OptimizeReport, Pose2};
 use utoipa::ToSchema;
-use wire::session::now_ns;
 
 /// Fleets with a map, and those whose stored map did not replay.
 #[derive(Serialize, ToSchema)]

@@ -7,10 +7,10 @@ use axum::extract::{FromRequestParts, Path, Request, State};
 use axum::http::header;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
+use runtime::session::now_ns;
 use serde_json::json;
 use std::sync::Arc;
 use tokio::sync::watch;
-use wire::session::now_ns;
 
 /// What one subscriber gets next: the newest sample, as JSON, with the scan only when it is
 /// one the subscriber has not had. `None` when the feed or the mapper ends.

@@ -302,7 +302,7 @@ pub(super) async fn localize(
             covariance: answer.covariance,
             score: answer.score.unwrap_or(0.0),
             search: answer.search,
-            sent_ns: wire::session::now_ns(),
+            sent_ns: runtime::session::now_ns(),
             reason: answer.reason.clone().unwrap_or_default(),
         };
         let message = wire::localization_to_wire(&message);

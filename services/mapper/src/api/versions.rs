@@ -11,10 +11,10 @@ use axum::body::Body;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use runtime::session::now_ns;
 use serde::Serialize;
 use utoipa::ToSchema;
 use wire::MAX_MAP_VERSION_BYTES;
-use wire::session::now_ns;
 
 /// The media type of a version file.
 const PROTOBUF: &str = "application/x-protobuf";

@@ -1,10 +1,9 @@
 //! MCAP recordings of levelmap traffic (`levelmap record`, `levelmap mapper --from-recording`):
 //! one channel per Zenoh key (the topic is the key), each message as it was on the bus,
-//! protobuf-encoded, with [`crate::DESCRIPTOR_SET`] as the schema data of every channel's
+//! protobuf-encoded, with [`wire::DESCRIPTOR_SET`] as the schema data of every channel's
 //! message type (Foxglove's convention for protobuf in MCAP). No I/O of its own beyond the
 //! writer or file it is given, and no clock: the caller stamps each message.
 
-use crate::{DESCRIPTOR_SET, message_name_of_key, v1};
 use anyhow::{Context, anyhow};
 use mcap::records::{MessageHeader, Record};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -12,6 +11,7 @@ use prost::Message;
 use std::collections::{BTreeMap, HashMap};
 use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
+use wire::{DESCRIPTOR_SET, message_name_of_key, v1};
 
 /// Writes levelmap messages into an MCAP, its summary and chunk indexes on [`Self::finish`].
 pub struct RecordingWriter<W: Write + Seek> {
@@ -102,9 +102,9 @@ fn header_stamp_ns(name: &str, payload: &[u8]) -> Option<u64> {
 }
 
 /// The largest record a reader takes (a chunk holds at most the writer's chunk size plus one
-/// message, and a message at most [`crate::MAX_NODE_BYTES`]): a damaged length field is an
+/// message, and a message at most [`wire::MAX_NODE_BYTES`]): a damaged length field is an
 /// error, not an allocation of gigabytes.
-pub const MAX_RECORD_BYTES: usize = 4 * crate::MAX_NODE_BYTES;
+pub const MAX_RECORD_BYTES: usize = 4 * wire::MAX_NODE_BYTES;
 
 /// One message of a recording.
 #[derive(Clone, Debug, PartialEq, Eq)]

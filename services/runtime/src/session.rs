@@ -68,8 +68,8 @@ where
 }
 
 /// The largest Zenoh message a levelmap session takes: twice the largest valid node
-/// ([`crate::MAX_NODE_BYTES`]), so every valid node fits with room for its framing.
-pub const MAX_MESSAGE_BYTES: usize = 2 * crate::MAX_NODE_BYTES;
+/// ([`wire::MAX_NODE_BYTES`]), so every valid node fits with room for its framing.
+pub const MAX_MESSAGE_BYTES: usize = 2 * wire::MAX_NODE_BYTES;
 
 /// Which service a session belongs to: what it is when neither its TOML nor its
 /// `config_file` sets `mode`.
@@ -340,7 +340,7 @@ pub async fn shutdown_signal() {
                 term.recv().await;
             }
             Err(e) => {
-                // wire has no logger; this happens at start, where stderr is read.
+                // runtime has no logger; this happens at start, where stderr is read.
                 eprintln!(
                     "levelmap: SIGTERM cannot be handled ({e}); only Ctrl-C stops gracefully"
                 );
