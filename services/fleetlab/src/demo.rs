@@ -288,12 +288,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
 
 /// The map's node positions against the ground truth (RMSE, m); fitted to it first when the
 /// map has a frame of its own.
-fn ate_of(
-    view: &mapper::state::FleetView,
-    truth: &[FleetRobot],
-    epoch_ns: u64,
-    aligned: bool,
-) -> f64 {
+fn ate_of(view: &fleetmap::FleetView, truth: &[FleetRobot], epoch_ns: u64, aligned: bool) -> f64 {
     let leveled_truth = |robot: usize, stamp_ns: u64| {
         let t = &truth[robot];
         let pose = t.truth_at(stamp_ns - epoch_ns);

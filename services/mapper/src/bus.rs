@@ -1,8 +1,8 @@
 //! What the mapper puts on the Zenoh bus: acks to robots, the corrected poses after a solve,
 //! and the answers to `levelmap/{fleet}/map/{poses,summary}` queries (protobuf, `map.proto`).
 
-use crate::fleet::FleetMap;
-use crate::state::{Metrics, Shared};
+use crate::views::{Metrics, Shared};
+use fleetmap::FleetMap;
 use runtime::session::now_ns;
 use wire::{MapPose, Message, v1};
 use zenoh::Wait;
@@ -136,3 +136,7 @@ pub fn answer_map_query(shared: &Shared, query: &zenoh::query::Query) {
     };
     let _ = query.reply(key, body).wait();
 }
+
+pub mod odometry;
+pub mod recording;
+pub mod ros_out;

@@ -77,8 +77,8 @@ impl Default for MapperConfig {
 
 impl MapperConfig {
     /// A fleet's empty map, as this configuration sets it up.
-    pub fn new_fleet(&self, id: &str) -> crate::fleet::FleetMap {
-        crate::fleet::FleetMap::new(
+    pub fn new_fleet(&self, id: &str) -> fleetmap::FleetMap {
+        fleetmap::FleetMap::new(
             id,
             self.mapping.clone(),
             self.datum.map(|origin| slam::geodesy::GeoDatum { origin }),

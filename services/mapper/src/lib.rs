@@ -2,29 +2,27 @@
 //! network (scan matching within and between robots, GPS), each node committed to the
 //! embedded store before it is acked, and the map served over HTTP.
 //!
-//! The domain: [`fleet`] (a fleet's map of checked nodes, pure), [`state`] (the views the
-//! HTTP side reads), [`live`] (each robot's live feed), [`tiles`] (the map's
-//! tiles for windows around robots), [`marginals`], [`versions`] (frozen maps). The disk: [`store`], [`restore`] (the store read back at start, and `--verify-store`). The shells: [`server`] (wiring),
-//! [`worker`] (the ingest loop), [`odometry`] and [`bus`] (Zenoh in and out), [`recording`] (a
-//! recording fed in as the bus's traffic), [`ros_out`] (the maps to ROS 2), [`api`] (HTTP).
+//! The map itself (a fleet's `FleetMap`, its snapshot, views, tiles, marginals) is the pure
+//! `fleetmap` crate; this crate is its shell, in rooms:
+//! - [`bus`]: Zenoh in and out (acks, corrected poses, live odometry and scans), a recording
+//!   fed in as the bus's traffic, the maps to ROS 2;
+//! - [`worker`]: the ingest loop (check, map, commit, ack, solve), on its own thread;
+//! - [`store`]: the durable store (redb), and the store read back at start ([`store::restore`],
+//!   also `--verify-store`);
+//! - [`views`]: what the HTTP side reads (each fleet's `FleetView`, metrics, events, each
+//!   robot's live feed);
+//! - [`api`]: the HTTP API; [`localization`] (robots localizing on a map version) and
+//!   [`versions`] (frozen maps) serve both the worker and the API;
+//! - [`server`] wires them; [`config`] is the configuration.
 
 pub mod api;
 pub mod bus;
 pub mod config;
-pub mod fleet;
-pub mod live;
 pub mod localization;
-pub mod marginals;
-pub mod odometry;
-pub mod recording;
-pub mod restore;
-pub mod ros_out;
 pub mod server;
-pub mod shared_log;
-pub mod state;
 pub mod store;
-pub mod tiles;
 pub mod versions;
+pub mod views;
 pub mod worker;
 
 /// The mapping code's version: what derives a fleet's edges and snapshot from its nodes,
@@ -35,6 +33,6 @@ pub mod worker;
 pub const MAPPING_CODE: &str = concat!("levelmap ", env!("CARGO_PKG_VERSION"), " mapping r1");
 
 pub use config::{MapperConfig, fleet_mapping_params};
-pub use fleet::{FleetMap, IngestError, Ingested, NodeRecord, Sequence};
+pub use fleetmap::{FleetMap, IngestError, Ingested, NodeRecord, Sequence};
 pub use server::{Running, start};
 pub use store::{Store, StoreError};

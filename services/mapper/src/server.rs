@@ -6,11 +6,11 @@
 //! mapping work, so teleoperation sees it at once.
 
 use crate::bus::Bus;
+use crate::bus::recording::FeedReport;
 use crate::config::MapperConfig;
 use crate::localization::MapCache;
-use crate::recording::FeedReport;
-use crate::state::Shared;
 use crate::store::Store;
+use crate::views::Shared;
 use crate::worker::{Work, Worker};
 use anyhow::{Context, Result};
 use runtime::session::now_ns;
@@ -48,8 +48,10 @@ impl Running {
     pub async fn feed_recording(&self, path: &std::path::Path) -> Result<FeedReport> {
         let (path, work) = (path.to_owned(), self.work.clone());
         let (shared, fleets) = (self.shared.clone(), self.fleets.clone());
-        tokio::task::spawn_blocking(move || crate::recording::feed(&path, &work, &shared, &fleets))
-            .await?
+        tokio::task::spawn_blocking(move || {
+            crate::bus::recording::feed(&path, &work, &shared, &fleets)
+        })
+        .await?
     }
 
     /// Stops accepting, ends the event streams, lets the worker finish what it holds, closes
@@ -91,7 +93,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     // The worker writes; the HTTP side reads clouds (redb: readers never wait on the writer).
     let store = Arc::new(store);
     let shared = Arc::new(Shared::new(config.token.clone(), now_ns()));
-    let (fleets, snapshots) = crate::restore::restore(&config, &store, &shared)?;
+    let (fleets, snapshots) = crate::store::restore::restore(&config, &store, &shared)?;
     let maps = Arc::new(MapCache::new(&config.localization, config.max_range_m));
     let localizing = crate::localization::restore(&store, &maps)?;
 
@@ -119,7 +121,11 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
 
     prune_clouds(config.clouds.clone(), store.clone(), shared.clone());
     if let Some(ros) = &config.ros2_out {
-        crate::ros_out::start_when_reachable(ros.clone(), shared.clone(), config.fleets.clone());
+        crate::bus::ros_out::start_when_reachable(
+            ros.clone(),
+            shared.clone(),
+            config.fleets.clone(),
+        );
     }
     let listener = tokio::net::TcpListener::bind(&config.http_listen)
         .await
@@ -185,7 +191,7 @@ async fn subscribe(
         shared,
         config,
         Topic::Odom,
-        crate::odometry::on_odometry,
+        crate::bus::odometry::on_odometry,
     )
     .await?;
     let scans = declare_live(
@@ -193,7 +199,7 @@ async fn subscribe(
         shared,
         config,
         Topic::Scan,
-        crate::odometry::on_live_scan,
+        crate::bus::odometry::on_live_scan,
     )
     .await?;
     let views = shared.clone();

@@ -16,7 +16,7 @@
 //! blocking pool: redb runs one write transaction at a time, so they interleave with the
 //! worker's commits without touching its rows.
 
-pub use crate::fleet::SolvePoint;
+pub use fleetmap::SolvePoint;
 use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition, TableHandle};
 use std::ops::Bound;
 use std::path::Path;
@@ -25,6 +25,7 @@ use wire::{Message, v1};
 
 mod localization;
 mod meta;
+pub mod restore;
 mod retention;
 mod versions;
 pub use localization::{ModeError, StoredModes};
@@ -45,7 +46,7 @@ const SOLVES: TableDefinition<(&str, u64), ()> = TableDefinition::new("solves");
 const SOLVE_POINTS: TableDefinition<(&str, u64), (u64, u64)> = TableDefinition::new("solve_points");
 /// (fleet, node index) → the node's encoded `v1::SegmentedCloud` (`Node.cloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
-/// fleet → its newest snapshot (`crate::fleet::snapshot`): the map after its first nodes,
+/// fleet → its newest snapshot (`fleetmap::snapshot`): the map after its first nodes,
 /// written after they and the solves it holds were committed. Only the newest is kept.
 const SNAPSHOTS: TableDefinition<&str, &[u8]> = TableDefinition::new("snapshots");
 
@@ -111,7 +112,7 @@ pub struct StoredFleet {
     /// The solves, in order.
     pub solve_points: Vec<SolvePoint>,
     /// Runs of nodes localized instead of mapped.
-    pub localized: Vec<crate::fleet::LocalizedSpan>,
+    pub localized: Vec<fleetmap::LocalizedSpan>,
 }
 
 /// What one batch of work adds to a fleet.
@@ -130,7 +131,7 @@ pub struct FleetBatch<'a> {
     /// A solve applied with this batch.
     pub solved: Option<SolvePoint>,
     /// Runs of localized nodes that this batch started or extended.
-    pub localized: Vec<crate::fleet::LocalizedSpan>,
+    pub localized: Vec<fleetmap::LocalizedSpan>,
 }
 
 /// Edges as the store keeps them: one JSON document each.

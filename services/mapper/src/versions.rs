@@ -7,8 +7,8 @@
 //! its nodes are committed, and makes it in one piece, so the version is a consistent
 //! snapshot of what the store holds, and freezing never waits on the worker.
 
-use crate::state::FleetView;
 use crate::store::{AddVersionError, Store, VersionRows};
+use fleetmap::FleetView;
 use serde::{Deserialize, Serialize};
 use slam::geodesy::Geodetic;
 use std::collections::BTreeSet;

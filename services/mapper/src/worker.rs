@@ -11,10 +11,10 @@
 
 use crate::bus::Bus;
 use crate::config::MapperConfig;
-use crate::fleet::{FleetMap, IngestError, Sequence};
-use crate::state::{Metrics, Shared};
 use crate::store::Store;
+use crate::views::{Metrics, Shared};
 use commit::Unstored;
+use fleetmap::{FleetMap, IngestError, Sequence};
 use serde_json::json;
 use solving::{SolveRequest, Solving};
 use std::collections::HashMap;

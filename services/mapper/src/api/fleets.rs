@@ -3,12 +3,12 @@
 
 use super::access::authorized;
 use super::{Api, ApiError, Reply};
-use crate::state::{FleetView, RobotView};
 use crate::worker::{OptimizeError, Work};
 use axum::Json;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
+use fleetmap::{FleetView, RobotView};
 use runtime::session::now_ns;
 use serde::Serialize;
 use slam::geodesy::Geodetic;
@@ -126,7 +126,7 @@ pub(super) struct RobotState {
     last_node_seq: u64,
     /// Its chains of nodes, one per outbox it sent from (a robot whose outbox was lost starts
     /// a new one), oldest first.
-    chains: Vec<crate::fleet::ChainRecord>,
+    chains: Vec<fleetmap::ChainRecord>,
 }
 
 /// The robot's pose on the map now: live odometry since its last node, or the node itself.

@@ -2,11 +2,11 @@
 //! covariances of nodes.
 
 use super::{Api, ApiError, Reply};
-use crate::state::FleetView;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::http::header;
 use axum::response::IntoResponse;
+use fleetmap::FleetView;
 use serde::{Deserialize, Serialize};
 use slam::nalgebra::Matrix3;
 use slam::{EdgeKind, Pose2};

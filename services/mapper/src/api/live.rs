@@ -1,7 +1,7 @@
 //! One robot's live feed (`crate::live`) as a WebSocket or as server-sent events.
 
 use super::{Api, ApiError, Reply};
-use crate::live::LiveSample;
+use crate::views::live::LiveSample;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{FromRequestParts, Path, Request, State};
 use axum::http::header;

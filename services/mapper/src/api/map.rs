@@ -2,11 +2,11 @@
 //! the nodes and trajectories as GeoJSON.
 
 use super::{Api, ApiError, Reply};
-use crate::state::FleetView;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::http::header;
 use axum::response::IntoResponse;
+use fleetmap::FleetView;
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 

@@ -21,13 +21,14 @@ mod web;
 mod window;
 
 use crate::config::MapperConfig;
-use crate::marginals::Marginals;
-use crate::state::{FleetView, Shared};
 use crate::store::Store;
+use crate::views::Shared;
 use crate::worker::Work;
 use axum::Router;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use fleetmap::FleetView;
+use fleetmap::marginals::Marginals;
 use std::sync::{Arc, OnceLock, mpsc};
 use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
@@ -52,7 +53,7 @@ struct Api {
     /// Heavy requests and event streams at once.
     limits: Arc<limits::Limits>,
     /// The map's tiles, for windows around robots.
-    tiles: Arc<crate::tiles::TileCache>,
+    tiles: Arc<fleetmap::tiles::TileCache>,
     /// The fleets this mapper serves.
     served: Arc<[String]>,
     /// Versions a fleet keeps at most (`[versions] max_versions`).

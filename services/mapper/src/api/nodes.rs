@@ -1,10 +1,10 @@
 //! One node of the network: what it came with, and its segmented 3D cloud.
 
 use super::{Api, ApiError, Reply};
-use crate::fleet::NodeRecord;
-use crate::state::FleetView;
 use axum::Json;
 use axum::extract::{Path, State};
+use fleetmap::FleetView;
+use fleetmap::NodeRecord;
 use leveling::ClassCounts;
 use serde::Serialize;
 use slam::{EdgeKind, Pose2};

@@ -75,7 +75,9 @@ pub(super) async fn robot_map_png(
         let tiles = api.tiles.clone();
         tokio::task::spawn_blocking(move || {
             for key in &stale {
-                tiles.refresh(&v, key);
+                if let Err(e) = tiles.refresh(&v, key) {
+                    tracing::warn!(fleet = %key.fleet, "tile not made again: {e}");
+                }
             }
         });
     }

@@ -3,7 +3,7 @@
 //! unbroken run, rewritten as it grows: the table grows with mode changes, not with time).
 
 use super::{Store, StoreError};
-use crate::fleet::LocalizedSpan;
+use fleetmap::LocalizedSpan;
 use redb::{ReadTransaction, ReadableTable, TableDefinition, WriteTransaction};
 
 /// (fleet, robot, chain_id, first node_seq) → the run's last node_seq, and for a run passed

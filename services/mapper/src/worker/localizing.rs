@@ -4,8 +4,8 @@
 //! `levelmap/{fleet}/robots/{robot}/localization`.
 
 use super::{Batch, Worker};
-use crate::fleet::{IngestError, LocalizedSpan};
 use crate::localization::{FleetModes, NodeLocalization, Outcome, RobotMode};
+use fleetmap::{IngestError, LocalizedSpan};
 use slam::Pose2;
 use slam::localize::{LocalizationMap, SearchKind, TrackStatus};
 use std::collections::HashMap;
@@ -91,7 +91,7 @@ impl Worker {
         let Some(span) = self.take_span(key, input, true) else {
             return;
         };
-        crate::state::Metrics::bump(&self.shared.metrics.nodes_passed);
+        crate::views::Metrics::bump(&self.shared.metrics.nodes_passed);
         let outcome = Outcome {
             version: 0,
             status: TrackStatus::Localized,
@@ -146,7 +146,7 @@ impl Worker {
         for n in nodes {
             self.bus.localization(&self.shared.metrics, &n.message);
             if n.entry.version != 0 {
-                crate::state::Metrics::bump(&self.shared.metrics.nodes_localized);
+                crate::views::Metrics::bump(&self.shared.metrics.nodes_localized);
             }
             self.shared
                 .localizations

@@ -1,4 +1,4 @@
-//! The worker's snapshots of the fleets' maps (`crate::fleet::snapshot`): a fleet's is
+//! The worker's snapshots of the fleets' maps (`fleetmap::snapshot`): a fleet's is
 //! written once it took `[store] snapshot_every_nodes` nodes since its last one, and at a
 //! graceful stop. Only between solves (none of the fleet's out, so its state is whole) and
 //! after its nodes and solve points are committed: a snapshot never holds what the store

@@ -7,9 +7,9 @@
 //! feed takes and applies each solve where the recorded mapper did.
 
 use super::{OptimizeError, OptimizeReply, Worker};
-use crate::fleet::SolvePoint;
-use crate::state::Metrics;
 use crate::store::StoreError;
+use crate::views::Metrics;
+use fleetmap::SolvePoint;
 use serde_json::json;
 use slam::{BackgroundSolve, SolvedInBackground};
 use std::collections::HashMap;

@@ -82,7 +82,8 @@ pub const MAX_ROBOTS_PER_FLEET: usize = 1024;
 pub const MAX_CHAINS_PER_ROBOT: usize = 256;
 
 /// One chain of a robot's nodes: what one outbox sent.
-#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ChainRecord {
     /// `Node.chain_id` (0: a robot from before chains).
     pub chain_id: u64,
@@ -527,9 +528,7 @@ mod coverage;
 mod localized;
 pub use localized::{LocalizedSpan, SpanReplay};
 
-#[path = "fleet_snapshot.rs"]
 pub(crate) mod snapshot;
 
 #[cfg(test)]
-#[path = "fleet_tests.rs"]
 pub(crate) mod tests;

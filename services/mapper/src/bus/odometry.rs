@@ -2,7 +2,7 @@
 //! `GET …/robots`, its live feed (`crate::live`) and, at most [`POSE_EVENT_PERIOD_NS`] apart
 //! per robot, a `pose` event in the map frame.
 
-use crate::state::{LiveOdometry, Metrics, Shared};
+use crate::views::{LiveOdometry, Metrics, Shared};
 use runtime::session::now_ns;
 use serde_json::json;
 use slam::Pose2;
@@ -37,11 +37,11 @@ pub fn on_odometry(shared: &Shared, fleets: &[String], key: &str, payload: &[u8]
     let odometry = Pose2::from_isometry3(&input.pose.pose);
     let stamp_ns = input.pose.stamp_ns;
     // Bounded like the fleets' robots: odometry of robots beyond that many is not kept.
-    let cap = crate::fleet::MAX_ROBOTS_PER_FLEET * fleets.len();
+    let cap = fleetmap::MAX_ROBOTS_PER_FLEET * fleets.len();
     let Some((due, previous)) = remember(shared, cap, &input, odometry) else {
         return;
     };
-    crate::live::on_odometry(
+    crate::views::live::on_odometry(
         shared,
         cap,
         (&input.fleet, &input.robot),
@@ -118,8 +118,8 @@ pub fn on_live_scan(shared: &Shared, fleets: &[String], key: &str, payload: &[u8
         metrics.reject("scan", "key_mismatch");
         return;
     }
-    let cap = crate::fleet::MAX_ROBOTS_PER_FLEET * fleets.len();
-    if !crate::live::on_scan(shared, cap, &input) {
+    let cap = fleetmap::MAX_ROBOTS_PER_FLEET * fleets.len();
+    if !crate::views::live::on_scan(shared, cap, &input) {
         metrics.reject("scan", "too_many_robots");
     }
 }

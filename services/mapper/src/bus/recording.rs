@@ -2,8 +2,8 @@
 //! debugging a map offline: its nodes go to the worker as [`Work::node`]s, exactly as the
 //! Zenoh callback hands them over, in recorded order and as fast as the worker takes them
 //! (a blocking send: a file can wait, a radio link cannot); its odometry goes through
-//! [`crate::odometry::on_odometry`] like live odometry, its live scans through
-//! [`crate::odometry::on_live_scan`]. Re-sent nodes in the recording meet
+//! [`crate::bus::odometry::on_odometry`] like live odometry, its live scans through
+//! [`crate::bus::odometry::on_live_scan`]. Re-sent nodes in the recording meet
 //! the worker's duplicate check as they did live. Acks are not fed.
 //!
 //! Where a node lands depends on the estimate when it came, so on when the network was
@@ -12,7 +12,7 @@
 //! them) and the worker's own timer is off meanwhile, so the replay rebuilds the recorded
 //! map; nodes after the last recorded solve get one more at the end.
 
-use crate::state::Shared;
+use crate::views::Shared;
 use crate::worker::{OptimizeError, Work};
 use runtime::recording::RecordingReader;
 use serde::Serialize;
@@ -131,11 +131,11 @@ fn feed_in_order(
                 }
             }
             Ok((_, _, Topic::Odom)) => {
-                crate::odometry::on_odometry(shared, served, &message.key, &message.payload);
+                crate::bus::odometry::on_odometry(shared, served, &message.key, &message.payload);
                 report.odometry += 1;
             }
             Ok((_, _, Topic::Scan)) => {
-                crate::odometry::on_live_scan(shared, served, &message.key, &message.payload);
+                crate::bus::odometry::on_live_scan(shared, served, &message.key, &message.payload);
                 report.live_scans += 1;
             }
             Ok((_, _, Topic::Ack | Topic::Localization)) | Err(_) => report.ignored += 1,

@@ -7,8 +7,9 @@
 //! unchanged. Transient-local-like: a queryable on the same key answers the last grid to
 //! late joiners at once.
 
-use crate::state::{FleetView, Shared};
+use crate::views::Shared;
 use anyhow::Result;
+use fleetmap::FleetView;
 use runtime::ros2::{Durability, RosOut, RosOutConfig, RosPublisher, ros_name_token};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};

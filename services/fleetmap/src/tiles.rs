@@ -6,7 +6,7 @@
 //! in the background, at most every [`REFRESH`]. A tile's cells are the whole map's at the
 //! same resolution: the same scans, in the same order, ray cast into a window.
 
-use crate::state::FleetView;
+use crate::view::FleetView;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -21,7 +21,8 @@ pub const REFRESH: Duration = Duration::from_secs(1);
 /// A tile: which fleet, cell size (µm) and lattice position.
 #[derive(Clone, Debug, Hash, PartialEq, Eq)]
 pub struct TileKey {
-    fleet: String,
+    /// The fleet whose map it cuts.
+    pub fleet: String,
     resolution_um: u64,
     i: i64,
     j: i64,
@@ -175,15 +176,19 @@ impl TileCache {
         );
     }
 
-    /// Makes a stale tile again from `view` (on a blocking thread: the caller's choice).
-    pub fn refresh(&self, view: &FleetView, key: &TileKey) {
+    /// Makes a stale tile again from `view` (on a blocking thread: the caller's choice); on
+    /// an error the stale tile stays, to be made again later.
+    pub fn refresh(&self, view: &FleetView, key: &TileKey) -> Result<(), slam::GridError> {
         match make_tile(view, key) {
-            Ok(tile) => self.put(key.clone(), Arc::new(tile)),
+            Ok(tile) => {
+                self.put(key.clone(), Arc::new(tile));
+                Ok(())
+            }
             Err(e) => {
-                tracing::warn!(fleet = %key.fleet, "tile not made again: {e}");
-                if let Some(e) = self.entries.lock().expect("tiles lock").get_mut(key) {
-                    e.refreshing = false;
+                if let Some(entry) = self.entries.lock().expect("tiles lock").get_mut(key) {
+                    entry.refreshing = false;
                 }
+                Err(e)
             }
         }
     }

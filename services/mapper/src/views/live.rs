@@ -4,7 +4,7 @@
 //! `tokio::sync::watch` per robot holds the newest sample only: a slow subscriber skips to it,
 //! and nothing queues. Filled in the Zenoh callbacks, with no mapping work.
 
-use crate::state::Shared;
+use crate::views::Shared;
 use runtime::session::now_ns;
 use serde::Serialize;
 use slam::Pose2;
@@ -190,7 +190,7 @@ pub fn on_scan(shared: &Shared, cap: usize, input: &wire::LiveScanInput) -> bool
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fleet::FleetMap;
+    use fleetmap::FleetMap;
     use leveling::{Beam, LeveledScan, TimedPose};
     use slam::nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
@@ -222,7 +222,7 @@ mod tests {
         let feed = shared.live_feeds.subscribe("site", "r0").expect("a feed");
         // The robot's first node, then its odometry: the view's correction is there now.
         let mut map = FleetMap::new("site", slam::Mapper2dParams::default(), None, 40.0);
-        map.ingest(&crate::fleet::tests::node("r0", 1, 0, 0, 0.0))
+        map.ingest(&fleetmap::testing::node("r0", 1, 0, 0, 0.0))
             .expect("the first node");
         shared.publish_map(&map, 0.0);
         assert!(on_odometry(&shared, 8, ("site", "r0"), (2, at), None));

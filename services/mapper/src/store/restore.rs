@@ -19,10 +19,10 @@
 //! its snapshot restores; and which fleets a start would rebuild.
 
 use crate::config::MapperConfig;
-use crate::fleet::{FleetMap, SpanReplay};
-use crate::state::{Metrics, Shared};
 use crate::store::{MappingVersion, SolvePoint, Store, StoredFleet};
+use crate::views::{Metrics, Shared};
 use anyhow::{Context, Result};
+use fleetmap::{FleetMap, SpanReplay};
 use serde::Serialize;
 use std::collections::HashMap;
 use std::time::Instant;

@@ -1,7 +1,7 @@
 //! Marginal covariances of nodes, answered from a fleet's current view. One optimizer per
 //! fleet keeps the network's symbolic factorization while its structure stays the same.
 
-use crate::state::FleetView;
+use crate::view::FleetView;
 use slam::nalgebra::Matrix3;
 use std::collections::HashMap;
 use std::sync::Mutex;

@@ -1,0 +1,26 @@
+//! levelmap's map core: one fleet's map of checked nodes into one pose network (scan
+//! matching within and between robots, GPS), pure: no async, no network, no store, no
+//! clock but the tile cache's ages. The mapper (`services/mapper`) is its shell: it feeds
+//! nodes from Zenoh, stores them, and serves what this crate computes.
+//!
+//! - [`fleet`]: [`FleetMap`], a fleet's map (nodes in chains, localized and passed spans,
+//!   coverage), and its snapshot (`FleetMap::snapshot`, `FleetMap::restore`);
+//! - [`view`]: [`FleetView`], the map at one moment for readers, sharing what did not change
+//!   with the view before it ([`shared_log`]);
+//! - [`tiles`]: the map cut into cached tiles for windows around robots;
+//! - [`marginals`]: nodes' marginal covariances from a view.
+
+pub mod fleet;
+pub mod marginals;
+pub mod shared_log;
+pub mod tiles;
+pub mod view;
+
+#[cfg(any(test, feature = "testing"))]
+pub mod testing;
+
+pub use fleet::{
+    ChainRecord, FleetMap, IngestError, Ingested, LocalizedSpan, MAX_CHAINS_PER_ROBOT,
+    MAX_ROBOTS_PER_FLEET, NodeRecord, RobotRecord, Sequence, SolvePoint, SpanReplay,
+};
+pub use view::{FleetView, RobotView};
