@@ -1,6 +1,6 @@
 //! The bytes of a Zenoh node message, as the mapper's worker takes them: the decode and check
 //! (`wire::decode_node_input`), then what the mapper does with a node that passes, short of
-//! its store and bus (`mapper/src/fleet.rs`, `FleetMap::ingest`; `store::split_cloud` and the
+//! its store and bus (`fleetmap/src/fleet.rs`, `FleetMap::ingest`; `store::split_cloud` and the
 //! replay; the cloud served over HTTP). The same bytes also go through the other decoders a
 //! service runs on bus messages: acks (edge), live odometry (mapper), map poses and summaries.
 #![no_main]
