@@ -555,15 +555,9 @@ async fn send_pending(
     let mut next = from;
     let held_from = outbox.acked_below()?;
     for (seq, bytes) in outbox.pending(from, RESEND_WINDOW)? {
-        let mut node = v1::Node::decode(bytes.as_slice()).context("outbox holds a bad node")?;
-        node.held_from_seq = held_from;
         *header_seq += 1;
-        if let Some(h) = node.header.as_mut() {
-            h.seq = *header_seq;
-            h.sent_ns = now_ns();
-        }
         publisher
-            .put(node.encode_to_vec())
+            .put(wire::node_as_sent(&bytes, held_from, *header_seq, now_ns()))
             .await
             .map_err(anyhow::Error::from_boxed)?;
         report.node_sends += 1;

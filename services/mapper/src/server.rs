@@ -2,7 +2,7 @@
 //! the mapping worker's thread, the HTTP listener.
 //!
 //! A node goes: Zenoh callback → channel → [`crate::worker`] (check, map, commit, ack,
-//! publish). Live odometry is handled in its Zenoh callback ([`crate::odometry`]), with no
+//! publish). Live odometry is handled in its Zenoh callback ([`crate::bus::odometry`]), with no
 //! mapping work, so teleoperation sees it at once.
 
 use crate::bus::Bus;

@@ -13,7 +13,7 @@ use super::{Store, StoreError};
 use redb::{ReadableDatabase, ReadableTable, TableDefinition, TableHandle, WriteTransaction};
 use serde::{Deserialize, Serialize};
 
-/// The store format this build writes. Raise it (and add the step to [`migrate`]) when a
+/// The store format this build writes. Raise it (and add the step to `migrate`) when a
 /// table's rows change their meaning; a store of a later format is refused.
 pub const STORE_FORMAT: u64 = 1;
 

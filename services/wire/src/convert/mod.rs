@@ -28,7 +28,9 @@ pub use localization::{
     localization_to_wire, localize_query, matching_scan,
 };
 pub use map::{MapPose, decode_map_poses, decode_map_summary, map_poses_to_wire};
-pub use node::{decode_ack, decode_node, decode_odometry, validate_ack, validate_node};
+pub use node::{
+    decode_ack, decode_node, decode_odometry, node_as_sent, validate_ack, validate_node,
+};
 pub use odometry::{odometry_from_wire, odometry_to_wire};
 pub use pose::{
     pose2_from_wire, pose2_to_wire, pose2d_from_wire, pose2d_to_wire, pose3d_from_wire,

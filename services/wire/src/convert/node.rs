@@ -6,7 +6,7 @@ use super::odometry::odometry_from_wire;
 use super::pose::pose2d_from_wire;
 use super::scan::leveled_scan_from_wire;
 use super::{check_header, decode, same_sender};
-use crate::{WireError, v1};
+use crate::{Message, WireError, v1};
 
 /// Checks a node: header; a scan and odometry, valid, from the same fleet and robot; the GPS
 /// fixes and the odometry delta, if present, valid; `earlier_gps` only beside `gps`, oldest
@@ -107,6 +107,28 @@ pub fn decode_node(bytes: &[u8]) -> Result<v1::Node, WireError> {
     let node: v1::Node = decode("Node", bytes)?;
     validate_node(&node)?;
     Ok(node)
+}
+
+/// A stored node as it is sent: `stored` (a node's encoding, as the outbox keeps it) with
+/// what each send sets appended: the lowest node the robot still holds, the header's send
+/// number and send time. Protobuf merges a repeated singular field into the one before it
+/// (the header's given fields replace the stored ones, the rest stay), so a send neither
+/// decodes nor re-encodes the node. The stored node carries 0 in those three fields, as the
+/// node builder makes it: a 0 here leaves the stored value.
+pub fn node_as_sent(stored: &[u8], held_from_seq: u64, header_seq: u64, sent_ns: u64) -> Vec<u8> {
+    let stamp = v1::Node {
+        header: Some(v1::Header {
+            seq: header_seq,
+            sent_ns,
+            ..Default::default()
+        }),
+        held_from_seq,
+        ..Default::default()
+    };
+    let mut bytes = Vec::with_capacity(stored.len() + stamp.encoded_len());
+    bytes.extend_from_slice(stored);
+    stamp.encode(&mut bytes).expect("a Vec grows");
+    bytes
 }
 
 /// Decodes and checks live odometry ([`odometry_from_wire`]).
@@ -426,6 +448,30 @@ mod tests {
         ok.node_seq = 3;
         ok.held_from_seq = 3;
         validate_node(&ok).unwrap();
+    }
+
+    #[test]
+    fn a_node_as_sent_is_the_stored_node_with_its_send_fields() {
+        let mut stored = node();
+        stored.held_from_seq = 0;
+        stored.node_seq = 9;
+        let header = stored.header.as_mut().unwrap();
+        (header.seq, header.sent_ns) = (0, 0);
+        let bytes = stored.encode_to_vec();
+        let sent = node_as_sent(&bytes, 7, 41, 123_456_789);
+        let decoded = decode_node(&sent).unwrap();
+        let mut expected = stored.clone();
+        expected.held_from_seq = 7;
+        let header = expected.header.as_mut().unwrap();
+        (header.seq, header.sent_ns) = (41, 123_456_789);
+        assert_eq!(decoded, expected, "only the send fields change");
+        // Nothing held below the first node yet: the stored 0 stays.
+        let first = decode_node(&node_as_sent(&bytes, 0, 1, 5)).unwrap();
+        assert_eq!(first.held_from_seq, 0);
+        assert_eq!(
+            first.header.unwrap().fleet_id,
+            stored.header.unwrap().fleet_id
+        );
     }
 
     #[test]
