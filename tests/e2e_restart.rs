@@ -7,7 +7,6 @@
 mod common;
 
 use common::*;
-use serde_json::Value;
 use std::time::Duration;
 
 const ROBOTS: usize = 2;
@@ -25,42 +24,17 @@ fn nodes_in_map(http: &str, at_least: usize) -> Vec<Vec<u64>> {
     .expect("the robots' nodes reach the map")
 }
 
-/// `levelmap mapper --verify-store --json` on the mapper's config: the exit code, the report.
-fn verify_store(config: &std::path::Path) -> (Option<i32>, Value) {
-    let out = levelmap()
-        .args(["mapper", "--verify-store", "--json", "--config"])
-        .arg(config)
-        .output()
-        .expect("levelmap runs");
-    let report = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "--verify-store --json: {e}: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        )
-    });
-    (out.status.code(), report)
-}
-
 #[test]
 fn a_mapper_killed_after_its_snapshot_restarts_to_what_a_full_replay_maps() {
     let dir = temp_dir("restart");
     let zenoh = format!("tcp/127.0.0.1:{}", free_port());
-    let mut mapper = MapperProcess::start_with(&dir, zenoh, CONFIG);
+    let mapper = MapperProcess::start_with(&dir, zenoh, CONFIG);
     // 60 s of driving at 4× speed: 15 nodes per robot over ~15 s.
     let edges: Vec<_> = (0..ROBOTS)
         .map(|r| spawn_edge(&dir, r, &mapper.zenoh, 60.0, 4.0))
         .collect();
     nodes_in_map(&mapper.http, 3);
-    sigterm(mapper.child());
-    let status = mapper.child().wait().expect("stops");
-    assert_eq!(status.code(), Some(0), "a graceful stop");
-    let ports = (
-        mapper.http.clone(),
-        mapper.zenoh.clone(),
-        mapper.config.clone(),
-    );
-    drop(mapper);
+    let ports = mapper.stop();
     let (code, stopped) = verify_store(&ports.2);
     assert_eq!(code, Some(0), "{stopped}");
     let snapshot_nodes = stopped["fleets"][0]["snapshot"]["covers"].as_u64().unwrap();

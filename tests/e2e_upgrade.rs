@@ -47,23 +47,6 @@ fn spans(store: &Path) -> Vec<String> {
         .collect()
 }
 
-/// `levelmap mapper --verify-store --json`: the exit code and the report.
-fn verify_store(config: &Path) -> (Option<i32>, Value) {
-    let out = levelmap()
-        .args(["mapper", "--verify-store", "--json", "--config"])
-        .arg(config)
-        .output()
-        .expect("levelmap runs");
-    let report = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "--verify-store --json: {e}: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        )
-    });
-    (out.status.code(), report)
-}
-
 /// What the mapper serves of the fleet's record, as the fixture's expected.json has it.
 fn record(http: &str) -> Value {
     let get = |path: &str| {
@@ -123,13 +106,6 @@ fn fixture_copy(name: &str) -> (PathBuf, Value) {
     )
 }
 
-/// A graceful stop (it writes the snapshots), waited for.
-fn stop(mut mapper: MapperProcess) {
-    sigterm(mapper.child());
-    let status = mapper.child().wait().expect("stops");
-    assert_eq!(status.code(), Some(0), "a graceful stop");
-}
-
 /// Fleets rebuilt at the mapper's start.
 fn rebuilt(http: &str) -> u64 {
     let (_, text) = http_get(http, "/metrics").expect("/metrics");
@@ -180,14 +156,14 @@ fn a_store_of_the_previous_release_opens_with_every_record_and_its_map_rebuilt()
     };
     assert_eq!(cloud(robot1), 200, "robot1's nodes came with their clouds");
     assert_eq!(cloud(robot2), 404, "robot2's without");
-    stop(mapper);
+    mapper.stop();
     assert_eq!(spans(&store), spans_before, "the spans are the record");
 
     // The next start restores what the first rebuilt.
     let mapper = MapperProcess::start_config(&dir, zenoh.clone(), &config(&dir, &zenoh, ""));
     assert_eq!(rebuilt(&mapper.http), 0, "restored, not rebuilt again");
     assert_eq!(record(&mapper.http)["nodes"], served["nodes"]);
-    stop(mapper);
+    mapper.stop();
 
     // One `[mapping.idc]` key changed: --verify-store says it will rebuild; the start does.
     let changed = config(&dir, &zenoh, "[mapping.idc]\nfinal_max_distance_m = 0.45\n");
@@ -203,7 +179,7 @@ fn a_store_of_the_previous_release_opens_with_every_record_and_its_map_rebuilt()
     for key in ["nodes", "robots", "modes", "versions"] {
         assert_eq!(again[key], served[key], "{key}");
     }
-    stop(mapper);
+    mapper.stop();
     let (code, check) = verify_store(&dir.join("mapper.toml"));
     assert_eq!(code, Some(0), "{check}");
     assert!(check["fleets"][0]["rebuild"].is_null(), "{check}");

@@ -274,6 +274,14 @@ impl MapperProcess {
         &mut self.child
     }
 
+    /// SIGTERM, waited for: a graceful stop (exit code 0; the snapshots written).
+    pub fn stop(mut self) -> (String, String, PathBuf) {
+        sigterm(&self.child);
+        let status = self.child.wait().expect("stops");
+        assert_eq!(status.code(), Some(0), "a graceful stop");
+        (self.http.clone(), self.zenoh.clone(), self.config.clone())
+    }
+
     /// SIGKILL: no chance to flush or close anything.
     pub fn kill(mut self) -> (String, String, PathBuf) {
         self.child.kill().expect("SIGKILL");
@@ -292,6 +300,23 @@ impl Drop for MapperProcess {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// `levelmap mapper --verify-store --json` on a mapper's config: the exit code, the report.
+pub fn verify_store(config: &Path) -> (Option<i32>, Value) {
+    let out = levelmap()
+        .args(["mapper", "--verify-store", "--json", "--config"])
+        .arg(config)
+        .output()
+        .expect("levelmap runs");
+    let report = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "--verify-store --json: {e}: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    (out.status.code(), report)
 }
 
 /// A simulated robot's edge service process (`--json` report on stdout).

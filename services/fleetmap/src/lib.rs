@@ -19,6 +19,14 @@ pub mod view;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 
+/// The mapping code's version: what derives a fleet's edges and snapshot from its nodes
+/// (this crate and `slam`), with the parameters (the mapper's `MapperConfig::mapping_version`).
+/// Raise the revision when a change maps the same nodes to another network (a better IDC, a
+/// new closure test): stores written before are then rebuilt from their nodes at start. An
+/// undeclared change is caught too (the replayed edges differ from the stored ones) and
+/// rebuilt the same way.
+pub const MAPPING_CODE: &str = concat!("levelmap ", env!("CARGO_PKG_VERSION"), " mapping r1");
+
 pub use fleet::{
     ChainRecord, FleetMap, IngestError, Ingested, LocalizedSpan, MAX_CHAINS_PER_ROBOT,
     MAX_ROBOTS_PER_FLEET, NodeRecord, RobotRecord, Sequence, SolvePoint, SpanReplay,

@@ -86,14 +86,14 @@ impl MapperConfig {
         )
     }
 
-    /// The mapping version of this configuration: [`crate::MAPPING_CODE`] and a digest of
+    /// The mapping version of this configuration: [`fleetmap::MAPPING_CODE`] and a digest of
     /// what it maps with (`[mapping]`, `datum`, `max_range_m`). A store's fleet mapped by
     /// another version is rebuilt from its nodes at start (`crate::restore`).
     pub fn mapping_version(&self) -> crate::store::MappingVersion {
         let parameters = serde_json::to_vec(&(&self.mapping, &self.datum, self.max_range_m))
             .expect("mapping parameters serialize");
         crate::store::MappingVersion {
-            code: crate::MAPPING_CODE.to_owned(),
+            code: fleetmap::MAPPING_CODE.to_owned(),
             parameters: format!("{:08x}", crc32fast::hash(&parameters)),
         }
     }

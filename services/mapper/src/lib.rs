@@ -25,13 +25,6 @@ pub mod versions;
 pub mod views;
 pub mod worker;
 
-/// The mapping code's version: what derives a fleet's edges and snapshot from its nodes,
-/// with the parameters (`MapperConfig::mapping_version`). Raise the revision when a change
-/// maps the same nodes to another network (a better IDC, a new closure test): stores
-/// written before are then rebuilt from their nodes at start. An undeclared change is
-/// caught too (the replayed edges differ from the stored ones) and rebuilt the same way.
-pub const MAPPING_CODE: &str = concat!("levelmap ", env!("CARGO_PKG_VERSION"), " mapping r1");
-
 pub use config::{MapperConfig, fleet_mapping_params};
 pub use fleetmap::{FleetMap, IngestError, Ingested, NodeRecord, Sequence};
 pub use server::{Running, start};

@@ -27,7 +27,7 @@ const FLEET_MAPPING: TableDefinition<&str, &[u8]> = TableDefinition::new("fleet_
 /// nodes to the same network.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct MappingVersion {
-    /// The mapping code (`crate::MAPPING_CODE`).
+    /// The mapping code (`fleetmap::MAPPING_CODE`).
     pub code: String,
     /// CRC-32 (hex) of the mapping parameters as JSON (`[mapping]`, the datum, the range).
     pub parameters: String,

@@ -1,6 +1,6 @@
 //! The store read back at start. The nodes (with the spans, chains, modes and versions) are
 //! the record; the edges and the snapshot are derived from them by a mapping version
-//! (`crate::MAPPING_CODE` and the parameters, recorded per fleet in the store):
+//! (`fleetmap::MAPPING_CODE` and the parameters, recorded per fleet in the store):
 //! - a fleet mapped by the running version is restored from its newest snapshot and the
 //!   nodes stored after it, or without a usable one replayed from all of its nodes; either
 //!   way the nodes are mapped again through the same deterministic mapper, each stored solve
@@ -59,24 +59,22 @@ pub fn restore(config: &MapperConfig, store: &Store, shared: &Shared) -> Result<
             }
         }
     }
-    // The configured fleets without rows yet will be mapped by this version too.
-    let mut served: Vec<&str> = fleets.keys().map(String::as_str).collect();
-    let quarantined = shared.quarantined.read().expect("quarantine lock");
-    served.extend(
-        config
-            .fleets
-            .iter()
-            .map(String::as_str)
-            .filter(|f| !fleets.contains_key(*f) && !quarantined.contains_key(*f)),
-    );
+    // The fleets served, and the configured ones without rows yet, are this version's.
+    let quarantined: Vec<String> = shared
+        .quarantined
+        .read()
+        .expect("quarantine lock")
+        .keys()
+        .cloned()
+        .collect();
     let mut due = Vec::new();
-    for id in served {
-        if store.mapping_version(id)?.as_ref() != Some(&running) {
-            due.push(id);
+    for id in fleets.keys().chain(&config.fleets) {
+        let served = !quarantined.contains(id) && !due.contains(&id.as_str());
+        if served && store.mapping_version(id)?.as_ref() != Some(&running) {
+            due.push(id.as_str());
         }
     }
     store.set_mapping_version(&due, &running)?;
-    drop(quarantined);
     Ok((fleets, covered))
 }
 
@@ -122,7 +120,7 @@ fn load(
             }
             Err(differ) => format!(
                 "{differ} under the same mapping version ({running}): the mapping code \
-                     changed without a new crate::MAPPING_CODE"
+                     changed without a new fleetmap::MAPPING_CODE"
             ),
         },
     };
