@@ -179,7 +179,7 @@ fn main() {
             "odometry" => wire::odometry_input(bytes).is_ok(),
             "map-poses" => wire::decode_map_poses(bytes).is_ok(),
             "map-summary" => wire::decode_map_summary(bytes).is_ok(),
-            _ => wire::decode_node_input(bytes).is_ok(),
+            _ => wire::decode_node(bytes).is_ok(),
         };
         assert!(passes, "seed {name} is rejected");
         std::fs::write(dir.join(name), bytes).expect("write a seed");

@@ -467,7 +467,8 @@ impl Relay {
     }
 }
 
-/// The first `n` nodes of a simulated robot, with their clouds (the edge's default).
+/// The first `n` nodes of a simulated robot, with their clouds (the edge's default), as
+/// messages a test can edit (or forge).
 pub fn real_nodes(n: usize) -> Vec<wire::v1::Node> {
     let mut source = SimSource::new(&SimSourceConfig::default(), 1_700_000_000_000_000_000, 10.0)
         .expect("loop 0");
@@ -481,6 +482,9 @@ pub fn real_nodes(n: usize) -> Vec<wire::v1::Node> {
         }
     }
     nodes
+        .iter()
+        .map(|node| wire::Message::decode(&node.encode()[..]).expect("a node decodes"))
+        .collect()
 }
 
 /// A mapper in this process on free ports, with a Zenoh client session to it.

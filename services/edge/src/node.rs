@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use slam::Pose2;
 use slam::geodesy::Geodetic;
 use slam::gnss::{FixStatus, GpsFix, carry_antenna_to_node};
-use wire::{pose2_to_wire, v1};
+use wire::{LiveScan, Node, NodeParts};
 
 /// When the robot starts a new node.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -93,12 +93,12 @@ pub struct PlanarScan {
 /// Why a scan gave no node.
 #[derive(Debug, thiserror::Error)]
 pub enum NodeError {
-    /// The node fails the wire's checks (the mapper's own, [`wire::node_input`]): it is not
+    /// The node fails the wire's checks (the mapper's own, [`wire::Node::new`]): it is not
     /// numbered, and goes to quarantine instead of blocking the nodes after it.
     #[error("the node fails the wire's checks ({}): {error}", error.reason())]
     Invalid {
         /// The node as built.
-        node: Box<v1::Node>,
+        node: Box<NodeParts>,
         /// What the check found.
         error: wire::WireError,
     },
@@ -175,7 +175,7 @@ impl NodeBuilder {
     /// The node of `scan` when the robot moved far enough since the last node (or there is
     /// none yet); `None` otherwise, without leveling the scan. The scan's GPS fixes go with
     /// the next node either way.
-    pub fn offer(&mut self, scan: &SensorScan) -> Result<Option<v1::Node>, NodeError> {
+    pub fn offer(&mut self, scan: &SensorScan) -> Result<Option<Node>, NodeError> {
         self.take_gps(&scan.gps);
         let start_ns = scan.raw.columns.first().ok_or(NodeError::Empty)?.stamp_ns;
         let robot_at_start = scan
@@ -191,19 +191,19 @@ impl NodeBuilder {
             .map_err(NodeError::Deskew)?;
         let scan_frame =
             Pose2::from_isometry3(&leveled_frame(&robot_at_start, &scan.sensor_in_robot).inverse());
-        let wire_scan =
-            wire::leveled_scan_to_wire(&leveled.scan, &leveled.counts, self.header(start_ns));
-        let cloud = self.cloud.as_ref().map(|params| {
-            wire::cloud_to_wire(&cloud::reduce(&leveled.cloud, &leveled.classes, params))
-        });
-        let mut node = self.assemble(start_ns, &robot_at_start, scan_frame, wire_scan);
+        let cloud = self
+            .cloud
+            .as_ref()
+            .map(|params| cloud::reduce(&leveled.cloud, &leveled.classes, params));
+        let mut node = self.assemble(&robot_at_start, scan_frame, leveled.scan);
+        node.counts = Some(leveled.counts);
         node.cloud = cloud;
         self.number(node).map(Some)
     }
 
     /// The live leveled scan of `scan` (for live views, not a node): leveled as a node's
     /// would be, with the robot's odometry at its start.
-    pub fn live_scan(&mut self, scan: &SensorScan) -> Result<v1::LiveScan, NodeError> {
+    pub fn live_scan(&mut self, scan: &SensorScan) -> Result<LiveScan, NodeError> {
         let start_ns = scan.raw.columns.first().ok_or(NodeError::Empty)?.stamp_ns;
         let robot_at_start = scan
             .track
@@ -216,52 +216,51 @@ impl NodeBuilder {
         let scan_frame =
             Pose2::from_isometry3(&leveled_frame(&robot_at_start, &scan.sensor_in_robot).inverse());
         let robot2 = Pose2::from_isometry3(&robot_at_start);
-        Ok(v1::LiveScan {
-            header: Some(self.header(start_ns)),
-            scan: Some(wire::leveled_scan_to_wire(
-                &leveled.scan,
-                &leveled.counts,
-                self.header(start_ns),
-            )),
-            odometry: Some(wire::odometry_to_wire(
-                &leveling::TimedPose {
-                    stamp_ns: start_ns,
-                    pose: robot_at_start,
-                },
-                self.header(start_ns),
-            )),
-            scan_origin_in_robot: Some(pose2_to_wire(&robot2.between(&scan_frame))),
+        Ok(LiveScan {
+            fleet: self.fleet.clone(),
+            robot: self.robot.clone(),
+            stamp_ns: start_ns,
+            scan: leveled.scan,
+            counts: Some(leveled.counts),
+            odometry: leveling::TimedPose {
+                stamp_ns: start_ns,
+                pose: robot_at_start,
+            },
+            scan_origin: robot2.between(&scan_frame),
         })
     }
 
     /// The node of a scan from a fixed 2D scanner (no leveling: its frame tilts with the
     /// robot), by the same rule as [`Self::offer`]. For comparisons with the paper's baseline.
-    pub fn offer_planar(&mut self, scan: &PlanarScan) -> Result<Option<v1::Node>, NodeError> {
+    pub fn offer_planar(&mut self, scan: &PlanarScan) -> Result<Option<Node>, NodeError> {
         self.take_gps(&scan.gps);
         if !self.moved_enough(&scan.robot_at_start) {
             return Ok(None);
         }
         let scan_frame = Pose2::from_isometry3(&(scan.robot_at_start * scan.sensor_in_robot));
-        let wire_scan = v1::LeveledScan {
-            header: Some(self.header(scan.stamp_ns)),
-            bearing_rad: scan.bearings_rad.clone(),
-            range_m: scan.ranges_m.clone(),
-            counts: None,
-            columns: u32::try_from(scan.bearings_rad.len()).unwrap_or(u32::MAX),
+        let planar = leveling::LeveledScan {
+            stamp_ns: scan.stamp_ns,
+            beams: scan
+                .bearings_rad
+                .iter()
+                .zip(&scan.ranges_m)
+                .map(|(&bearing_rad, &r)| leveling::Beam {
+                    bearing_rad,
+                    range_m: (r != 0.0).then_some(r),
+                })
+                .collect(),
         };
-        let node = self.assemble(scan.stamp_ns, &scan.robot_at_start, scan_frame, wire_scan);
+        let node = self.assemble(&scan.robot_at_start, scan_frame, planar);
         self.number(node).map(Some)
     }
 
     /// Gives a node its number once it passes the mapper's checks; a node that fails them
     /// takes none, so the chain has no gap.
-    fn number(&mut self, node: v1::Node) -> Result<v1::Node, NodeError> {
-        if let Err(error) = wire::node_input(&node) {
-            return Err(NodeError::Invalid {
-                node: Box::new(node),
-                error,
-            });
-        }
+    fn number(&mut self, parts: NodeParts) -> Result<Node, NodeError> {
+        let node = Node::new(parts.clone()).map_err(|error| NodeError::Invalid {
+            node: Box::new(parts),
+            error,
+        })?;
         self.next_node_seq += 1;
         Ok(node)
     }
@@ -276,10 +275,6 @@ impl NodeBuilder {
         }
     }
 
-    fn header(&self, stamp_ns: u64) -> v1::Header {
-        v1::Header::new(&self.fleet, &self.robot, 0, stamp_ns, 0)
-    }
-
     fn moved_enough(&self, robot_at_start: &Isometry3<f64>) -> bool {
         let Some(last) = self.last else {
             return true;
@@ -289,46 +284,42 @@ impl NodeBuilder {
             || d.theta.abs() >= self.params.node_rotation_deg.to_radians()
     }
 
+    /// The node of `scan` (counts and cloud unset), its fixes taken.
     fn assemble(
         &mut self,
-        start_ns: u64,
         robot_at_start: &Isometry3<f64>,
         scan_frame: Pose2,
-        scan: v1::LeveledScan,
-    ) -> v1::Node {
+        scan: leveling::LeveledScan,
+    ) -> NodeParts {
+        let start_ns = scan.stamp_ns;
         let robot2 = Pose2::from_isometry3(robot_at_start);
         // Fixes after the scan's start wait for the next node; of the others the latest
         // max_gps_fixes go, the last one as Node.gps.
         let later = self.pending_gps.partition_point(|g| g.stamp_ns <= start_ns);
         let rest = self.pending_gps.split_off(later);
-        let mut fixes: Vec<v1::GpsFix> = std::mem::replace(&mut self.pending_gps, rest)
+        let taken = std::mem::replace(&mut self.pending_gps, rest);
+        let skipped = taken.len().saturating_sub(self.params.max_gps_fixes);
+        let gps = taken[skipped..]
             .iter()
-            .rev()
-            .take(self.params.max_gps_fixes)
-            .map(|g| gps_to_wire(g, robot_at_start, self.header(start_ns)))
+            .map(|g| carried_fix(g, robot_at_start))
             .collect();
-        let gps = (!fixes.is_empty()).then(|| fixes.remove(0));
-        fixes.reverse();
-        let node = v1::Node {
-            header: Some(self.header(start_ns)),
+        let node = NodeParts {
+            fleet: self.fleet.clone(),
+            robot: self.robot.clone(),
             node_seq: self.next_node_seq,
             chain_id: self.chain_id,
             // Set at each send, from the outbox.
             held_from_seq: 0,
-            scan: Some(scan),
-            odometry: Some(wire::odometry_to_wire(
-                &leveling::TimedPose {
-                    stamp_ns: start_ns,
-                    pose: *robot_at_start,
-                },
-                self.header(start_ns),
-            )),
+            stamp_ns: start_ns,
+            scan,
+            counts: None,
+            odometry: leveling::TimedPose {
+                stamp_ns: start_ns,
+                pose: *robot_at_start,
+            },
+            odometry_delta: self.last.map(|last| last.between(&robot2)),
+            scan_origin: robot2.between(&scan_frame),
             gps,
-            odometry_delta_from_previous: self
-                .last
-                .map(|last| pose2_to_wire(&last.between(&robot2))),
-            scan_origin_in_robot: Some(pose2_to_wire(&robot2.between(&scan_frame))),
-            earlier_gps: fixes,
             cloud: None,
         };
         self.last = Some(robot2);
@@ -336,11 +327,11 @@ impl NodeBuilder {
     }
 }
 
-/// The fix on the wire, carried to the scan's start by dead reckoning
+/// The fix, carried to the scan's start by dead reckoning
 /// ([`slam::gnss::carry_antenna_to_node`]; see `Node.gps` in node.proto).
-fn gps_to_wire(g: &GpsReading, robot_at_start: &Isometry3<f64>, header: v1::Header) -> v1::GpsFix {
+fn carried_fix(g: &GpsReading, robot_at_start: &Isometry3<f64>) -> GpsFix {
     let (h, v) = (g.sigma_horizontal_m.powi(2), g.sigma_vertical_m.powi(2));
-    let fix = GpsFix {
+    GpsFix {
         stamp_ns: g.stamp_ns,
         position: Geodetic {
             latitude_deg: g.latitude_deg,
@@ -354,8 +345,7 @@ fn gps_to_wire(g: &GpsReading, robot_at_start: &Isometry3<f64>, header: v1::Head
             &g.odometry_at_fix,
             robot_at_start,
         ),
-    };
-    wire::gps_fix_to_wire(&fix, header)
+    }
 }
 
 #[cfg(test)]
@@ -398,13 +388,8 @@ mod tests {
         }
     }
 
-    fn stamps(node: &v1::Node) -> Vec<u64> {
-        let stamp = |g: &v1::GpsFix| g.header.as_ref().unwrap().stamp_ns / S;
-        node.earlier_gps
-            .iter()
-            .chain(&node.gps)
-            .map(stamp)
-            .collect()
+    fn stamps(node: &Node) -> Vec<u64> {
+        node.gps.iter().map(|g| g.stamp_ns / S).collect()
     }
 
     #[test]
@@ -446,13 +431,12 @@ mod tests {
             .offer_planar(&scan(4 * S, vec![fix(2 * S), fix(3 * S), fix(4 * S)]))
             .unwrap()
             .unwrap();
-        wire::validate_node(&node).unwrap();
         assert_eq!(stamps(&node), [1, 2, 3, 4]);
         // Each carried to the node: where the antenna was at the fix's time, in the robot
         // frame at the scan's start (4 s, x = 4 m).
-        let offset = |g: &v1::GpsFix| g.antenna_offset_m.as_ref().unwrap().x;
-        assert!((offset(&node.earlier_gps[0]) - (1.0 - 0.5 - 4.0)).abs() < 1e-12);
-        assert!((offset(node.gps.as_ref().unwrap()) + 0.5).abs() < 1e-12);
+        let offset = |g: &GpsFix| g.antenna_offset_m.x;
+        assert!((offset(&node.gps[0]) - (1.0 - 0.5 - 4.0)).abs() < 1e-12);
+        assert!((offset(node.gps.last().unwrap()) + 0.5).abs() < 1e-12);
         // At most max_gps_fixes, the latest; none: no fix on the node.
         let many = (5..12).map(|t| fix(t * S)).collect();
         let node = builder.offer_planar(&scan(11 * S, many)).unwrap().unwrap();
@@ -461,14 +445,13 @@ mod tests {
             .offer_planar(&scan(15 * S, Vec::new()))
             .unwrap()
             .unwrap();
-        assert!(node.gps.is_none() && node.earlier_gps.is_empty());
+        assert!(node.gps.is_empty());
     }
 
     #[test]
     #[cfg(feature = "sim")]
     fn nodes_of_the_simulated_robot_carry_their_cloud_when_kept() {
         use crate::{SimSource, SimSourceConfig, Source, SourceEvent};
-        use wire::Message;
         let mut source = SimSource::new(&SimSourceConfig::default(), 0, 10.0).unwrap();
         let new = || NodeBuilder::new("park", "robot0", Default::default(), Default::default(), 0);
         let mut with = new().with_cloud(&CloudParams::default());
@@ -489,29 +472,35 @@ mod tests {
                 continue;
             };
             nodes += 1;
-            wire::validate_node(&node).unwrap();
             assert!(bare.cloud.is_none());
             let cloud = node.cloud.as_ref().unwrap();
-            let kept = wire::validate_cloud(cloud).unwrap();
+            let kept = cloud.counts();
             // Every class is there, the cap holds, and nothing else differs.
             assert!(
                 kept.ground > 0 && kept.landmark > 0 && kept.overhang > 0,
                 "{kept:?}"
             );
             assert!(cloud.classes.len() <= 6000);
-            let counts = node.scan.as_ref().unwrap().counts.unwrap();
+            let counts = node.counts.unwrap();
             assert_eq!(
                 cloud.source_points,
-                counts.ground + counts.landmark + counts.overhang
+                (counts.ground + counts.landmark + counts.overhang) as u64
             );
-            assert_eq!(
-                v1::Node {
-                    cloud: None,
-                    ..node.clone()
-                },
-                bare
-            );
-            sizes.push((bare.encoded_len(), node.encoded_len(), cloud.classes.len()));
+            let mut without_cloud = node.clone().into_parts();
+            without_cloud.cloud = None;
+            assert_eq!(Node::new(without_cloud).unwrap(), bare);
+            let bytes = node.encode();
+            // The wire keeps a cloud to the centimetre.
+            let sent = wire::decode_node(&bytes)
+                .unwrap()
+                .into_parts()
+                .cloud
+                .unwrap();
+            assert_eq!(sent.classes, cloud.classes);
+            let off =
+                |(a, b): (&[f32; 3], &[f32; 3])| (0..3).all(|k| (a[k] - b[k]).abs() <= 0.0051);
+            assert!(sent.points_m.iter().zip(&cloud.points_m).all(off));
+            sizes.push((bare.encode().len(), bytes.len(), cloud.classes.len()));
         }
         // Well under 100 KB a node with its cloud (printed with --nocapture).
         eprintln!("node bytes without cloud, with cloud, cloud points: {sizes:?}");

@@ -4,7 +4,7 @@
 use redb::{Database, ReadableDatabase, ReadableTable, ReadableTableMetadata, TableDefinition};
 use std::path::Path;
 
-/// Encoded `v1::Node`s by node_seq.
+/// Nodes by node_seq, encoded once, here ([`wire::NodeParts::encode`]).
 const NODES: TableDefinition<u64, &[u8]> = TableDefinition::new("nodes");
 /// `next_node_seq` (the next number to give), `acked` (highest node_seq acked + 1) and
 /// `chain_id` (drawn when the outbox is made: `Node.chain_id`).
@@ -67,7 +67,11 @@ impl Outbox {
     }
 
     /// Keeps a node that must not be sent, with why (it takes no node_seq).
-    pub fn quarantine(&self, reason: &str, encoded: &[u8]) -> Result<(), OutboxError> {
+    pub fn quarantine(&self, reason: &str, node: &wire::NodeParts) -> Result<(), OutboxError> {
+        self.quarantine_encoded(reason, &node.encode())
+    }
+
+    fn quarantine_encoded(&self, reason: &str, encoded: &[u8]) -> Result<(), OutboxError> {
         let txn = self.db.begin_write()?;
         {
             let mut table = txn.open_table(QUARANTINE)?;
@@ -100,8 +104,13 @@ impl Outbox {
         self.meta("acked")
     }
 
-    /// Commits node `node_seq` (which must be [`Self::next_node_seq`]).
-    pub fn push(&self, node_seq: u64, encoded: &[u8]) -> Result<(), OutboxError> {
+    /// Commits `node` (its node_seq must be [`Self::next_node_seq`]), encoded: the one
+    /// encoding of a node, which every send of it appends its send fields to.
+    pub fn push(&self, node: &wire::Node) -> Result<(), OutboxError> {
+        self.push_encoded(node.node_seq, &node.encode())
+    }
+
+    fn push_encoded(&self, node_seq: u64, encoded: &[u8]) -> Result<(), OutboxError> {
         let txn = self.db.begin_write()?;
         {
             let mut nodes = txn.open_table(NODES)?;
@@ -188,9 +197,11 @@ mod tests {
             chain_id = outbox.chain_id().unwrap();
             assert_ne!(chain_id, 0);
             assert_eq!(outbox.next_node_seq().unwrap(), 0);
-            outbox.quarantine("implausible_range", b"bad").unwrap();
+            outbox
+                .quarantine_encoded("implausible_range", b"bad")
+                .unwrap();
             for seq in 0..5 {
-                outbox.push(seq, &[seq as u8; 3]).unwrap();
+                outbox.push_encoded(seq, &[seq as u8; 3]).unwrap();
             }
             assert_eq!(outbox.ack(1).unwrap(), 2);
             // An old ack changes nothing.

@@ -27,19 +27,13 @@ pub struct NodeFrame {
 }
 
 impl NodeFrame {
-    /// The frame of a node as it is sent.
-    pub fn of(node: &wire::v1::Node) -> Result<NodeFrame, wire::WireError> {
-        let odometry = node.odometry.as_ref().ok_or(wire::WireError::Missing {
-            field: "Node.odometry",
-        })?;
-        Ok(NodeFrame {
+    /// The frame of a node.
+    pub fn of(node: &wire::Node) -> NodeFrame {
+        NodeFrame {
             node_seq: node.node_seq,
-            odometry: Pose2::from_isometry3(&wire::odometry_from_wire(odometry)?.pose),
-            scan_origin: node
-                .scan_origin_in_robot
-                .as_ref()
-                .map_or(Ok(Pose2::IDENTITY), wire::pose2_from_wire)?,
-        })
+            odometry: Pose2::from_isometry3(&node.odometry.pose),
+            scan_origin: node.scan_origin,
+        }
     }
 }
 

@@ -18,7 +18,6 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot};
-use wire::{Message, v1};
 use zenoh::qos::{CongestionControl, Priority};
 
 /// Most nodes sent in one burst of re-sending.
@@ -70,11 +69,12 @@ pub struct EdgeReport {
 
 /// What the blocking side hands the sending loop.
 pub(super) enum Produced {
-    /// A node is in the outbox; its frame when it has one for corrections.
-    Node(Option<NodeFrame>),
-    Odometry(Box<v1::Odometry>),
+    /// A node is in the outbox: its frame, for corrections.
+    Node(NodeFrame),
+    /// Live odometry (best effort).
+    Odometry(leveling::TimedPose),
     /// A live leveled scan (best effort).
-    LiveScan(Box<v1::LiveScan>),
+    LiveScan(Box<wire::LiveScan>),
     ScanError,
     Quarantined,
     End,
@@ -147,6 +147,8 @@ impl Link {
 
 /// What the sending loop keeps between events.
 struct Sending {
+    /// The robot's fleet (its robot is the report's).
+    fleet: String,
     outbox: Arc<Outbox>,
     report: EdgeReport,
     /// Publications of this run, for `Header.seq`.
@@ -180,15 +182,13 @@ const GAP_RESEND_HOLDOFF: Duration = Duration::from_millis(300);
 
 impl Sending {
     /// A node was made (sent or not yet).
-    fn made(&mut self, frame: Option<NodeFrame>) {
+    fn made(&mut self, frame: NodeFrame) {
         self.report.nodes += 1;
-        if let Some(frame) = frame {
-            self.correction.on_node(frame);
-        }
+        self.correction.on_node(frame);
     }
 
     /// A new node is in the outbox: send it (and any before it not sent yet).
-    async fn on_node(&mut self, link: &Link, frame: Option<NodeFrame>) -> Result<()> {
+    async fn on_node(&mut self, link: &Link, frame: NodeFrame) -> Result<()> {
         self.made(frame);
         if self.next_to_send <= self.outbox.acked_below()? {
             // Nothing was waiting for an ack: the timer starts with this node.
@@ -216,27 +216,22 @@ impl Sending {
     }
 
     /// Live odometry, best effort; the transform with its stamp.
-    async fn on_odometry(&mut self, link: &Link, mut odometry: Box<v1::Odometry>) {
+    async fn on_odometry(&mut self, link: &Link, pose: leveling::TimedPose) {
         self.header_seq += 1;
-        if let Some(h) = odometry.header.as_mut() {
-            h.seq = self.header_seq;
-            h.sent_ns = now_ns();
-            self.last_odometry_ns = h.stamp_ns;
-        }
+        self.last_odometry_ns = pose.stamp_ns;
+        let (fleet, robot) = (&self.fleet, &self.report.robot);
+        let bytes = wire::encode_odometry(fleet, robot, &pose, self.header_seq, now_ns());
         self.publish_tf();
-        if link.odometry.put(odometry.encode_to_vec()).await.is_ok() {
+        if link.odometry.put(bytes).await.is_ok() {
             self.report.odometry_sent += 1;
         }
     }
 
     /// A live scan, best effort at low priority.
-    async fn on_live_scan(&mut self, link: &Link, mut scan: Box<v1::LiveScan>) {
+    async fn on_live_scan(&mut self, link: &Link, scan: Box<wire::LiveScan>) {
         self.header_seq += 1;
-        if let Some(h) = scan.header.as_mut() {
-            h.seq = self.header_seq;
-            h.sent_ns = now_ns();
-        }
-        if link.live_scans.put(scan.encode_to_vec()).await.is_ok() {
+        let bytes = scan.encode(self.header_seq, now_ns());
+        if link.live_scans.put(bytes).await.is_ok() {
             self.report.live_scans_sent += 1;
         }
     }
@@ -436,6 +431,7 @@ pub async fn run(
         tokio::task::spawn_blocking(move || produce(config, source, outbox, tx))
     };
     let mut sending = Sending {
+        fleet: config.fleet.clone(),
         report: EdgeReport {
             robot: config.robot.clone(),
             ..Default::default()

@@ -10,13 +10,12 @@ use clap::Args;
 use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
 use runtime::session::{Role, SessionConfig};
 use serde::Serialize;
-use slam::geodesy::Geodetic;
 use std::collections::HashMap;
 use std::io::BufRead;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use wire::{Message, v1};
+use wire::Node;
 
 /// Load-test the mapper: N simulated robots publishing nodes and odometry over Zenoh, with
 /// pose queries over HTTP at the same time.
@@ -123,7 +122,7 @@ struct BenchReport {
 }
 
 /// The nodes of the park's three loops, each a node per scan, to be replayed.
-fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<v1::Node>> {
+fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<Node>> {
     (0..3)
         .map(|loop_index| {
             let config = SimSourceConfig {
@@ -152,45 +151,32 @@ fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<v1::Node>> {
         .collect()
 }
 
-/// Node `k` of a robot: a pool node moved `east_m` east (odometry and GPS), renamed, restamped.
-fn robot_node(template: &v1::Node, robot: &str, k: u64, east_m: f64, stamp_ns: u64) -> v1::Node {
-    let mut node = template.clone();
+/// Node `k` of a robot as sent: a pool node moved `east_m` east (odometry and GPS), renamed,
+/// restamped, encoded as an outbox keeps it with its send fields appended.
+fn robot_node(template: &Node, robot: &str, k: u64, east_m: f64, stamp_ns: u64) -> Vec<u8> {
+    let mut node = template.clone().into_parts();
+    node.robot = robot.to_owned();
     node.node_seq = k;
     // One chain per robot, from node 0: chain ids are per robot.
     node.chain_id = 1;
-    // Every header moves by the same time: the fixes keep their own (earlier, increasing)
+    // Every stamp moves by the same time: the fixes keep their own (earlier, increasing)
     // times relative to the scan's start.
-    let shift = stamp_ns.saturating_sub(template.header.as_ref().map_or(0, |h| h.stamp_ns));
-    for h in node.headers_mut() {
-        h.robot_id = robot.to_owned();
-        h.stamp_ns += shift;
-        h.sent_ns = stamp_ns;
-    }
-    if let Some(o) = node.odometry.as_mut() {
-        if let Some(p) = o.pose.as_mut() {
-            p.x_m += east_m;
-        }
-        if let Some(p) = o.pose2d.as_mut() {
-            p.x_m += east_m;
-        }
-    }
-    for g in node.gps.iter_mut().chain(node.earlier_gps.iter_mut()) {
-        let datum = sim::PARK_DATUM;
-        let mut enu = datum.geodetic_to_enu(&Geodetic {
-            latitude_deg: g.latitude_deg,
-            longitude_deg: g.longitude_deg,
-            height_m: g.altitude_m,
-        });
+    let shift = stamp_ns.saturating_sub(template.stamp_ns);
+    node.stamp_ns += shift;
+    node.scan.stamp_ns += shift;
+    node.odometry.stamp_ns += shift;
+    node.odometry.pose.translation.x += east_m;
+    let datum = sim::PARK_DATUM;
+    for g in &mut node.gps {
+        g.stamp_ns += shift;
+        let mut enu = datum.geodetic_to_enu(&g.position);
         enu.x += east_m;
-        let moved = datum.enu_to_geodetic(&enu);
-        g.latitude_deg = moved.latitude_deg;
-        g.longitude_deg = moved.longitude_deg;
-        g.altitude_m = moved.height_m;
+        g.position = datum.enu_to_geodetic(&enu);
     }
     if k == 0 {
-        node.odometry_delta_from_previous = None;
+        node.odometry_delta = None;
     }
-    node
+    wire::node_as_sent(&node.encode(), 0, k + 1, stamp_ns)
 }
 
 /// Runs the bench: a mapper, simulated robots over Zenoh, HTTP queries; prints the figures.
@@ -330,21 +316,16 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
                     .expect("sent")
                     .insert((robot.clone(), k), Instant::now());
                 node_pub
-                    .put(node.encode_to_vec())
+                    .put(node)
                     .await
                     .map_err(anyhow::Error::from_boxed)?;
                 published += 1;
             }
-            let mut odometry = template.odometry.clone().expect("odometry");
-            if let Some(h) = odometry.header.as_mut() {
-                h.robot_id = robot.clone();
-                h.stamp_ns = stamp;
-                h.seq = step;
-            }
-            if let Some(p) = odometry.pose.as_mut() {
-                p.x_m += east;
-            }
-            if odom_pub.put(odometry.encode_to_vec()).await.is_ok() {
+            let mut odometry = template.odometry;
+            odometry.stamp_ns = stamp;
+            odometry.pose.translation.x += east;
+            let odometry = wire::encode_odometry(FLEET, robot, &odometry, step, stamp);
+            if odom_pub.put(odometry).await.is_ok() {
                 odometry_published += 1;
             }
         }

@@ -68,7 +68,7 @@ pub fn map_fixed2d(robots: usize, duration_s: f64, seed: u64) -> Result<(f64, us
             let Some(node) = builder.offer_planar(&planar)? else {
                 continue;
             };
-            map.ingest(&wire::node_input(&node)?)?;
+            map.ingest(&node)?;
             map.optimize_pending()?;
             truth.push(Pose2::from_isometry3(&(scan.scan.truth_start_pose * mount)));
         }

@@ -280,7 +280,7 @@ async fn run_async(args: &LocalizeDemoArgs) -> Result<()> {
 
     // 2. The fourth robot drives in localize mode, set by its id; then three more, set by
     // the fleet's mode. Every node they send is captured for step 3.
-    let captured: Arc<Mutex<BTreeMap<(String, u64), wire::NodeInput>>> = Arc::default();
+    let captured: Arc<Mutex<BTreeMap<(String, u64), wire::Node>>> = Arc::default();
     let session = SessionConfig::client(&args.zenoh)
         .open(runtime::session::Role::Client)
         .await?;
@@ -289,7 +289,7 @@ async fn run_async(args: &LocalizeDemoArgs) -> Result<()> {
         session
             .declare_subscriber(wire::all_robots_key_expr(FLEET, wire::Topic::Node)?)
             .callback(move |sample| {
-                if let Ok((node, _)) = wire::decode_node_input(&sample.payload().to_bytes()) {
+                if let Ok(node) = wire::decode_node(&sample.payload().to_bytes()) {
                     let key = (node.robot.clone(), node.node_seq);
                     captured.lock().expect("capture").insert(key, node);
                 }

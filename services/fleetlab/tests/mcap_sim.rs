@@ -137,8 +137,7 @@ fn map(events: impl IntoIterator<Item = SourceEvent>) -> (f64, usize) {
         let Some(node) = builder.offer(&scan).expect("a node") else {
             continue;
         };
-        map.ingest(&wire::node_input(&node).expect("valid"))
-            .expect("ingested");
+        map.ingest(&node).expect("ingested");
         map.optimize_pending().expect("optimized");
         let start = scan.raw.columns[0].stamp_ns - EPOCH_NS;
         truth.push(Pose2::from_isometry3(&(robot.truth_at(start) * mount)));

@@ -6,7 +6,7 @@
 //! a node after a gap is not taken, and the sender learns from the ack the highest node taken
 //! and where to re-send from. Each chain is its own odometry chain in the pose network.
 
-use leveling::ClassCounts;
+use leveling::{ClassCounts, LeveledScan};
 use serde::Serialize;
 use slam::geodesy::GeoDatum;
 use slam::matching::Scan2;
@@ -16,7 +16,7 @@ use slam::{
 };
 use std::collections::HashMap;
 use std::sync::Arc;
-use wire::NodeInput;
+use wire::Node;
 
 /// Where a node stands against its robot's sequence.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -54,24 +54,15 @@ pub struct NodeRecord {
     pub gps: Vec<GpsObservation>,
     /// The scan's points per class, when the robot sent them.
     pub counts: Option<ClassCounts>,
-    /// The leveled scan: bearings (rad) and ranges (m, 0 = no return).
-    pub bearings_rad: Vec<f32>,
-    /// Range per bearing (m, 0 = no return).
-    pub ranges_m: Vec<f32>,
+    /// The leveled scan.
+    pub scan: LeveledScan,
 }
 
 impl NodeRecord {
     /// Every return of the leveled scan, however far (the map shows what the robot saw;
     /// matching cuts at the mapper's `max_range_m`).
     pub fn scan(&self) -> Scan2 {
-        let (bearings, ranges): (Vec<f32>, Vec<f32>) = self
-            .bearings_rad
-            .iter()
-            .zip(&self.ranges_m)
-            .filter(|(_, r)| **r > 0.0)
-            .map(|(b, r)| (*b, *r))
-            .unzip();
-        Scan2::from_polar(&bearings, &ranges, f32::MAX).expect("returns come in pairs")
+        wire::matching_scan(&self.scan, f32::MAX)
     }
 }
 
@@ -272,7 +263,7 @@ impl FleetMap {
 
     /// Where `node` stands against what the map took of its robot's chain (mapped or
     /// localized).
-    pub fn sequence(&self, node: &NodeInput) -> Sequence {
+    pub fn sequence(&self, node: &Node) -> Sequence {
         let Some(last) = self.chain_acked(&node.robot, node.chain_id) else {
             // A chain the map does not know starts where its robot says it still holds nodes
             // (0 for a new outbox): a lost first node is asked for, never skipped. Chain 0 is
@@ -316,7 +307,7 @@ impl FleetMap {
     /// and whether the step from the chain's last node broke odometry ([`wire::check_step`]).
     fn chain_for(
         &mut self,
-        node: &NodeInput,
+        node: &Node,
     ) -> Result<(usize, usize, Option<wire::WireError>), IngestError> {
         let refused = |source| IngestError::Refused {
             robot: node.robot.clone(),
@@ -391,7 +382,7 @@ impl FleetMap {
     }
 
     /// Adds a node of this fleet.
-    pub fn ingest(&mut self, node: &NodeInput) -> Result<Ingested, IngestError> {
+    pub fn ingest(&mut self, node: &Node) -> Result<Ingested, IngestError> {
         let robot_id = &node.robot;
         let problem = match self.sequence(node) {
             Sequence::Next => None,
@@ -429,11 +420,10 @@ impl FleetMap {
 
     /// What the map keeps of a node of robot `robot` (its GPS fixes in the map's frame: the
     /// first fix sets the datum when none is configured), and its scan as matching uses it.
-    fn read_node(&mut self, node: &NodeInput, robot: usize) -> (NodeRecord, Scan2) {
+    fn read_node(&mut self, node: &Node, robot: usize) -> (NodeRecord, Scan2) {
         let robot_odometry = Pose2::from_isometry3(&node.odometry.pose);
         let scan_frame = robot_odometry.compose(&node.scan_origin);
-        let (bearings_rad, ranges_m) = node.polar();
-        let scan = wire::matching_scan(&node.scan, self.max_range_m);
+        let scan = node.matching_scan(self.max_range_m);
         let attitude = node.odometry.pose.rotation;
         let gps: Vec<GpsObservation> = node
             .gps
@@ -456,8 +446,7 @@ impl FleetMap {
             scan_origin: node.scan_origin,
             gps,
             counts: node.counts,
-            bearings_rad,
-            ranges_m,
+            scan: node.scan.clone(),
         };
         (record, scan)
     }

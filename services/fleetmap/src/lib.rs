@@ -8,12 +8,17 @@
 //! - [`view`]: [`FleetView`], the map at one moment for readers, sharing what did not change
 //!   with the view before it ([`shared_log`]);
 //! - [`tiles`]: the map cut into cached tiles for windows around robots;
-//! - [`marginals`]: nodes' marginal covariances from a view.
+//! - [`marginals`]: nodes' marginal covariances from a view;
+//! - [`versions`]: a view frozen into a map version, and a version file taken in;
+//! - [`localization`]: robots' modes, a version's map, and the trackers of robots that
+//!   localize on a version instead of mapping.
 
 pub mod fleet;
+pub mod localization;
 pub mod marginals;
 pub mod shared_log;
 pub mod tiles;
+pub mod versions;
 pub mod view;
 
 #[cfg(any(test, feature = "testing"))]

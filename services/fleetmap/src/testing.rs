@@ -3,19 +3,19 @@
 use leveling::nalgebra::{Isometry3, Translation3};
 use leveling::{Beam, LeveledScan, TimedPose};
 use slam::Pose2;
-use wire::NodeInput;
+use wire::{Node, NodeParts};
 
 const S: u64 = 1_000_000_000;
 
 /// Node `seq` of `robot`'s chain `chain`, the robot `x` m along, at `seq` s.
-pub fn node(robot: &str, chain: u64, seq: u64, held_from: u64, x: f64) -> NodeInput {
+pub fn node(robot: &str, chain: u64, seq: u64, held_from: u64, x: f64) -> Node {
     let beams = (0..90)
         .map(|k| Beam {
             bearing_rad: k as f32 * 0.07,
             range_m: Some(5.0 + (k % 7) as f32),
         })
         .collect();
-    NodeInput {
+    Node::new(NodeParts {
         fleet: "site".into(),
         robot: robot.into(),
         node_seq: seq,
@@ -31,7 +31,10 @@ pub fn node(robot: &str, chain: u64, seq: u64, held_from: u64, x: f64) -> NodeIn
             stamp_ns: (seq + 1) * S,
             pose: Isometry3::from_parts(Translation3::new(x, 0.0, 0.0), Default::default()),
         },
+        odometry_delta: None,
         scan_origin: Pose2::IDENTITY,
         gps: Vec::new(),
-    }
+        cloud: None,
+    })
+    .expect("a valid node")
 }

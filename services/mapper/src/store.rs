@@ -21,7 +21,6 @@ use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition, TableHand
 use std::ops::Bound;
 use std::path::Path;
 use std::sync::{Mutex, RwLock};
-use wire::{Message, v1};
 
 mod localization;
 mod meta;
@@ -33,7 +32,8 @@ pub use meta::{MappingVersion, STORE_FORMAT};
 pub use retention::Pruned;
 pub use versions::{AddVersionError, VersionRows};
 
-/// (fleet, arrival index) → encoded `v1::Node`, without `Node.cloud`.
+/// (fleet, arrival index) → the node as the robot encoded it, without `Node.cloud`
+/// ([`wire::split_node_cloud`]).
 const NODES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("nodes");
 /// (fleet, edge index) → the edge as JSON (`slam::RelativeEdge`).
 const EDGES: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("edges");
@@ -44,7 +44,7 @@ const SOLVES: TableDefinition<(&str, u64), ()> = TableDefinition::new("solves");
 /// last node when it was applied): a replay takes and applies each solve at the same points,
 /// so it finds the same loop closures.
 const SOLVE_POINTS: TableDefinition<(&str, u64), (u64, u64)> = TableDefinition::new("solve_points");
-/// (fleet, node index) → the node's encoded `v1::SegmentedCloud` (`Node.cloud`).
+/// (fleet, node index) → the node's encoded cloud (`Node.cloud`, a `SegmentedCloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
 /// fleet → its newest snapshot (`fleetmap::snapshot`): the map after its first nodes,
 /// written after they and the solves it holds were committed. Only the newest is kept.
@@ -140,15 +140,6 @@ pub fn encode_edges(edges: &[slam::RelativeEdge]) -> Vec<Vec<u8>> {
         .iter()
         .map(|e| serde_json::to_vec(e).expect("edges serialize"))
         .collect()
-}
-
-/// What is stored of a received node (`payload`, decoded as `node`): the node without its
-/// cloud (the payload itself when it has none) and the encoded cloud, taken out of `node`.
-pub fn split_cloud(node: &mut v1::Node, payload: Vec<u8>) -> (Vec<u8>, Option<Vec<u8>>) {
-    match node.cloud.take() {
-        Some(cloud) => (node.encode_to_vec(), Some(cloud.encode_to_vec())),
-        None => (payload, None),
-    }
 }
 
 impl Store {

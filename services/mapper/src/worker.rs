@@ -21,7 +21,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
-use wire::NodeInput;
+use wire::Node;
 
 mod commit;
 mod localizing;
@@ -131,7 +131,7 @@ impl Work {
 
 /// A node that passed the checks: who sent it, what it holds, what is stored of it.
 struct Checked {
-    input: NodeInput,
+    input: Node,
     /// The node as stored: as received, without its cloud.
     payload: Vec<u8>,
     /// Its encoded `Node.cloud`, stored apart.
@@ -307,7 +307,7 @@ impl Worker {
             self.reject("unknown_fleet", key, &why);
             return None;
         }
-        let (input, mut node) = match wire::decode_node_input(&payload) {
+        let input = match wire::decode_node(&payload) {
             Ok(d) => d,
             Err(e) => {
                 self.reject(e.reason(), key, &e);
@@ -320,7 +320,7 @@ impl Worker {
             return None;
         }
         // The cloud goes to its own table: the node is stored (and replayed) without it.
-        let (payload, cloud) = crate::store::split_cloud(&mut node, payload);
+        let (payload, cloud) = wire::split_node_cloud(payload);
         Some(Checked {
             input,
             payload,

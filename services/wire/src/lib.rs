@@ -2,14 +2,15 @@
 //! `proto/levelmap/v1/*.proto` (compiled by protox, no system `protoc`), the Zenoh key
 //! expressions, and checked conversions between the messages and the `leveling` types.
 //!
-//! Sending: build a [`v1::Header`] with [`v1::Header::new`], convert with
-//! [`leveled_scan_to_wire`], [`odometry_to_wire`], [`pose3d_to_wire`], encode with
-//! [`Message::encode_to_vec`], publish on [`node_key`] / [`odom_key`].
-//! Receiving: [`decode_node`], [`decode_odometry`] and [`decode_ack`] reject malformed bytes,
-//! a missing header, a foreign wire version and out-of-domain numbers with a [`WireError`]
-//! naming the field; [`leveled_scan_from_wire`] and [`pose3d_from_wire`] then give the
-//! algorithm types. A node may carry its segmented 3D cloud ([`cloud_to_wire`],
-//! [`cloud_from_wire`], checked by [`validate_cloud`]). A map version, the mapper's frozen map
+//! A node has one form past this crate: [`Node`], made from its [`NodeParts`] by
+//! [`Node::new`] (the robot's node builder) or by [`decode_node`] (the mapper's subscriber),
+//! both checked by the same rules ([`validate_node`]), and encoded once, at the robot's outbox
+//! ([`NodeParts::encode`]); each send appends its send fields to that encoding
+//! ([`node_as_sent`]), and the mapper splits the cloud from it without re-encoding
+//! ([`split_node_cloud`]). Live scans and odometry go the same way ([`LiveScan`],
+//! [`encode_odometry`], [`decode_odometry`]). Decoding rejects malformed bytes, a missing
+//! header, a foreign wire version and out-of-domain numbers with a [`WireError`] naming the
+//! field. A node may carry its segmented 3D cloud ([`ClassifiedCloud`]). A map version, the mapper's frozen map
 //! as one file, is written by [`encode_map_version_file`] and read back, checked, by
 //! [`decode_map_version_file`].
 
@@ -58,18 +59,6 @@ impl v1::Node {
                 .chain(self.earlier_gps.iter_mut())
                 .filter_map(|g| g.header.as_mut()),
         )
-    }
-}
-
-impl v1::LiveScan {
-    /// A node's scan as a live scan: its header, leveled scan, odometry and scan frame.
-    pub fn of_node(node: &v1::Node) -> v1::LiveScan {
-        v1::LiveScan {
-            header: node.header.clone(),
-            scan: node.scan.clone(),
-            odometry: node.odometry.clone(),
-            scan_origin_in_robot: node.scan_origin_in_robot,
-        }
     }
 }
 

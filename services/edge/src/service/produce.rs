@@ -10,7 +10,7 @@ use crate::source::{Source, SourceEvent};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
-use wire::{Message, v1};
+use wire::{LiveScan, Node};
 
 /// Offers a scan to the node builder; when a live scan is due, it goes too (the node's own
 /// scan when the scan made one), dropped rather than waited for when the sender is behind.
@@ -19,11 +19,11 @@ fn offer(
     scan: &SensorScan,
     live_due: bool,
     tx: &mpsc::Sender<Produced>,
-) -> Result<Option<v1::Node>, NodeError> {
+) -> Result<Option<Node>, NodeError> {
     let offered = builder.offer(scan);
     if live_due {
         let live = match &offered {
-            Ok(Some(node)) => Ok(v1::LiveScan::of_node(node)),
+            Ok(Some(node)) => Ok(LiveScan::of_node(node)),
             _ => builder.live_scan(scan),
         };
         match live {
@@ -91,21 +91,20 @@ pub(super) fn produce(
                     continue;
                 }
                 last_odometry_ns = Some(pose.stamp_ns);
-                let header = v1::Header::new(&config.fleet, &config.robot, 0, pose.stamp_ns, 0);
-                Produced::Odometry(Box::new(wire::odometry_to_wire(&pose, header)))
+                Produced::Odometry(pose)
             }
             SourceEvent::Scan(scan) => match offer(&mut builder, &scan, live_due, &tx) {
                 Ok(None) => continue,
                 Ok(Some(node)) => {
-                    if let Err(e) = outbox.push(node.node_seq, &node.encode_to_vec()) {
+                    if let Err(e) = outbox.push(&node) {
                         tracing::error!(robot = %config.robot, "node {} not kept: {e}", node.node_seq);
                         break;
                     }
-                    Produced::Node(NodeFrame::of(&node).ok())
+                    Produced::Node(NodeFrame::of(&node))
                 }
                 Err(NodeError::Invalid { node, error }) => {
                     tracing::error!(robot = %config.robot, "node quarantined, not sent: {error}");
-                    if let Err(e) = outbox.quarantine(error.reason(), &node.encode_to_vec()) {
+                    if let Err(e) = outbox.quarantine(error.reason(), &node) {
                         tracing::error!(robot = %config.robot, "quarantine not kept: {e}");
                     }
                     Produced::Quarantined

@@ -7,7 +7,7 @@
 
 use super::{FleetMap, Sequence};
 use slam::Pose2;
-use wire::NodeInput;
+use wire::Node;
 
 /// Where a chain's last node stood, for the next one's prediction.
 #[derive(Clone, Copy, Debug)]
@@ -27,7 +27,7 @@ pub(super) struct Cover {
 impl FleetMap {
     /// The map pose of `node` when it passes over covered ground (it is then taken with
     /// [`FleetMap::take_localized`], not [`FleetMap::ingest`]); `None` when it is to be added.
-    pub fn pass(&mut self, node: &NodeInput) -> Option<Pose2> {
+    pub fn pass(&mut self, node: &Node) -> Option<Pose2> {
         if !self.mapper.params().coverage.enabled || self.sequence(node) != Sequence::Next {
             return None;
         }
@@ -63,7 +63,7 @@ impl FleetMap {
         let passes = covered && was_covered;
         let located = passes
             .then(|| {
-                let scan = wire::matching_scan(&node.scan, self.max_range_m);
+                let scan = node.matching_scan(self.max_range_m);
                 self.mapper.locate_against(covering[0], &predicted, &scan)
             })
             .flatten();

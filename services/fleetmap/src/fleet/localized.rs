@@ -6,7 +6,7 @@
 
 use super::{FleetMap, IngestError, MAX_CHAINS_PER_ROBOT, MAX_ROBOTS_PER_FLEET, Sequence};
 use std::collections::{HashMap, VecDeque};
-use wire::NodeInput;
+use wire::Node;
 
 /// An unbroken run of a robot chain's nodes that were localized, not mapped.
 #[derive(Clone, Debug, PartialEq)]
@@ -120,7 +120,7 @@ impl FleetMap {
     /// the store keeps of it.
     pub fn take_localized(
         &mut self,
-        node: &NodeInput,
+        node: &Node,
         passed: bool,
     ) -> Result<LocalizedSpan, IngestError> {
         if self.sequence(node) != Sequence::Next {
@@ -194,7 +194,7 @@ impl SpanReplay {
     }
 
     /// Takes the spans of `node`'s chain that came before it.
-    pub fn before(&mut self, map: &mut FleetMap, node: &NodeInput) {
+    pub fn before(&mut self, map: &mut FleetMap, node: &Node) {
         let Some(spans) = self.by_chain.get_mut(&(node.robot.clone(), node.chain_id)) else {
             return;
         };

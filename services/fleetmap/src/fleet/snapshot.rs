@@ -152,7 +152,7 @@ impl FleetMap {
         }
         let mut scans = Vec::with_capacity(nodes);
         for (arrival, bytes) in stored[..nodes].iter().enumerate() {
-            let (node, _) = wire::decode_node_input(bytes)
+            let node = wire::decode_node(bytes)
                 .map_err(|e| mismatch(format!("stored node {arrival}: {e}")))?;
             let robot = self.robot_index(&node.robot).ok_or_else(|| {
                 mismatch(format!(

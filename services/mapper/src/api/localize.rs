@@ -367,7 +367,7 @@ impl Api {
         Ok(all
             .iter()
             .find(|(f, _)| f == fleet)
-            .map(|(_, m)| FleetModes::from_stored(m))
+            .map(|(_, m)| crate::localization::modes_of(m))
             .unwrap_or_default())
     }
 

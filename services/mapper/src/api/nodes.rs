@@ -116,8 +116,13 @@ pub(super) async fn node_detail(
             .collect(),
         counts: n.counts.as_ref().map(Counts::from),
         scan: PolarScan {
-            bearing_rad: n.bearings_rad.clone(),
-            range_m: n.ranges_m.clone(),
+            bearing_rad: n.scan.beams.iter().map(|b| b.bearing_rad).collect(),
+            range_m: n
+                .scan
+                .beams
+                .iter()
+                .map(|b| b.range_m.unwrap_or(0.0))
+                .collect(),
         },
         edges: v
             .edges

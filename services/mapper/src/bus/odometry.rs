@@ -107,7 +107,7 @@ pub fn on_live_scan(shared: &Shared, fleets: &[String], key: &str, payload: &[u8
         metrics.reject("scan", "unknown_fleet");
         return;
     }
-    let input = match wire::live_scan_input(payload) {
+    let input = match wire::decode_live_scan(payload) {
         Ok(s) => s,
         Err(e) => {
             metrics.reject("scan", e.reason());

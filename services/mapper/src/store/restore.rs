@@ -242,7 +242,7 @@ fn replay_tail(
     }
     for (arrival, bytes) in stored.nodes.iter().enumerate().skip(from) {
         let arrival = arrival as u64;
-        let (node, _) = wire::decode_node_input(bytes)
+        let node = wire::decode_node(bytes)
             .with_context(|| format!("store: node {arrival} of fleet {id} is unreadable"))?;
         spans.before(map, &node);
         map.ingest(&node)

@@ -3,32 +3,6 @@
 use super::*;
 
 #[test]
-fn a_node_is_stored_without_its_cloud() {
-    let cloud = v1::SegmentedCloud {
-        xyz_cm: vec![100, -200, 30],
-        classes: vec![2],
-        source_points: 10,
-        voxel_m: 0.1,
-        max_points: 6000,
-    };
-    let mut node = v1::Node {
-        node_seq: 7,
-        cloud: Some(cloud.clone()),
-        ..Default::default()
-    };
-    let payload = node.encode_to_vec();
-    let (stored, apart) = split_cloud(&mut node, payload.clone());
-    assert!(node.cloud.is_none());
-    let back = v1::Node::decode(stored.as_slice()).unwrap();
-    assert_eq!((back.node_seq, back.cloud), (7, None));
-    assert!(stored.len() < payload.len());
-    let apart = v1::SegmentedCloud::decode(apart.unwrap().as_slice()).unwrap();
-    assert_eq!(apart, cloud);
-    // Without a cloud: the payload as received.
-    assert_eq!(split_cloud(&mut node, stored.clone()), (stored, None));
-}
-
-#[test]
 fn clouds_are_kept_apart_and_survive_reopening() {
     let dir = std::env::temp_dir().join(format!("levelmap-store-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

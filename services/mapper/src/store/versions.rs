@@ -5,7 +5,7 @@
 use super::{Store, StoreError};
 use redb::{Database, ReadTransaction, ReadableDatabase, TableDefinition};
 
-/// (fleet, number) → the version's file (`v1::MapVersionFile`, encoded).
+/// (fleet, number) → the version's file (a `MapVersionFile`, encoded).
 const VERSIONS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("versions");
 /// (fleet, number) → the version's summary, as JSON.
 const VERSION_SUMMARIES: TableDefinition<(&str, u64), &[u8]> =

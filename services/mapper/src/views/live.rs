@@ -160,7 +160,7 @@ pub fn on_odometry(
 }
 
 /// A robot's live scan: kept for the next samples of its feed.
-pub fn on_scan(shared: &Shared, cap: usize, input: &wire::LiveScanInput) -> bool {
+pub fn on_scan(shared: &Shared, cap: usize, input: &wire::LiveScan) -> bool {
     let corrected = correction(shared, &input.fleet, &input.robot);
     let odometry = Pose2::from_isometry3(&input.odometry.pose);
     let (bearing_rad, range_m) = input
@@ -198,7 +198,7 @@ mod tests {
     fn a_scan_before_the_robots_first_node_is_placed_by_the_first_correction() {
         let shared = Shared::new(String::new(), 0);
         let at = Pose2::new(2.0, 1.0, 0.5);
-        let scan = wire::LiveScanInput {
+        let scan = wire::LiveScan {
             fleet: "site".into(),
             robot: "r0".into(),
             stamp_ns: 1,
@@ -209,6 +209,7 @@ mod tests {
                     range_m: Some(3.0),
                 }],
             },
+            counts: None,
             odometry: TimedPose {
                 stamp_ns: 1,
                 pose: Isometry3::from_parts(

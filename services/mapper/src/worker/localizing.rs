@@ -10,7 +10,7 @@ use slam::Pose2;
 use slam::localize::{LocalizationMap, SearchKind, TrackStatus};
 use std::collections::HashMap;
 use std::sync::Arc;
-use wire::{Localized, NodeInput};
+use wire::{Localized, Node};
 
 /// A node localized in this batch, not yet committed.
 pub(super) struct LocalizedNode {
@@ -27,7 +27,7 @@ pub(super) struct LocalizedNode {
 
 impl LocalizedNode {
     fn new(
-        input: &NodeInput,
+        input: &Node,
         span: LocalizedSpan,
         (message, entry): (Localized, NodeLocalization),
     ) -> Self {
@@ -52,13 +52,7 @@ impl Worker {
     }
 
     /// Takes `input` (the next node of its chain) as localized and finds it on `version`.
-    pub(super) fn localize(
-        &mut self,
-        key: &str,
-        input: &NodeInput,
-        version: u64,
-        batch: &mut Batch,
-    ) {
+    pub(super) fn localize(&mut self, key: &str, input: &Node, version: u64, batch: &mut Batch) {
         let Some(span) = self.take_span(key, input, false) else {
             return;
         };
@@ -71,6 +65,7 @@ impl Worker {
             version,
             &self.config.localization.track,
             self.config.max_range_m,
+            runtime::session::now_ns(),
         );
         batch
             .localized
@@ -80,13 +75,7 @@ impl Worker {
     /// Takes `input` as passed over covered ground, at `pose` on the live map (docs/services.md,
     /// "Bounded growth"): numbered and acked like a localized node, answered to its robot as
     /// one (map version 0: the live map).
-    pub(super) fn take_passed(
-        &mut self,
-        key: &str,
-        input: &NodeInput,
-        pose: Pose2,
-        batch: &mut Batch,
-    ) {
+    pub(super) fn take_passed(&mut self, key: &str, input: &Node, pose: Pose2, batch: &mut Batch) {
         let started = std::time::Instant::now();
         let Some(span) = self.take_span(key, input, true) else {
             return;
@@ -100,7 +89,8 @@ impl Worker {
             search: Some(SearchKind::Window),
             reason: None,
         };
-        let answers = outcome.answers(input, started.elapsed().as_secs_f64() * 1e3);
+        let took_ms = started.elapsed().as_secs_f64() * 1e3;
+        let answers = outcome.answers(input, took_ms, runtime::session::now_ns());
         batch
             .localized
             .push(LocalizedNode::new(input, span, answers));
@@ -108,7 +98,7 @@ impl Worker {
 
     /// The span `input` (the next node of its chain) extends, localized or `passed`; `None`
     /// (counted, logged) when its fleet's map refuses it.
-    fn take_span(&mut self, key: &str, input: &NodeInput, passed: bool) -> Option<LocalizedSpan> {
+    fn take_span(&mut self, key: &str, input: &Node, passed: bool) -> Option<LocalizedSpan> {
         let map = self
             .fleets
             .get_mut(&input.fleet)

@@ -217,7 +217,7 @@ mod tests {
 
     #[test]
     fn cloud_round_trips_to_the_centimetre() {
-        let decoded = decode_node(&node().encode_to_vec()).unwrap();
+        let decoded = decode_node_message(&node().encode_to_vec()).unwrap();
         let wire = decoded.cloud.as_ref().unwrap();
         assert_eq!(wire.classes, [1, 2, 3, 1]);
         assert_eq!(&wire.xyz_cm[..6], [125, -50, -75, -1250, 300, 25]);
@@ -249,7 +249,7 @@ mod tests {
         // are the same) decodes to the same node.
         let mut n = node();
         n.cloud = None;
-        assert_eq!(decode_node(&n.encode_to_vec()).unwrap(), n);
+        assert_eq!(decode_node_message(&n.encode_to_vec()).unwrap(), n);
         // Sent without its cloud, the node is smaller by the cloud's encoding and a field tag.
         let cloud_bytes = wire.encoded_len();
         assert_eq!(
@@ -340,7 +340,7 @@ mod tests {
         // max_points 0: no cap.
         let mut n = node();
         wire_cloud(&mut n).max_points = 0;
-        decode_node(&n.encode_to_vec()).unwrap();
+        decode_node_message(&n.encode_to_vec()).unwrap();
         // More points than the scan had, in all or in one class.
         let err = rejection(|n| wire_cloud(n).source_points = 26_901);
         assert_eq!(
@@ -367,9 +367,9 @@ mod tests {
         let mut n = node();
         wire_scan(&mut n).counts = None;
         wire_cloud(&mut n).source_points = 4;
-        decode_node(&n.encode_to_vec()).unwrap();
+        decode_node_message(&n.encode_to_vec()).unwrap();
         wire_cloud(&mut n).source_points = 3;
-        let err = decode_node(&n.encode_to_vec()).unwrap_err();
+        let err = decode_node_message(&n.encode_to_vec()).unwrap_err();
         assert!(matches!(
             err,
             WireError::Invalid {

@@ -136,7 +136,7 @@ pub(crate) fn wire_cloud(n: &mut v1::Node) -> &mut v1::SegmentedCloud {
 pub(crate) fn rejection(edit: impl FnOnce(&mut v1::Node)) -> WireError {
     let mut n = node();
     edit(&mut n);
-    decode_node(&n.encode_to_vec()).expect_err("must be rejected")
+    decode_node_message(&n.encode_to_vec()).expect_err("must be rejected")
 }
 
 pub(crate) fn wire_scan(n: &mut v1::Node) -> &mut v1::LeveledScan {

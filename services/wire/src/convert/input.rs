@@ -1,20 +1,24 @@
 //! Received messages as domain types: what the mapping takes, parsed once at the edge of the
 //! mapper so that nothing past it sees a protobuf message.
 
-use super::gps::gps_fix_from_wire;
+use super::cloud::{ClassifiedCloud, cloud_from_wire, cloud_to_wire};
+use super::gps::{gps_fix_from_wire, gps_fix_to_wire};
+use super::localization::matching_scan;
 use super::node::{decode_odometry, validate_node};
-use super::odometry::odometry_from_wire;
-use super::pose::pose2_from_wire;
-use super::scan::{counts_from_wire, leveled_scan_from_wire};
-use crate::{MAX_NODE_BYTES, MAX_SPEED_M_PER_S, WireError, v1};
+use super::odometry::{odometry_from_wire, odometry_to_wire};
+use super::pose::{pose2_from_wire, pose2_to_wire};
+use super::scan::{counts_from_wire, counts_to_wire, leveled_scan_from_wire, leveled_scan_to_wire};
+use crate::{MAX_NODE_BYTES, MAX_SPEED_M_PER_S, Message, WireError, v1};
 use leveling::{ClassCounts, LeveledScan, TimedPose};
 use slam::Pose2;
 use slam::gnss::GpsFix;
+use slam::matching::Scan2;
 
-/// One node of a robot, checked: a leveled scan with its odometry and the GPS fixes carried
-/// to it (see `node.proto`). The segmented cloud, stored apart, is not part of it.
+/// One node of a robot as it is built, before its check: a leveled scan with its odometry,
+/// the GPS fixes carried to it and, optionally, its segmented cloud (see `node.proto`). Only
+/// [`Node::new`] (at the robot) and [`decode_node`] (at the mapper) make a [`Node`] of it.
 #[derive(Clone, Debug, PartialEq)]
-pub struct NodeInput {
+pub struct NodeParts {
     /// The sender's fleet.
     pub fleet: String,
     /// The sender's robot.
@@ -23,7 +27,8 @@ pub struct NodeInput {
     pub node_seq: u64,
     /// The robot's chain (`Node.chain_id`; 0 from senders before chains).
     pub chain_id: u64,
-    /// The lowest node_seq of the chain the robot still held when it sent this one.
+    /// The lowest node_seq of the chain the robot still held when it sent this one (0 as
+    /// built: each send sets it, [`crate::node_as_sent`]).
     pub held_from_seq: u64,
     /// The scan's start (ns since the Unix epoch).
     pub stamp_ns: u64,
@@ -34,20 +39,82 @@ pub struct NodeInput {
     /// Dead reckoning at the scan's start (odometry frame, 3D: its attitude levels the GPS
     /// lever arm).
     pub odometry: TimedPose,
+    /// The robot's planar motion since its previous node, if there is one.
+    pub odometry_delta: Option<Pose2>,
     /// The scan's frame in the robot's planar frame.
     pub scan_origin: Pose2,
     /// Every fix since the previous node, oldest first (`earlier_gps`, then `gps`).
     pub gps: Vec<GpsFix>,
+    /// The segmented 3D cloud, when the robot keeps it (the mapper stores it apart).
+    pub cloud: Option<ClassifiedCloud>,
 }
 
-impl NodeInput {
-    /// The leveled scan as bearings (rad) and ranges (m, 0 = no return), as it came.
-    pub fn polar(&self) -> (Vec<f32>, Vec<f32>) {
-        self.scan
-            .beams
-            .iter()
-            .map(|b| (b.bearing_rad, b.range_m.unwrap_or(0.0)))
-            .unzip()
+/// One node of a robot, checked: the one form of a node between the node builder and the
+/// mapping. Read its parts through `Deref`; a changed node is made again with
+/// [`Node::new`] from [`Node::into_parts`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Node(NodeParts);
+
+impl std::ops::Deref for Node {
+    type Target = NodeParts;
+
+    fn deref(&self) -> &NodeParts {
+        &self.0
+    }
+}
+
+impl Node {
+    /// Checks `parts` by the rules the mapper decodes a node with ([`validate_node`]: the
+    /// contract's rules are written once, on the message), so a node the robot makes is a
+    /// node the mapper takes.
+    pub fn new(parts: NodeParts) -> Result<Node, WireError> {
+        validate_node(&node_to_wire(&parts))?;
+        Ok(Node(parts))
+    }
+
+    /// The parts, to change and check again.
+    pub fn into_parts(self) -> NodeParts {
+        self.0
+    }
+
+    /// The node's scan as matching uses it, cut at `max_range_m`.
+    pub fn matching_scan(&self, max_range_m: f32) -> Scan2 {
+        matching_scan(&self.scan, max_range_m)
+    }
+}
+
+impl NodeParts {
+    /// The node's encoding as the outbox keeps it: header send number, send time and
+    /// `held_from_seq` 0 (each send appends its own, [`crate::node_as_sent`]).
+    pub fn encode(&self) -> Vec<u8> {
+        node_to_wire(self).encode_to_vec()
+    }
+}
+
+/// The node as its message.
+fn node_to_wire(node: &NodeParts) -> v1::Node {
+    let header = v1::Header::new(&node.fleet, &node.robot, 0, node.stamp_ns, 0);
+    let mut scan =
+        leveled_scan_to_wire(&node.scan, &node.counts.unwrap_or_default(), header.clone());
+    scan.counts = node.counts.as_ref().map(counts_to_wire);
+    let mut fixes: Vec<v1::GpsFix> = node
+        .gps
+        .iter()
+        .map(|fix| gps_fix_to_wire(fix, header.clone()))
+        .collect();
+    let gps = fixes.pop();
+    v1::Node {
+        header: Some(header.clone()),
+        node_seq: node.node_seq,
+        scan: Some(scan),
+        odometry: Some(odometry_to_wire(&node.odometry, header)),
+        gps,
+        odometry_delta_from_previous: node.odometry_delta.as_ref().map(pose2_to_wire),
+        scan_origin_in_robot: Some(pose2_to_wire(&node.scan_origin)),
+        earlier_gps: fixes,
+        cloud: node.cloud.as_ref().map(cloud_to_wire),
+        chain_id: node.chain_id,
+        held_from_seq: node.held_from_seq,
     }
 }
 
@@ -80,8 +147,8 @@ pub fn check_step(previous: (u64, [f64; 2]), next: (u64, [f64; 2])) -> Result<()
     Ok(())
 }
 
-/// A node as the mapping takes it; every check of [`validate_node`] applies.
-pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
+/// A node message as the mapping takes it; every check of [`validate_node`] applies.
+pub fn node_from_wire(node: &v1::Node) -> Result<Node, WireError> {
     validate_node(node)?;
     let header = node.header.as_ref().ok_or(WireError::Missing {
         field: "Node.header",
@@ -93,7 +160,7 @@ pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
     let odometry = node.odometry.as_ref().ok_or(WireError::Missing {
         field: "Node.odometry",
     })?;
-    Ok(NodeInput {
+    Ok(Node(NodeParts {
         fleet: header.fleet_id.clone(),
         robot: header.robot_id.clone(),
         node_seq: node.node_seq,
@@ -103,6 +170,11 @@ pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
         scan: leveled_scan_from_wire(scan)?,
         counts: scan.counts.as_ref().map(counts_from_wire).transpose()?,
         odometry: odometry_from_wire(odometry)?,
+        odometry_delta: node
+            .odometry_delta_from_previous
+            .as_ref()
+            .map(pose2_from_wire)
+            .transpose()?,
         scan_origin: node
             .scan_origin_in_robot
             .as_ref()
@@ -113,7 +185,8 @@ pub fn node_input(node: &v1::Node) -> Result<NodeInput, WireError> {
             .chain(&node.gps)
             .map(gps_fix_from_wire)
             .collect::<Result<_, _>>()?,
-    })
+        cloud: node.cloud.as_ref().map(cloud_from_wire).transpose()?,
+    }))
 }
 
 /// A message over [`MAX_NODE_BYTES`] is refused before it is decoded.
@@ -130,12 +203,12 @@ fn check_size(field: &'static str, bytes: &[u8]) -> Result<(), WireError> {
     Ok(())
 }
 
-/// Decodes a node and parses it into its [`NodeInput`] (checked once); the message is
-/// returned too, for what is stored of it.
-pub fn decode_node_input(bytes: &[u8]) -> Result<(NodeInput, v1::Node), WireError> {
+/// Decodes a node and checks it into a [`Node`], once: bytes over [`MAX_NODE_BYTES`],
+/// garbage, a missing header, a foreign wire version and every failure of [`validate_node`]
+/// are errors.
+pub fn decode_node(bytes: &[u8]) -> Result<Node, WireError> {
     check_size("Node", bytes)?;
-    let node: v1::Node = super::decode("Node", bytes)?;
-    Ok((node_input(&node)?, node))
+    node_from_wire(&super::decode("Node", bytes)?)
 }
 
 /// A robot's live odometry, checked.
@@ -163,9 +236,9 @@ pub fn odometry_input(bytes: &[u8]) -> Result<OdometryInput, WireError> {
     })
 }
 
-/// A robot's live leveled scan, checked (`live_scan.proto`).
+/// A robot's live leveled scan (`live_scan.proto`): for live views, not a node.
 #[derive(Clone, Debug, PartialEq)]
-pub struct LiveScanInput {
+pub struct LiveScan {
     /// The sender's fleet.
     pub fleet: String,
     /// The sender's robot.
@@ -174,21 +247,65 @@ pub struct LiveScanInput {
     pub stamp_ns: u64,
     /// The leveled scan.
     pub scan: LeveledScan,
+    /// The scan's points per class, when known.
+    pub counts: Option<ClassCounts>,
     /// Dead reckoning at the scan's start.
     pub odometry: TimedPose,
     /// The scan's frame in the robot's planar frame.
     pub scan_origin: Pose2,
 }
 
-/// Decodes and checks a live scan into a [`LiveScanInput`].
-pub fn live_scan_input(bytes: &[u8]) -> Result<LiveScanInput, WireError> {
+impl LiveScan {
+    /// A node's scan as a live scan.
+    pub fn of_node(node: &Node) -> LiveScan {
+        LiveScan {
+            fleet: node.fleet.clone(),
+            robot: node.robot.clone(),
+            stamp_ns: node.stamp_ns,
+            scan: node.scan.clone(),
+            counts: node.counts,
+            odometry: node.odometry,
+            scan_origin: node.scan_origin,
+        }
+    }
+
+    /// Its message as sent: publication `seq` of the robot, sent at `sent_ns`.
+    pub fn encode(&self, seq: u64, sent_ns: u64) -> Vec<u8> {
+        let header = v1::Header::new(&self.fleet, &self.robot, seq, self.stamp_ns, sent_ns);
+        let mut scan =
+            leveled_scan_to_wire(&self.scan, &self.counts.unwrap_or_default(), header.clone());
+        scan.counts = self.counts.as_ref().map(counts_to_wire);
+        v1::LiveScan {
+            header: Some(header.clone()),
+            scan: Some(scan),
+            odometry: Some(odometry_to_wire(&self.odometry, header)),
+            scan_origin_in_robot: Some(pose2_to_wire(&self.scan_origin)),
+        }
+        .encode_to_vec()
+    }
+}
+
+/// Live odometry as sent: `pose` of `robot` of `fleet`, publication `seq`, sent at `sent_ns`.
+pub fn encode_odometry(
+    fleet: &str,
+    robot: &str,
+    pose: &TimedPose,
+    seq: u64,
+    sent_ns: u64,
+) -> Vec<u8> {
+    let header = v1::Header::new(fleet, robot, seq, pose.stamp_ns, sent_ns);
+    odometry_to_wire(pose, header).encode_to_vec()
+}
+
+/// Decodes and checks a live scan into a [`LiveScan`].
+pub fn decode_live_scan(bytes: &[u8]) -> Result<LiveScan, WireError> {
     check_size("LiveScan", bytes)?;
     let msg: v1::LiveScan = super::decode("LiveScan", bytes)?;
     live_scan_from_wire(&msg)
 }
 
-/// A live scan message checked into a [`LiveScanInput`].
-pub fn live_scan_from_wire(msg: &v1::LiveScan) -> Result<LiveScanInput, WireError> {
+/// A live scan message checked into a [`LiveScan`].
+fn live_scan_from_wire(msg: &v1::LiveScan) -> Result<LiveScan, WireError> {
     let header = super::check_header(msg.header.as_ref(), "LiveScan.header")?;
     let scan = msg.scan.as_ref().ok_or(WireError::Missing {
         field: "LiveScan.scan",
@@ -204,11 +321,12 @@ pub fn live_scan_from_wire(msg: &v1::LiveScan) -> Result<LiveScanInput, WireErro
             super::same_sender(header, inner, field)?;
         }
     }
-    Ok(LiveScanInput {
+    Ok(LiveScan {
         fleet: header.fleet_id.clone(),
         robot: header.robot_id.clone(),
         stamp_ns: header.stamp_ns,
         scan: leveled_scan_from_wire(scan)?,
+        counts: scan.counts.as_ref().map(counts_from_wire).transpose()?,
         odometry: odometry_from_wire(odometry)?,
         scan_origin: msg
             .scan_origin_in_robot
@@ -221,18 +339,14 @@ pub fn live_scan_from_wire(msg: &v1::LiveScan) -> Result<LiveScanInput, WireErro
 mod tests {
     use super::*;
     use crate::convert::fixtures::*;
-    use prost::Message;
 
     #[test]
     fn a_live_scan_is_checked_like_a_nodes_scan() {
-        let wire = node();
-        let live = v1::LiveScan::of_node(&wire);
-        let input = live_scan_input(&live.encode_to_vec()).unwrap();
-        let from_node = node_input(&wire).unwrap();
-        assert_eq!(input.scan, from_node.scan);
-        assert_eq!(input.odometry, from_node.odometry);
-        assert_eq!(input.scan_origin, from_node.scan_origin);
-        let mut forged = live.clone();
+        let node = node_from_wire(&node()).unwrap();
+        let live = LiveScan::of_node(&node);
+        let bytes = live.encode(3, STAMP_NS + 7);
+        assert_eq!(decode_live_scan(&bytes).unwrap(), live);
+        let mut forged = v1::LiveScan::decode(&bytes[..]).unwrap();
         forged
             .odometry
             .as_mut()
@@ -242,16 +356,15 @@ mod tests {
             .unwrap()
             .robot_id = "other".into();
         assert!(matches!(
-            live_scan_input(&forged.encode_to_vec()),
+            decode_live_scan(&forged.encode_to_vec()),
             Err(WireError::Invalid {
                 field: "LiveScan.odometry.header",
                 ..
             })
         ));
-        let mut no_scan = live;
-        no_scan.scan = None;
+        forged.scan = None;
         assert!(matches!(
-            live_scan_input(&no_scan.encode_to_vec()),
+            decode_live_scan(&forged.encode_to_vec()),
             Err(WireError::Missing {
                 field: "LiveScan.scan"
             })
@@ -259,30 +372,63 @@ mod tests {
     }
 
     #[test]
-    fn a_node_becomes_its_domain_input_once() {
+    fn a_node_becomes_its_domain_form_once() {
         let wire = node();
-        let input = node_input(&wire).unwrap();
+        let domain = node_from_wire(&wire).unwrap();
         assert_eq!(
-            (input.fleet.as_str(), input.robot.as_str()),
+            (domain.fleet.as_str(), domain.robot.as_str()),
             ("campus", "rover-1")
         );
-        assert_eq!(input.node_seq, wire.node_seq);
-        assert_eq!(input.stamp_ns, STAMP_NS);
+        assert_eq!(domain.node_seq, wire.node_seq);
+        assert_eq!(domain.stamp_ns, STAMP_NS);
         let scan = wire.scan.as_ref().unwrap();
-        let (bearings, ranges) = input.polar();
-        assert_eq!((&bearings, &ranges), (&scan.bearing_rad, &scan.range_m));
-        assert_eq!(input.counts, Some(counts()));
-        assert_eq!(input.gps.len(), wire.earlier_gps.len() + 1);
+        let ranges: Vec<f32> = domain
+            .scan
+            .beams
+            .iter()
+            .map(|b| b.range_m.unwrap_or(0.0))
+            .collect();
+        assert_eq!(ranges, scan.range_m);
+        assert_eq!(domain.counts, Some(counts()));
+        assert_eq!(domain.gps.len(), wire.earlier_gps.len() + 1);
         assert_eq!(
-            input.gps.last().unwrap().position.latitude_deg,
+            domain.gps.last().unwrap().position.latitude_deg,
             wire.gps.as_ref().unwrap().latitude_deg
         );
-        // Whatever validate_node rejects, node_input rejects.
+        assert_eq!(domain.cloud.as_ref().unwrap().points_m.len(), 4);
+        // Whatever validate_node rejects, decoding rejects.
         let mut bad = node();
         bad.scan.as_mut().unwrap().range_m[3] = f32::NAN;
         assert_eq!(
-            node_input(&bad).unwrap_err().to_string(),
+            decode_node(&bad.encode_to_vec()).unwrap_err().to_string(),
             validate_node(&bad).unwrap_err().to_string()
         );
+    }
+
+    #[test]
+    fn a_node_encoded_once_decodes_to_itself() {
+        let node = node_from_wire(&node()).unwrap();
+        let mut parts = node.clone().into_parts();
+        parts.held_from_seq = 0;
+        let built = Node::new(parts).unwrap();
+        // The fixture's satellites and send fields are not the domain's: compare domain forms.
+        assert_eq!(decode_node(&built.encode()).unwrap(), built);
+        // Without counts, GPS, a cloud and a previous node too.
+        let mut bare = built.clone().into_parts();
+        (bare.counts, bare.cloud, bare.odometry_delta) = (None, None, None);
+        bare.gps.clear();
+        let bare = Node::new(bare).unwrap();
+        assert_eq!(decode_node(&bare.encode()).unwrap(), bare);
+        // The constructor holds the mapper's rules: a NaN range is no node.
+        let mut bad = built.into_parts();
+        bad.scan.beams[2].range_m = Some(f32::NAN);
+        assert!(matches!(
+            Node::new(bad),
+            Err(WireError::InvalidValue {
+                field: "LeveledScan.range_m",
+                index: Some(2),
+                ..
+            })
+        ));
     }
 }

@@ -164,7 +164,16 @@ impl LocalizeQuery {
 
 /// A leveled scan's returns as matching uses them, cut at `max_range_m`.
 pub fn matching_scan(scan: &LeveledScan, max_range_m: f32) -> Scan2 {
-    let (bearings, ranges): (Vec<f32>, Vec<f32>) = scan.returns().unzip();
+    scan_of_returns(scan.returns(), max_range_m)
+}
+
+/// Returns (bearing in rad, range in m) as a `Scan2`, cut at `max_range_m`: the one place a
+/// scan becomes what matching, the grids and localization use.
+pub(crate) fn scan_of_returns(
+    returns: impl Iterator<Item = (f32, f32)>,
+    max_range_m: f32,
+) -> Scan2 {
+    let (bearings, ranges): (Vec<f32>, Vec<f32>) = returns.unzip();
     Scan2::from_polar(&bearings, &ranges, max_range_m).expect("returns come in pairs")
 }
 

@@ -20,16 +20,18 @@ pub use cloud::{
 };
 pub use gps::{fix_status_to_wire, gps_fix_from_wire, gps_fix_to_wire, validate_gps_fix};
 pub use input::{
-    LiveScanInput, NodeInput, OdometryInput, check_step, decode_node_input, live_scan_from_wire,
-    live_scan_input, node_input, odometry_input,
+    LiveScan, Node, NodeParts, OdometryInput, check_step, decode_live_scan, decode_node,
+    encode_odometry, node_from_wire, odometry_input,
 };
 pub use localization::{
     DEFAULT_PRIOR_SIGMA, LocalizeQuery, Localized, decode_localization, decode_localize_request,
     localization_to_wire, localize_query, matching_scan,
 };
 pub use map::{MapPose, decode_map_poses, decode_map_summary, map_poses_to_wire};
+#[cfg(test)]
+pub(crate) use node::decode_node_message;
 pub use node::{
-    decode_ack, decode_node, decode_odometry, node_as_sent, validate_ack, validate_node,
+    decode_ack, decode_odometry, node_as_sent, split_node_cloud, validate_ack, validate_node,
 };
 pub use odometry::{odometry_from_wire, odometry_to_wire};
 pub use pose::{

@@ -101,9 +101,9 @@ pub fn validate_ack(ack: &v1::Ack) -> Result<(), WireError> {
     check_header(ack.header.as_ref(), "Ack.header").map(drop)
 }
 
-/// Decodes and checks a node ([`validate_node`]): garbage bytes, a missing header, a wire
-/// version other than 1 and a bad scan, pose or fix are errors.
-pub fn decode_node(bytes: &[u8]) -> Result<v1::Node, WireError> {
+/// Decodes and checks a node message ([`validate_node`]), for the tests of the checks.
+#[cfg(test)]
+pub(crate) fn decode_node_message(bytes: &[u8]) -> Result<v1::Node, WireError> {
     let node: v1::Node = decode("Node", bytes)?;
     validate_node(&node)?;
     Ok(node)
@@ -131,6 +131,63 @@ pub fn node_as_sent(stored: &[u8], held_from_seq: u64, header_seq: u64, sent_ns:
     bytes
 }
 
+/// A received node's encoding split, without decoding or re-encoding the node, into the
+/// node without its cloud and the cloud's own encoding (`Node.cloud`, field 9): the mapper
+/// stores the two apart. Several cloud fields merge, as protobuf merges them. `bytes` must be
+/// a node that decoded; an encoding this scan does not follow (groups) is split by decoding.
+pub fn split_node_cloud(bytes: Vec<u8>) -> (Vec<u8>, Option<Vec<u8>>) {
+    const CLOUD_FIELD: u32 = 9;
+    let mut node = Vec::with_capacity(bytes.len());
+    let mut cloud: Option<Vec<u8>> = None;
+    let mut rest = &bytes[..];
+    while !rest.is_empty() {
+        let Some((tag, content, after)) = next_field(rest) else {
+            return split_by_decoding(bytes);
+        };
+        let field = &rest[..rest.len() - after.len()];
+        if tag == CLOUD_FIELD {
+            cloud.get_or_insert_default().extend_from_slice(content);
+        } else {
+            node.extend_from_slice(field);
+        }
+        rest = after;
+    }
+    match cloud {
+        None => (bytes, None),
+        some => (node, some),
+    }
+}
+
+/// The first field of `bytes`: its number, its content (a length-delimited field's payload)
+/// and the bytes after it; `None` for a group or a malformed field.
+fn next_field(mut bytes: &[u8]) -> Option<(u32, &[u8], &[u8])> {
+    use prost::encoding::{WireType, decode_key, decode_varint};
+    let (tag, wire_type) = decode_key(&mut bytes).ok()?;
+    let len = match wire_type {
+        WireType::Varint => {
+            let before = bytes.len();
+            let mut probe = bytes;
+            decode_varint(&mut probe).ok()?;
+            before - probe.len()
+        }
+        WireType::SixtyFourBit => 8,
+        WireType::ThirtyTwoBit => 4,
+        WireType::LengthDelimited => usize::try_from(decode_varint(&mut bytes).ok()?).ok()?,
+        WireType::StartGroup | WireType::EndGroup => return None,
+    };
+    (len <= bytes.len()).then(|| (tag, &bytes[..len], &bytes[len..]))
+}
+
+fn split_by_decoding(bytes: Vec<u8>) -> (Vec<u8>, Option<Vec<u8>>) {
+    let Ok(mut node) = v1::Node::decode(&bytes[..]) else {
+        return (bytes, None);
+    };
+    match node.cloud.take() {
+        Some(cloud) => (node.encode_to_vec(), Some(cloud.encode_to_vec())),
+        None => (bytes, None),
+    }
+}
+
 /// Decodes and checks live odometry ([`odometry_from_wire`]).
 pub fn decode_odometry(bytes: &[u8]) -> Result<v1::Odometry, WireError> {
     let odometry: v1::Odometry = decode("Odometry", bytes)?;
@@ -154,7 +211,7 @@ mod tests {
     #[test]
     fn garbage_bytes_are_rejected() {
         for bytes in [&b"garbage"[..], &[0xff; 16], &[0x0a, 0x05, 0x01]] {
-            let err = decode_node(bytes).unwrap_err();
+            let err = decode_node_message(bytes).unwrap_err();
             assert!(
                 matches!(
                     err,
@@ -170,7 +227,7 @@ mod tests {
         }
         // Empty bytes are a valid encoding of an empty node, which has no header.
         assert_eq!(
-            decode_node(&[]).unwrap_err(),
+            decode_node_message(&[]).unwrap_err(),
             WireError::Missing {
                 field: "Node.header"
             }
@@ -260,7 +317,7 @@ mod tests {
         n.gps = None;
         n.earlier_gps.clear();
         n.odometry_delta_from_previous = None;
-        decode_node(&n.encode_to_vec()).unwrap();
+        decode_node_message(&n.encode_to_vec()).unwrap();
     }
 
     #[test]
@@ -434,7 +491,7 @@ mod tests {
         edge.odometry.as_mut().unwrap().pose.as_mut().unwrap().x_m = MAX_POSITION_M;
         validate_node(&edge).unwrap();
         let big = vec![0u8; MAX_NODE_BYTES + 1];
-        assert_eq!(decode_node_input(&big).unwrap_err().reason(), "too_large");
+        assert_eq!(decode_node(&big).unwrap_err().reason(), "too_large");
     }
 
     #[test]
@@ -459,19 +516,45 @@ mod tests {
         (header.seq, header.sent_ns) = (0, 0);
         let bytes = stored.encode_to_vec();
         let sent = node_as_sent(&bytes, 7, 41, 123_456_789);
-        let decoded = decode_node(&sent).unwrap();
+        let decoded = decode_node_message(&sent).unwrap();
         let mut expected = stored.clone();
         expected.held_from_seq = 7;
         let header = expected.header.as_mut().unwrap();
         (header.seq, header.sent_ns) = (41, 123_456_789);
         assert_eq!(decoded, expected, "only the send fields change");
         // Nothing held below the first node yet: the stored 0 stays.
-        let first = decode_node(&node_as_sent(&bytes, 0, 1, 5)).unwrap();
+        let first = decode_node_message(&node_as_sent(&bytes, 0, 1, 5)).unwrap();
         assert_eq!(first.held_from_seq, 0);
         assert_eq!(
             first.header.unwrap().fleet_id,
             stored.header.unwrap().fleet_id
         );
+    }
+
+    #[test]
+    fn a_cloud_is_split_from_its_node_without_re_encoding() {
+        let sent = node();
+        let bytes = sent.encode_to_vec();
+        let (stored, cloud) = split_node_cloud(bytes.clone());
+        let mut expected = sent.clone();
+        let expected_cloud = expected.cloud.take().unwrap();
+        assert_eq!(v1::Node::decode(&stored[..]).unwrap(), expected);
+        assert_eq!(
+            stored,
+            expected.encode_to_vec(),
+            "the other fields' bytes as sent"
+        );
+        let cloud = v1::SegmentedCloud::decode(&cloud.unwrap()[..]).unwrap();
+        assert_eq!(cloud, expected_cloud);
+        // Without a cloud: the bytes themselves.
+        let bare = expected.encode_to_vec();
+        assert_eq!(split_node_cloud(bare.clone()), (bare, None));
+        // A group (wire type 3) is split by decoding: prost skips it.
+        let mut grouped = vec![(15 << 3) | 3, (15 << 3) | 4];
+        grouped.extend_from_slice(&bytes);
+        let (stored, cloud) = split_node_cloud(grouped);
+        assert_eq!(v1::Node::decode(&stored[..]).unwrap(), expected);
+        assert!(cloud.is_some());
     }
 
     #[test]

@@ -165,7 +165,7 @@ mod tests {
     fn leveled_scan_round_trips_through_bytes() {
         let original = scan();
         let bytes = node().encode_to_vec();
-        let decoded = decode_node(&bytes).unwrap();
+        let decoded = decode_node_message(&bytes).unwrap();
         let wire = decoded.scan.as_ref().unwrap();
         assert_eq!(wire.columns, 360);
         assert_eq!(wire.header.as_ref().unwrap().stamp_ns, STAMP_NS);

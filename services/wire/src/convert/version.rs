@@ -67,6 +67,11 @@ pub struct VersionNode {
 }
 
 impl VersionNode {
+    /// The scan as matching uses it, cut at `max_range_m` ([`super::matching_scan`]'s rule).
+    pub fn matching_scan(&self, max_range_m: f32) -> slam::matching::Scan2 {
+        super::localization::scan_of_returns(self.returns(), max_range_m)
+    }
+
     /// The beams with a return, as (bearing in rad, range in m).
     pub fn returns(&self) -> impl Iterator<Item = (f32, f32)> + '_ {
         self.bearings_rad

@@ -141,7 +141,7 @@ fn map_as_the_worker(
     let mut edges = 0;
     let mut arrival = 0;
     for bytes in nodes {
-        let (input, _) = wire::decode_node_input(bytes).unwrap();
+        let input = wire::decode_node(bytes).unwrap();
         // Over covered ground: a span, as the worker takes it.
         if map.pass(&input).is_some() {
             let span = map.take_localized(&input, true).unwrap();
@@ -248,7 +248,7 @@ fn a_snapshot_and_the_nodes_after_it_restore_what_a_full_replay_maps() {
     // Both go on mapping the same way.
     let (mut a, mut b) = (restored, full);
     for r in 0..3 {
-        let (input, _) = wire::decode_node_input(&node(r, 110).encode_to_vec()).unwrap();
+        let input = wire::decode_node(&node(r, 110).encode_to_vec()).unwrap();
         a.ingest(&input).unwrap();
         b.ingest(&input).unwrap();
     }
