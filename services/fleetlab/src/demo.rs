@@ -4,6 +4,7 @@
 //! fixed horizontal 2D scanner (the paper's baseline, [`crate::fixed2d`]) for comparison.
 
 use crate::FLEET;
+use crate::map_score::MapScore;
 use anyhow::{Context, Result};
 use clap::Args;
 use edge::{EdgeConfig, SimSourceConfig, SourceConfig};
@@ -97,10 +98,15 @@ struct DemoReport {
     ate_aligned: bool,
     /// Connected parts of the pose network (1: every robot in one map).
     components: usize,
+    /// The grid against the simulator's truth (docs/slam.md); none when the map has a frame
+    /// of its own (`--no-gps --scatter-starts`).
+    map: Option<MapScore>,
     /// The same run mapped from the fixed 2D scanners instead (m); only for the docked
     /// start with GPS, the baseline's setting.
     ate_rmse_fixed2d_m: Option<f64>,
     fixed2d_loop_closures: Option<usize>,
+    /// The fixed 2D scanners' grid against the truth.
+    map_fixed2d: Option<MapScore>,
     node_sends: u64,
     node_resends: u64,
     /// Nodes left unacked in the outboxes (0 when every node reached the map).
@@ -146,8 +152,9 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
     })
     .await?;
     let api = format!("http://{}/api/v1/fleets/{FLEET}", mapper.http_addr);
+    let dashboard = format!("http://{}/", mapper.http_addr);
     if !args.json {
-        println!("mapper: Zenoh {} · HTTP {api}/summary", args.zenoh);
+        println!("mapper: Zenoh {} · dashboard {dashboard}", args.zenoh);
     }
     let epoch_ns = runtime::session::now_ns();
     let duration_ns = (args.duration * 1e9) as u64;
@@ -182,17 +189,29 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         Some(_) => Some(after_first_lap(&mapper, &truth, epoch_ns, ate_aligned, &args.dir).await?),
         None => None,
     };
+    let progress = (!args.json).then(|| {
+        tokio::spawn(show_progress(
+            mapper.shared.clone(),
+            epoch_ns,
+            args.duration,
+        ))
+    });
     let mut sends = (0, 0, 0);
+    let mut reports = Vec::new();
     for robot in robots {
-        let report = robot.await??;
+        reports.push(robot.await??);
+    }
+    if let Some(progress) = progress {
+        progress.abort();
+    }
+    for report in reports {
         if !args.json {
+            let acked = report
+                .acked_node_seq
+                .map_or("none acked".to_owned(), |seq| format!("acked up to {seq}"));
             println!(
-                "{}: {} nodes, {} sends ({} re-sends), acked up to {:?}",
-                report.robot,
-                report.nodes,
-                report.node_sends,
-                report.node_resends,
-                report.acked_node_seq
+                "{}: {} nodes, {} sends ({} re-sends), {acked}",
+                report.robot, report.nodes, report.node_sends, report.node_resends,
             );
         }
         sends.0 += report.node_sends;
@@ -205,6 +224,13 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         .fleet(FLEET)
         .context("no node reached the mapper")?;
     let ate = ate_of(&view, &truth, epoch_ns, ate_aligned);
+    let map = if ate_aligned {
+        None
+    } else {
+        let grid = view.grid(&slam::GridParams::default())?;
+        let paths: Vec<Vec<[f64; 2]>> = truth.iter().map(crate::map_score::path_of).collect();
+        Some(crate::map_score::score(&grid, edge::park(), &paths))
+    };
     // Seconds of simulation and mapping (minutes in a debug build): on the blocking pool, so
     // that the mapper's HTTP API, on this runtime, goes on answering meanwhile.
     let baseline = if args.no_gps || args.scatter_starts || args.no_baseline {
@@ -234,8 +260,10 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
             gps: Vec::new(),
         }
         .component_count(),
-        ate_rmse_fixed2d_m: baseline.map(|b| b.0),
-        fixed2d_loop_closures: baseline.map(|b| b.1),
+        map,
+        ate_rmse_fixed2d_m: baseline.map(|b| b.ate_rmse_m),
+        fixed2d_loop_closures: baseline.map(|b| b.loop_closures),
+        map_fixed2d: baseline.map(|b| b.map),
         node_sends: sends.0,
         node_resends: sends.1,
         outbox_pending: sends.2,
@@ -268,16 +296,32 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
             ""
         };
         match baseline {
-            Some((ate_fixed, _)) => println!(
-                "ATE: leveled scans {ate:.3} m, fixed 2D scanner {ate_fixed:.3} m ({:.1}x worse)",
-                ate_fixed / ate
+            Some(fixed) => println!(
+                "ATE: leveled scans {ate:.3} m, fixed 2D scanner {:.3} m ({:.1}x worse)",
+                fixed.ate_rmse_m,
+                fixed.ate_rmse_m / ate
             ),
             None => println!("ATE: leveled scans {ate:.3} m{aligned}"),
+        }
+        let line = |who: &str, s: &MapScore| {
+            println!(
+                "grid ({who}): {:.1} % of {} obstacles shown, {:.2} % of obstacle cells free, {:.1} % of the free space near the paths free",
+                100.0 * s.obstacle_recall,
+                s.obstacles,
+                100.0 * s.false_free,
+                100.0 * s.free_coverage
+            )
+        };
+        if let Some(s) = &report.map {
+            line("leveled scans", s);
+        }
+        if let Some(s) = &report.map_fixed2d {
+            line("fixed 2D scanner", s);
         }
     }
     if args.serve {
         if !args.json {
-            println!("serving {api}/summary until Ctrl-C (or SIGTERM)");
+            println!("serving the dashboard at {dashboard} until Ctrl-C (or SIGTERM)");
         }
         let _ = ctrl_c.await;
     } else {
@@ -304,6 +348,38 @@ fn ate_of(view: &fleetmap::FleetView, truth: &[FleetRobot], epoch_ns: u64, align
         slam::aligned_position_rmse(pairs)
     } else {
         slam::position_rmse(pairs)
+    }
+}
+
+/// Prints one line every few seconds while the robots drive: nodes mapped, closures, the
+/// time driven and left.
+async fn show_progress(
+    shared: std::sync::Arc<mapper::views::Shared>,
+    epoch_ns: u64,
+    duration_s: f64,
+) {
+    let started = Instant::now();
+    loop {
+        tokio::time::sleep(std::time::Duration::from_secs(5)).await;
+        let Some(view) = shared.fleet(FLEET) else {
+            continue;
+        };
+        let newest_ns = view
+            .nodes
+            .iter()
+            .map(|n| n.stamp_ns)
+            .max()
+            .unwrap_or(epoch_ns);
+        let driven = newest_ns.saturating_sub(epoch_ns) as f64 * 1e-9;
+        println!(
+            "… {} nodes mapped, {} loop closures; {:.0} of {:.0} s driven ({:.0} s left), {:.0} s wall",
+            view.poses.len(),
+            view.stats.loop_closures,
+            driven.min(duration_s),
+            duration_s,
+            (duration_s - driven).max(0.0),
+            started.elapsed().as_secs_f64()
+        );
     }
 }
 

@@ -2,6 +2,7 @@
 //! instead of its leveled 3D scans, with the mapper's own code ([`FleetMap`]) and parameters,
 //! scored against the simulator's ground truth.
 
+use crate::map_score::MapScore;
 use crate::{FLEET, sim_mapping_params};
 use anyhow::Result;
 use edge::{EdgeConfig, NodeBuilder, PlanarScan};
@@ -10,10 +11,21 @@ use mapper::{FleetMap, MapperConfig};
 use sim::FleetRobot;
 use slam::Pose2;
 
+/// What the fixed 2D scanners' map came to.
+#[derive(Clone, Copy, Debug)]
+pub struct Fixed2dRun {
+    /// RMSE of node positions against ground truth (m).
+    pub ate_rmse_m: f64,
+    /// Loop closures in its network.
+    pub loop_closures: usize,
+    /// Its grid against the truth.
+    pub map: MapScore,
+}
+
 /// The run of `robots` of the park's loops, `duration_s` long with noise seed `seed` (the
 /// simulator is deterministic per seed, so this is the demo's run), from the fixed 2D
-/// scanners, mapped with the mapper's own code and parameters: the ATE and the loop closures.
-pub fn map_fixed2d(robots: usize, duration_s: f64, seed: u64) -> Result<(f64, usize)> {
+/// scanners, mapped with the mapper's own code and parameters, scored against the truth.
+pub fn map_fixed2d(robots: usize, duration_s: f64, seed: u64) -> Result<Fixed2dRun> {
     let duration_ns = (duration_s * 1e9) as u64;
     let defaults = MapperConfig::default();
     let mut map = FleetMap::new(
@@ -78,5 +90,15 @@ pub fn map_fixed2d(robots: usize, duration_s: f64, seed: u64) -> Result<(f64, us
     }
     map.optimize_now()?;
     let ate = slam::position_rmse(map.poses().iter().copied().zip(truth));
-    Ok((ate, map.stats().loop_closures))
+    let grid = fleetmap::grid_of(
+        map.nodes().iter().map(|n| &**n),
+        map.poses(),
+        &slam::GridParams::default(),
+    )?;
+    let paths: Vec<Vec<[f64; 2]>> = robots.iter().map(crate::map_score::path_of).collect();
+    Ok(Fixed2dRun {
+        ate_rmse_m: ate,
+        loop_closures: map.stats().loop_closures,
+        map: crate::map_score::score(&grid, edge::park(), &paths),
+    })
 }

@@ -10,6 +10,7 @@ pub mod bench_incremental;
 pub mod demo;
 pub mod fixed2d;
 pub mod localize_demo;
+pub mod map_score;
 
 pub use bench_fleet::BenchFleetArgs;
 pub use bench_incremental::BenchIncrementalArgs;

@@ -59,11 +59,22 @@ pub struct NodeRecord {
 }
 
 impl NodeRecord {
-    /// Every return of the leveled scan, however far (the map shows what the robot saw;
-    /// matching cuts at the mapper's `max_range_m`).
-    pub fn scan(&self) -> Scan2 {
-        wire::matching_scan(&self.scan, f32::MAX)
+    /// Every beam of the leveled scan, a return or none, as the grid takes it (the map shows
+    /// what the robot saw, up to the grid's `max_range_m`; matching cuts at the mapper's).
+    pub fn fan(&self) -> slam::BeamFan {
+        wire::grid_fan(&self.scan)
     }
+}
+
+/// The probability grid of `nodes` at `poses` (the same order): the one way a fleet's map
+/// becomes a grid (the HTTP map, windows and tiles, versions, ROS 2, the lab's scores).
+pub fn grid_of<'a>(
+    nodes: impl IntoIterator<Item = &'a NodeRecord>,
+    poses: &[Pose2],
+    params: &slam::GridParams,
+) -> Result<slam::OccupancyGrid, slam::GridError> {
+    let fans: Vec<slam::BeamFan> = nodes.into_iter().map(NodeRecord::fan).collect();
+    slam::OccupancyGrid::from_fans(poses.iter().copied().zip(&fans), params)
 }
 
 /// Most robots one fleet takes: per-robot state is bounded (a node of one more is rejected,

@@ -123,7 +123,6 @@ impl FleetView {
 
     /// The occupancy grid of the fleet's leveled scans at their optimized poses.
     pub fn grid(&self, params: &slam::GridParams) -> Result<slam::OccupancyGrid, slam::GridError> {
-        let scans: Vec<slam::matching::Scan2> = self.nodes.iter().map(|n| n.scan()).collect();
-        slam::OccupancyGrid::from_scans(self.poses.iter().copied().zip(&scans), params)
+        crate::fleet::grid_of(self.nodes.iter().map(|n| &**n), &self.poses, params)
     }
 }

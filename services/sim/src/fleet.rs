@@ -136,6 +136,11 @@ impl<'w> FleetRobot<'w> {
         &self.fixed2d
     }
 
+    /// How long it drives (ns from time 0).
+    pub fn duration_ns(&self) -> u64 {
+        self.end_ns
+    }
+
     /// The robot's true pose (robot frame in the world frame) at a time.
     pub fn truth_at(&self, stamp_ns: u64) -> Isometry3<f64> {
         self.route.pose_at(self.world, stamp_ns)

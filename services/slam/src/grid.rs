@@ -1,6 +1,9 @@
 //! The occupancy grid of a scan-based map (docs/slam.md, "Map products"): the leveled scans at
-//! their optimized node poses, ray cast into a grid of log-odds. Every beam clears the cells it
-//! crosses (a supercover traversal, see `traverse`) and marks the cell of its return occupied.
+//! their optimized node poses, ray cast into a grid of log-odds (a probability grid). Every
+//! beam clears the cells it crosses from the sensor's blind zone on (a supercover traversal,
+//! see `traverse`) and adds hit evidence to the cell of its return; neighbouring beams that
+//! see alike clear the wedge between them, and a beam without a return clears only a short
+//! way ([`GridParams`] gives each rule and its reason).
 //! The result is served as occupancy per cent in the layout of ROS `nav_msgs/OccupancyGrid` (−1
 //! unknown, 0–100; row-major, row 0 the southernmost), so the PNG/PGM encoders and any ROS
 //! client read it the same way.
@@ -8,9 +11,11 @@
 //! Within one scan a cell is updated at most once, and a return wins over a beam crossing
 //! it: rays grazing a wall would otherwise erase the wall their neighbours just hit.
 
+mod fan;
 mod params;
 mod raycast;
 
+pub use fan::BeamFan;
 pub use params::{GridError, GridParams};
 
 // The tests reach these through `use super::*`.
@@ -110,210 +115,4 @@ impl OccupancyGrid {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::matching::synthetic::{Scene, uniform_bearings};
-
-    /// A closed square room of side `side_m`, centred on the origin.
-    fn room(side_m: f64) -> Scene {
-        let h = side_m / 2.0;
-        let c = [[-h, -h], [h, -h], [h, h], [-h, h]];
-        Scene {
-            walls: (0..4).map(|i| [c[i], c[(i + 1) % 4]]).collect(),
-            trunks: Vec::new(),
-        }
-    }
-
-    fn scan_of(scene: &Scene, pose: Pose2) -> Scan2 {
-        let bearings = uniform_bearings(720, -std::f64::consts::PI, std::f64::consts::TAU / 720.0);
-        let ranges = scene.scan(&pose, &bearings, 50.0, 0.0, 1);
-        Scan2::from_polar(&bearings, &ranges, 50.0).expect("same lengths")
-    }
-
-    #[test]
-    fn square_room_has_occupied_walls_free_inside_unknown_outside() {
-        // A room of 6.05 m, walls at ±3.025 m: mid-cell, so each wall fills one row of
-        // cells. Scanned from an off-centre, rotated pose.
-        let pose = Pose2::new(0.7, -0.4, 0.5);
-        let scan = scan_of(&room(6.05), pose);
-        let grid = OccupancyGrid::from_scans([(pose, &scan)], &GridParams::default()).unwrap();
-        // The wall cells span −3.1 … 3.1 m, plus one cell of margin on each side.
-        assert_eq!((grid.width, grid.height), (64, 64));
-        assert!((grid.origin_m[0] + 3.2).abs() < 1e-9 && (grid.origin_m[1] + 3.2).abs() < 1e-9);
-        let state = |x: f64, y: f64| {
-            let (ix, iy) = grid.cell_at([x, y]).expect("inside");
-            grid.state(ix, iy)
-        };
-        // Every wall cell holds a return: 4 walls × 62 cells, corners shared (a corner
-        // cell holds only 2.5 cm of each wall, beams are 3–6 cm apart there: it may be missed).
-        for i in 1..61 {
-            let t = -3.05 + 0.1 * i as f64;
-            for (x, y) in [(t, -3.025), (t, 3.025), (-3.025, t), (3.025, t)] {
-                assert_eq!(state(x, y), CellState::Occupied, "wall at ({x}, {y})");
-            }
-        }
-        let (unknown, free, occupied) = grid.counts();
-        assert!((240..=244).contains(&occupied), "{occupied}");
-        // Everything inside the walls is free: 60 × 60 cells; the rest was never seen.
-        assert_eq!(free, 3600);
-        assert_eq!(unknown, 64 * 64 - occupied - 3600);
-        for i in 0..60 {
-            for j in 0..60 {
-                let (x, y) = (-2.95 + 0.1 * i as f64, -2.95 + 0.1 * j as f64);
-                assert_eq!(state(x, y), CellState::Free, "({x}, {y})");
-            }
-        }
-    }
-
-    #[test]
-    fn long_beams_clear_up_to_max_range_only() {
-        // One beam along +x with a return at 10 m, and max range 4 m: free to 4 m, nothing
-        // occupied, nothing seen beyond.
-        let scan = Scan2::from_polar(&[0.0], &[10.0], 50.0).expect("scan");
-        let params = GridParams {
-            max_range_m: 4.0,
-            ..GridParams::default()
-        };
-        let grid = OccupancyGrid::from_scans([(Pose2::IDENTITY, &scan)], &params).expect("grid");
-        let (_, free, occupied) = grid.counts();
-        assert_eq!(occupied, 0);
-        // Cells 0.0–4.0 m along the beam: 40, or 41 when 4.0 m rounds into the next cell.
-        assert!((40..=41).contains(&free), "{free} free");
-        assert!(grid.width <= 43 && grid.height == 3);
-    }
-
-    #[test]
-    fn returns_win_over_passes_and_repeated_passes_clear() {
-        let scene = room(4.0);
-        let pose = Pose2::new(0.0, 0.0, 0.0);
-        let scan = scan_of(&scene, pose);
-        let once = OccupancyGrid::from_scans([(pose, &scan)], &GridParams::default()).unwrap();
-        let thrice =
-            OccupancyGrid::from_scans([(pose, &scan); 3].iter().copied(), &GridParams::default())
-                .unwrap();
-        let (ix, iy) = once.cell_at([1.0, 0.3]).unwrap();
-        // Inside: 33 % after one scan; after three, −2.1 clamps to −2.0: 12 %.
-        assert_eq!(once.occupancy(ix, iy), 33);
-        assert_eq!(thrice.occupancy(ix, iy), 12);
-        let (wx, wy) = once.cell_at([1.99, 0.03]).unwrap();
-        assert_eq!(once.occupancy(wx, wy), 70);
-        assert_eq!(thrice.occupancy(wx, wy), 93);
-    }
-
-    #[test]
-    fn bad_input_is_an_error_not_a_huge_allocation() {
-        let scan = Scan2::from_polar(&[0.0], &[1.0], 50.0).unwrap();
-        let p = GridParams::default();
-        let none: [(Pose2, &Scan2); 0] = [];
-        assert_eq!(OccupancyGrid::from_scans(none, &p), Err(GridError::NoScans));
-        let far = [
-            (Pose2::IDENTITY, &scan),
-            (Pose2::new(1e6, -1e6, 0.0), &scan),
-        ];
-        let err = OccupancyGrid::from_scans(far, &p).unwrap_err();
-        assert!(matches!(err, GridError::TooLarge { .. }), "{err}");
-        assert!(err.to_string().contains("exceeds"), "{err}");
-        let nan = [(Pose2::new(f64::NAN, 0.0, 0.0), &scan)];
-        assert_eq!(
-            OccupancyGrid::from_scans(nan, &p),
-            Err(GridError::NonFinitePose { index: 0 })
-        );
-        let zero = GridParams {
-            resolution_m: 0.0,
-            ..GridParams::default()
-        };
-        assert!(matches!(
-            OccupancyGrid::from_scans([(Pose2::IDENTITY, &scan)], &zero),
-            Err(GridError::InvalidParams(_))
-        ));
-    }
-
-    #[test]
-    fn traversal_visits_every_crossed_cell_without_the_last() {
-        let mut cells = Vec::new();
-        traverse([0.5, 0.5], [5.5, -1.5], |x, y| cells.push((x, y)));
-        // 5 steps in x, 2 in y: 7 cells before the end cell (5, −2), 4-connected.
-        assert_eq!(cells.len(), 7, "{cells:?}");
-        assert_eq!(cells[0], (0, 0));
-        assert!(!cells.contains(&(5, -2)));
-        for w in cells.windows(2) {
-            assert_eq!((w[1].0 - w[0].0).abs() + (w[1].1 - w[0].1).abs(), 1);
-        }
-        // The exact crossings of y = 0 (x = 1.75) and y = −1 (x = 4.25).
-        assert!(
-            cells.contains(&(1, -1)) && cells.contains(&(4, -2)),
-            "{cells:?}"
-        );
-        let mut none = 0;
-        traverse([3.2, 3.7], [3.9, 3.1], |_, _| none += 1);
-        assert_eq!(none, 0);
-    }
-
-    #[test]
-    fn a_window_is_the_same_cells_as_the_whole_grid_there() {
-        let pose = Pose2::new(0.7, -0.4, 0.5);
-        let scan = scan_of(&room(6.05), pose);
-        let whole = OccupancyGrid::from_scans([(pose, &scan)], &GridParams::default()).unwrap();
-        let params = GridParams {
-            window_m: Some([0.0, 0.0, 2.0, 5.0]),
-            ..GridParams::default()
-        };
-        let part = OccupancyGrid::from_scans([(pose, &scan)], &params).unwrap();
-        // x: 0–2 m and a cell of margin each side (−0.1–2.2 m); y: 0 m to the wall's cells.
-        assert_eq!((part.width, part.height), (23, 33));
-        for iy in 0..part.height {
-            for ix in 0..part.width {
-                let (wx, wy) = whole.cell_at(part.cell_center(ix, iy)).expect("inside");
-                assert_eq!(
-                    part.occupancy(ix, iy),
-                    whole.occupancy(wx, wy),
-                    "({ix}, {iy})"
-                );
-            }
-        }
-        let away = GridParams {
-            window_m: Some([100.0, 100.0, 110.0, 110.0]),
-            ..GridParams::default()
-        };
-        // Beyond the map: the window, all unknown.
-        let empty = OccupancyGrid::from_scans([(pose, &scan)], &away).unwrap();
-        assert_eq!((empty.width, empty.height), (102, 102));
-        assert_eq!(empty.counts(), (102 * 102, 0, 0));
-    }
-
-    #[test]
-    fn coarsen_to_fit_grows_the_cells_until_the_grid_fits() {
-        let pose = Pose2::new(0.7, -0.4, 0.5);
-        let scan = scan_of(&room(6.05), pose);
-        let small = GridParams {
-            max_cells: 1000,
-            ..GridParams::default()
-        };
-        assert!(matches!(
-            OccupancyGrid::from_scans([(pose, &scan)], &small),
-            Err(GridError::TooLarge { .. })
-        ));
-        let fit = GridParams {
-            coarsen_to_fit: true,
-            ..small
-        };
-        let grid = OccupancyGrid::from_scans([(pose, &scan)], &fit).unwrap();
-        assert!(
-            grid.width * grid.height <= 1000,
-            "{} × {}",
-            grid.width,
-            grid.height
-        );
-        // 64 × 64 cells of 0.1 m into 1000: cells about 0.2 m, not much coarser.
-        assert!(
-            (0.19..0.23).contains(&grid.resolution_m),
-            "{}",
-            grid.resolution_m
-        );
-        let (_, free, occupied) = grid.counts();
-        assert!(
-            free > 600 && occupied > 80,
-            "{free} free, {occupied} occupied"
-        );
-    }
-}
+mod tests;

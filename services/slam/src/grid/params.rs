@@ -36,6 +36,32 @@ pub struct GridParams {
     /// Only this part of the map, `[min x, min y, max x, max y]` (m): the beams of every scan
     /// that reach it still count.
     pub window_m: Option<[f64; 4]>,
+    /// The sensor's blind zone (m): no beam clears a cell nearer than this to the scan's
+    /// origin. A spinning lidar reports nothing inside its minimum range, so its silence there
+    /// says nothing about the space (0.5 m: about the minimum range of the lidars levelmap
+    /// reads; the robot's own body is often in it).
+    pub blind_zone_m: f64,
+    /// A beam with a return clears up to this much short of it (m): the cells just in front
+    /// of a surface keep it when a scan's pose is a little off (0.1 m: a cell, and about the
+    /// error of a solved pose), and a ray crossing the corner of a cell that is mostly inside
+    /// the object does not call that cell free.
+    pub clear_short_of_hit_m: f64,
+    /// A beam without a return clears free space up to this range (m) and no further: open
+    /// space is likely near the sensor, but the return may also have been lost (glass, black
+    /// paint, a reflection), and such a beam must not clear a wall that other scans saw.
+    /// 5 m, Cartographer's `missing_data_ray_length` in 2D.
+    pub no_return_free_m: f64,
+    /// Neighbouring beams at most this far apart in bearing (rad) clear the wedge between
+    /// them, not only their own lines: beams diverge, and beyond a few metres the cells
+    /// between two lines would stay unknown. 3° fills scans of 1° beams (the Freiburg logs)
+    /// and every finer one, and leaves the gaps where beams were dropped.
+    pub max_wedge_rad: f64,
+    /// Two returns fill their wedge only when their ranges differ by at most this (m)…
+    pub wedge_max_jump_m: f64,
+    /// …or this fraction of the nearer range, whichever is more: a larger jump is an edge
+    /// (one beam passes an object's side, the other hits it), and the space behind the
+    /// nearer object is not seen.
+    pub wedge_max_jump_ratio: f64,
 }
 
 impl Default for GridParams {
@@ -52,6 +78,12 @@ impl Default for GridParams {
             max_cells: 1 << 24,
             coarsen_to_fit: false,
             window_m: None,
+            blind_zone_m: 0.5,
+            clear_short_of_hit_m: 0.1,
+            no_return_free_m: 5.0,
+            max_wedge_rad: 3f64.to_radians(),
+            wedge_max_jump_m: 0.5,
+            wedge_max_jump_ratio: 0.1,
         }
     }
 }
@@ -109,6 +141,25 @@ pub(super) fn check(params: &GridParams) -> Result<(), GridError> {
     }
     if !(p.max_range_m.is_finite() && p.max_range_m > 0.0) {
         return bad("max_range_m must be positive");
+    }
+    let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+    if ![
+        p.blind_zone_m,
+        p.clear_short_of_hit_m,
+        p.no_return_free_m,
+        p.max_wedge_rad,
+        p.wedge_max_jump_m,
+        p.wedge_max_jump_ratio,
+    ]
+    .into_iter()
+    .all(non_negative)
+    {
+        return bad(
+            "blind_zone_m, clear_short_of_hit_m, no_return_free_m and the wedge limits must be finite and ≥ 0",
+        );
+    }
+    if p.max_wedge_rad >= std::f64::consts::PI {
+        return bad("max_wedge_rad must be below π");
     }
     if !(p.log_odds_hit > 0.0 && p.log_odds_miss < 0.0) {
         return bad("log_odds_hit must be positive and log_odds_miss negative");

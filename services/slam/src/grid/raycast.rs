@@ -1,45 +1,104 @@
-//! Building the grid: every scan's beams ray cast at its pose into log-odds.
+//! Building the grid: every scan's beams ray cast at its pose into log-odds, the wedges
+//! between neighbouring beams filled.
 
+use super::fan::BeamFan;
 use super::params::check;
 use super::{GridError, GridParams, OccupancyGrid};
 use crate::matching::Scan2;
 use crate::se2::Pose2;
 
+/// One beam as the grid uses it, in the scan's frame: its direction, how far it clears, and
+/// whether its end holds a return (within `max_range_m`).
+#[derive(Clone, Copy)]
+struct Ray {
+    direction: [f64; 2],
+    clear_m: f64,
+    hit: bool,
+}
+
+impl Ray {
+    fn of(bearing: f64, range: Option<f64>, params: &GridParams) -> Ray {
+        let (clear_m, hit) = match range {
+            Some(r) if r <= params.max_range_m => (r, true),
+            Some(_) => (params.max_range_m, false),
+            None => (params.no_return_free_m.min(params.max_range_m), false),
+        };
+        Ray {
+            direction: [bearing.cos(), bearing.sin()],
+            clear_m,
+            hit,
+        }
+    }
+
+    /// The point `at_m` along the ray, in the map frame.
+    fn point(&self, pose: Pose2, at_m: f64) -> [f64; 2] {
+        pose.transform_point([self.direction[0] * at_m, self.direction[1] * at_m])
+    }
+}
+
+/// The scan's rays and the wedges to fill between neighbours: (ray i, ray j, bearing gap).
+fn rays(fan: &BeamFan, params: &GridParams) -> (Vec<Ray>, Vec<(usize, usize, f64)>) {
+    let beams = fan.beams();
+    let rays: Vec<Ray> = beams.iter().map(|&(b, r)| Ray::of(b, r, params)).collect();
+    let wedges = fan
+        .neighbours(params.max_wedge_rad)
+        .filter(|&(i, j, _)| match (beams[i].1, beams[j].1) {
+            (Some(a), Some(b)) => {
+                let allowed = params
+                    .wedge_max_jump_m
+                    .max(params.wedge_max_jump_ratio * a.min(b));
+                (a - b).abs() <= allowed
+            }
+            (None, None) => true,
+            // A return beside a beam without one: an edge of what was seen.
+            _ => false,
+        })
+        .collect();
+    (rays, wedges)
+}
+
 impl OccupancyGrid {
-    /// Ray casts scans at their poses (the scanner's pose in the map frame). The grid covers
-    /// every scan origin and every beam (up to `max_range_m`), with one cell of margin.
+    /// Ray casts matching scans (returns only) at their poses, as [`Self::from_fans`].
     pub fn from_scans<'a>(
         scans: impl IntoIterator<Item = (Pose2, &'a Scan2)>,
         params: &GridParams,
     ) -> Result<OccupancyGrid, GridError> {
+        let fans: Vec<(Pose2, BeamFan)> = scans
+            .into_iter()
+            .map(|(pose, scan)| (pose, BeamFan::of_returns(scan)))
+            .collect();
+        OccupancyGrid::from_fans(fans.iter().map(|(p, f)| (*p, f)), params)
+    }
+
+    /// Ray casts scans at their poses (the scanner's pose in the map frame), the one way a
+    /// grid is made. Per scan: a return within `max_range_m` adds hit evidence to its cell;
+    /// each beam clears the cells it crosses from the blind zone on (a return beyond
+    /// `max_range_m` up to it, a beam without a return up to `no_return_free_m`); the wedge
+    /// between neighbouring beams that see alike is cleared too, a cell short of the line
+    /// between their ends. Within one scan a cell is updated once, and a return wins over a
+    /// clearing. The grid covers every scan origin and every cleared beam, with one cell of
+    /// margin.
+    pub fn from_fans<'a>(
+        scans: impl IntoIterator<Item = (Pose2, &'a BeamFan)>,
+        params: &GridParams,
+    ) -> Result<OccupancyGrid, GridError> {
         check(params)?;
-        let scans: Vec<(Pose2, &Scan2)> = scans.into_iter().collect();
+        let scans: Vec<(Pose2, &BeamFan)> = scans.into_iter().collect();
         if scans.is_empty() {
             return Err(GridError::NoScans);
         }
         if let Some(index) = scans.iter().position(|(p, _)| !p.is_finite()) {
             return Err(GridError::NonFinitePose { index });
         }
-        // Each beam in world coordinates: its end (clipped to max range) and whether it is
-        // a return.
-        let max_r = params.max_range_m;
-        let beams = |pose: Pose2, scan: &'a Scan2| {
-            scan.points()
-                .iter()
-                .zip(scan.ranges_m())
-                .map(move |(p, &r)| {
-                    let hit = r <= max_r;
-                    let s = if hit { 1.0 } else { max_r / r };
-                    (pose.transform_point([p[0] * s, p[1] * s]), hit)
-                })
-        };
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         let window = params.window_m;
         // With a window, only the scans whose beams reach into it.
         let mut scans_used = Vec::with_capacity(scans.len());
-        for &(pose, scan) in &scans {
+        for &(pose, fan) in &scans {
+            let (rays, wedges) = rays(fan, params);
             let (mut slo, mut shi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for (q, _) in beams(pose, scan).chain([([pose.x, pose.y], false)]) {
+            let ends = rays.iter().map(|ray| ray.point(pose, ray.clear_m));
+            for q in ends.chain([[pose.x, pose.y]]) {
                 for d in 0..2 {
                     slo[d] = slo[d].min(q[d]);
                     shi[d] = shi[d].max(q[d]);
@@ -54,7 +113,7 @@ impl OccupancyGrid {
                 lo[d] = lo[d].min(slo[d]);
                 hi[d] = hi[d].max(shi[d]);
             }
-            scans_used.push((pose, scan));
+            scans_used.push((pose, rays, wedges));
         }
         let scans = scans_used;
         if let Some(w) = window {
@@ -104,28 +163,75 @@ impl OccupancyGrid {
         // return; 0: never seen.
         let mut mark = vec![0u32; width * height];
         let clamp = |l: f32| l.clamp(params.log_odds_min, params.log_odds_max);
-        for (k, &(pose, scan)) in scans.iter().enumerate() {
+        let blind = params.blind_zone_m;
+        for (k, (pose, rays, wedges)) in scans.iter().enumerate() {
+            let pose = *pose;
             let (pass, ret) = (2 * k as u32 + 1, 2 * k as u32 + 2);
-            for (q, hit) in beams(pose, scan) {
-                let Some(c) = index(cell(q)) else { continue };
-                if hit && mark[c] != ret {
+            for ray in rays.iter().filter(|ray| ray.hit) {
+                let Some(c) = index(cell(ray.point(pose, ray.clear_m))) else {
+                    continue;
+                };
+                if mark[c] != ret {
                     mark[c] = ret;
                     log_odds[c] = clamp(log_odds[c] + params.log_odds_hit);
                 }
             }
-            let from = units([pose.x, pose.y]);
-            for (q, hit) in beams(pose, scan) {
-                let to = cell(q);
-                let mut clear = |x: i64, y: i64| {
-                    let Some(c) = index((x, y)) else { return };
-                    if mark[c] != ret && mark[c] != pass {
-                        mark[c] = pass;
-                        log_odds[c] = clamp(log_odds[c] + params.log_odds_miss);
-                    }
-                };
-                traverse(from, units(q), &mut clear);
-                if !hit {
-                    clear(to.0, to.1);
+            let mut clear = |x: i64, y: i64| {
+                let Some(c) = index((x, y)) else { return };
+                if mark[c] != ret && mark[c] != pass {
+                    mark[c] = pass;
+                    log_odds[c] = clamp(log_odds[c] + params.log_odds_miss);
+                }
+            };
+            // From the blind zone to `to_m` along `direction`, the end cell cleared when
+            // `to_end`.
+            let mut clear_line = |direction: [f64; 2], to_m: f64, to_end: bool| {
+                if to_m <= blind {
+                    return;
+                }
+                let along = |m: f64| pose.transform_point([direction[0] * m, direction[1] * m]);
+                let end = along(to_m);
+                traverse(units(along(blind)), units(end), &mut clear);
+                if to_end {
+                    let (x, y) = cell(end);
+                    clear(x, y);
+                }
+            };
+            let short = params.clear_short_of_hit_m;
+            for ray in rays {
+                if ray.hit {
+                    clear_line(ray.direction, ray.clear_m - short, true);
+                } else {
+                    clear_line(ray.direction, ray.clear_m, true);
+                }
+            }
+            for &(i, j, gap) in wedges {
+                let (a, b) = (rays[i], rays[j]);
+                // The chord between the two ends: a surface both beams saw lies along it.
+                let chord = [
+                    b.direction[0] * b.clear_m - a.direction[0] * a.clear_m,
+                    b.direction[1] * b.clear_m - a.direction[1] * a.clear_m,
+                ];
+                let chord_m = chord[0].hypot(chord[1]);
+                // Rays between the two, one a cell apart at the far end.
+                let far = a.clear_m.max(b.clear_m);
+                let between = ((gap * far / res).ceil() as usize).saturating_sub(1);
+                let bearing_a = a.direction[1].atan2(a.direction[0]);
+                for s in 1..=between {
+                    let t = s as f64 / (between + 1) as f64;
+                    let bearing = bearing_a + gap * t;
+                    let direction = [bearing.cos(), bearing.sin()];
+                    // Each stops 1.5 cells (measured across the chord) short of it: a beam
+                    // grazing a wall would otherwise clear the wall's own cells between the
+                    // two hits.
+                    let across = if chord_m > 0.0 {
+                        (direction[0] * chord[1] - direction[1] * chord[0]).abs() / chord_m
+                    } else {
+                        1.0
+                    };
+                    let margin = 1.5 * res / across.max(0.05);
+                    let to_m = a.clear_m + (b.clear_m - a.clear_m) * t - margin;
+                    clear_line(direction, to_m, false);
                 }
             }
         }

@@ -167,6 +167,16 @@ pub fn matching_scan(scan: &LeveledScan, max_range_m: f32) -> Scan2 {
     scan_of_returns(scan.returns(), max_range_m)
 }
 
+/// A leveled scan's beams as the grid takes them: every beam, a return or none, so that
+/// neighbouring beams fill the wedge between them (`slam::grid`).
+pub fn grid_fan(scan: &LeveledScan) -> slam::BeamFan {
+    slam::BeamFan::new(
+        scan.beams
+            .iter()
+            .map(|b| (f64::from(b.bearing_rad), b.range_m.map(f64::from))),
+    )
+}
+
 /// Returns (bearing in rad, range in m) as a `Scan2`, cut at `max_range_m`: the one place a
 /// scan becomes what matching, the grids and localization use.
 pub(crate) fn scan_of_returns(

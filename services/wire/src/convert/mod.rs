@@ -25,7 +25,7 @@ pub use input::{
 };
 pub use localization::{
     DEFAULT_PRIOR_SIGMA, LocalizeQuery, Localized, decode_localization, decode_localize_request,
-    localization_to_wire, localize_query, matching_scan,
+    grid_fan, localization_to_wire, localize_query, matching_scan,
 };
 pub use map::{MapPose, decode_map_poses, decode_map_summary, map_poses_to_wire};
 #[cfg(test)]
