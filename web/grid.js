@@ -53,15 +53,58 @@ async function loadGridDetail() {
 export const refreshGrid = throttled(loadGrid, 3000);
 export const refreshGridDetail = throttled(loadGridDetail, 300);
 
+// The picture's greys (map_saver's trinary PNG): occupied 0, unknown 205, free 254.
+const OCCUPIED = 0, UNKNOWN = 205, FREE = 254;
+
+/// The picture reduced by `k` × `k` blocks, each block the state that matters most in it:
+/// occupied over free over unknown. Averaging (the canvas's smoothing) would fade a tree's
+/// few cells into the free space around it and lose it when zoomed out. Kept per factor.
+function reduced(g, k) {
+  g.reduced ??= new Map();
+  if (g.reduced.has(k)) return g.reduced.get(k);
+  const src = new OffscreenCanvas(g.image.width, g.image.height).getContext("2d");
+  src.drawImage(g.image, 0, 0);
+  const { data } = src.getImageData(0, 0, g.image.width, g.image.height);
+  const [w, h] = [Math.ceil(g.image.width / k), Math.ceil(g.image.height / k)];
+  const out = new ImageData(w, h);
+  for (let by = 0; by < h; by++) {
+    for (let bx = 0; bx < w; bx++) {
+      let v = UNKNOWN;
+      for (let y = by * k; y < Math.min((by + 1) * k, g.image.height) && v !== OCCUPIED; y++) {
+        for (let x = bx * k; x < Math.min((bx + 1) * k, g.image.width); x++) {
+          const c = data[4 * (y * g.image.width + x)];
+          if (c < 100) { v = OCCUPIED; break; }
+          if (c > 230) v = FREE;
+        }
+      }
+      const o = 4 * (by * w + bx);
+      out.data[o] = out.data[o + 1] = out.data[o + 2] = v;
+      out.data[o + 3] = 255;
+    }
+  }
+  const canvas = new OffscreenCanvas(w, h);
+  canvas.getContext("2d").putImageData(out, 0, 0);
+  g.reduced.set(k, canvas);
+  return canvas;
+}
+
 /// Both pictures on the map canvas, each where its header placed it (the frame's first layer).
+/// A cell under a device pixel is drawn from the reduced picture, so an occupied cell stays at
+/// least one device pixel at every zoom.
 export function drawGrid() {
   if (!state.showGrid) return;
+  const dpr = window.devicePixelRatio || 1;
   ctx.globalAlpha = 0.9;
   for (const g of [state.grid, state.gridDetail]) {
     if (!g) continue;
     const [x0, y0] = view.toScreen(g.origin_m[0], g.origin_m[1] + g.height * g.resolution_m);
-    ctx.imageSmoothingEnabled = view.scale * g.resolution_m < 1;
-    ctx.drawImage(g.image, x0, y0, g.width * g.resolution_m * view.scale, g.height * g.resolution_m * view.scale);
+    const cellPx = view.scale * g.resolution_m * dpr;
+    const k = cellPx < 1 ? Math.ceil(1 / cellPx) : 1;
+    const picture = k > 1 ? reduced(g, k) : g.image;
+    // A reduced picture's last blocks may reach past the grid: its own size, in cells.
+    const cellM = g.resolution_m * (k > 1 ? k : 1);
+    ctx.imageSmoothingEnabled = false;
+    ctx.drawImage(picture, x0, y0, picture.width * cellM * view.scale, picture.height * cellM * view.scale);
   }
   ctx.globalAlpha = 1;
 }

@@ -253,6 +253,35 @@ test("the occupancy grid is drawn where the mapper placed it", async () => {
   assert.equal(g.iw, g.w, "the picture is the grid the header describes");
   assert.equal(g.ih, g.h);
   assert.ok(g.res >= 0.1 && g.nodes > 0, JSON.stringify(g));
+  // Zoomed out until a cell is under half a device pixel, the obstacles stay on the map as
+  // near-black pixels (averaged into the free space around them they would fade to grey):
+  // the dark pixels with the grid shown, less those without it.
+  const cellPx = () => page.evaluate(() => window.levelmapView.scale * window.levelmapState.grid.resolution_m * (window.devicePixelRatio || 1));
+  const box = await page.locator("#map").boundingBox();
+  for (let i = 0; i < 10 && (await cellPx()) >= 0.5; i++) {
+    await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+    await page.mouse.wheel(0, 300);
+    await sleep(100);
+  }
+  assert.ok((await cellPx()) < 0.5, `zoomed out: ${await cellPx()} device px per cell`);
+  const dark = () =>
+    page.evaluate(() => {
+      const c = document.getElementById("map");
+      const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+      let n = 0;
+      for (let i = 0; i < d.length; i += 4) if (d[i] < 60 && d[i + 1] < 60 && d[i + 2] < 60 && d[i + 3] > 200) n += 1;
+      return n;
+    });
+  await sleep(300);
+  const shown = await dark();
+  await page.click("#toggle-grid");
+  await sleep(300);
+  const hidden = await dark();
+  await page.click("#toggle-grid");
+  await page.screenshot({ path: path.join(artifacts, "3b-grid-zoomed-out.png") });
+  assert.ok(shown - hidden > 100, `obstacle pixels zoomed out: ${shown} with the grid, ${hidden} without`);
+  console.log(`near-black pixels zoomed out (${(await cellPx()).toFixed(2)} device px per cell): ${shown} with the grid, ${hidden} without`);
+  await page.click("#fit");
 });
 
 test("the token is checked before any write, and re-optimize works with it", async () => {
