@@ -33,8 +33,9 @@ pub fn pose3d_from_wire(pose: &v1::Pose3D) -> Result<Isometry3<f64>, WireError> 
         finite("Pose3D.qz", None, pose.qz)?,
     );
     let norm = q.norm();
-    // Components are finite, so the norm is too.
-    if norm <= 1e-6 {
+    // Finite components can still square past f64 (1e200): such a norm is infinite, and
+    // normalizing by it would give the zero quaternion, no rotation at all.
+    if !(norm > 1e-6 && norm.is_finite()) {
         return Err(WireError::InvalidValue {
             field: "Pose3D.qw",
             index: None,
@@ -120,6 +121,25 @@ mod tests {
     use crate::*;
     use leveling::heading_rad;
     use leveling::*;
+
+    #[test]
+    fn a_quaternion_whose_norm_overflows_is_no_rotation() {
+        // Found by the `node` fuzz target: finite components whose squares overflow gave an
+        // infinite norm, and normalizing by it the zero quaternion, which was taken.
+        let mut huge = pose3d_to_wire(&robot_pose());
+        (huge.qw, huge.qx, huge.qy, huge.qz) = (1e200, 0.0, 0.0, 1e200);
+        assert!(matches!(
+            pose3d_from_wire(&huge),
+            Err(WireError::InvalidValue {
+                field: "Pose3D.qw",
+                ..
+            })
+        ));
+        // Large but representable components still normalize.
+        (huge.qw, huge.qz) = (1e150, 1e150);
+        let rotation = pose3d_from_wire(&huge).unwrap().rotation;
+        assert!((rotation.angle() - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
 
     #[test]
     fn poses_round_trip() {
