@@ -42,7 +42,7 @@ fn scan(pose: &Pose2, beams: usize, seed: u64) -> v1::LeveledScan {
         overhang: 1,
     };
     let header = v1::Header::new("park", "rover-4", 9, 0, 1_700_000_000_050_000_000);
-    wire::leveled_scan_to_wire(&scan, &counts, header)
+    wire::leveled_scan_to_wire(&scan, Some(&counts), header)
 }
 
 fn request(

@@ -102,7 +102,7 @@ fn full_node(beams: usize) -> v1::Node {
         held_from_seq: 5,
         scan: Some(wire::leveled_scan_to_wire(
             &scan(beams),
-            &counts(),
+            Some(&counts()),
             header(9, STAMP_NS),
         )),
         odometry: Some(odometry()),

@@ -90,19 +90,17 @@ pub fn freeze(view: &FleetView, created_ns: u64) -> Result<MapVersion, VersionEr
         .nodes
         .iter()
         .zip(&view.poses)
-        .map(|(n, pose)| VersionNode {
-            robot: view.robots[n.robot].id.clone(),
-            chain_id: n.chain_id,
-            node_seq: n.node_seq,
-            stamp_ns: n.stamp_ns,
-            pose: *pose,
-            bearings_rad: n.scan.beams.iter().map(|b| b.bearing_rad).collect(),
-            ranges_m: n
-                .scan
-                .beams
-                .iter()
-                .map(|b| b.range_m.unwrap_or(0.0))
-                .collect(),
+        .map(|(n, pose)| {
+            let (bearings_rad, ranges_m) = n.scan.polar();
+            VersionNode {
+                robot: view.robots[n.robot].id.clone(),
+                chain_id: n.chain_id,
+                node_seq: n.node_seq,
+                stamp_ns: n.stamp_ns,
+                pose: *pose,
+                bearings_rad,
+                ranges_m,
+            }
         })
         .collect();
     Ok(MapVersion {

@@ -32,6 +32,15 @@ impl LeveledScan {
             .filter_map(|b| b.range_m.map(|r| (b.bearing_rad, r)))
     }
 
+    /// Every beam as bearings (rad) and ranges (m, 0 = no return): the array form the wire,
+    /// the HTTP API and map version files share.
+    pub fn polar(&self) -> (Vec<f32>, Vec<f32>) {
+        self.beams
+            .iter()
+            .map(|b| (b.bearing_rad, b.range_m.unwrap_or(0.0)))
+            .unzip()
+    }
+
     /// Number of beams with a return.
     pub fn return_count(&self) -> usize {
         self.beams.iter().filter(|b| b.range_m.is_some()).count()

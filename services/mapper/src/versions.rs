@@ -100,13 +100,7 @@ mod tests {
         let frozen = freeze(&v, 42).unwrap();
         assert_eq!(frozen.nodes.len(), 3);
         assert_eq!(frozen.nodes[2].pose, v.poses[2]);
-        let ranges: Vec<f32> = v.nodes[1]
-            .scan
-            .beams
-            .iter()
-            .map(|b| b.range_m.unwrap_or(0.0))
-            .collect();
-        assert_eq!(frozen.nodes[1].ranges_m, ranges);
+        assert_eq!(frozen.nodes[1].ranges_m, v.nodes[1].scan.polar().1);
         assert_eq!(frozen.datum, v.datum);
         let path = std::env::temp_dir().join(format!(
             "levelmap-versions-frozen-{}.redb",

@@ -115,14 +115,12 @@ pub(super) async fn node_detail(
             })
             .collect(),
         counts: n.counts.as_ref().map(Counts::from),
-        scan: PolarScan {
-            bearing_rad: n.scan.beams.iter().map(|b| b.bearing_rad).collect(),
-            range_m: n
-                .scan
-                .beams
-                .iter()
-                .map(|b| b.range_m.unwrap_or(0.0))
-                .collect(),
+        scan: {
+            let (bearing_rad, range_m) = n.scan.polar();
+            PolarScan {
+                bearing_rad,
+                range_m,
+            }
         },
         edges: v
             .edges

@@ -54,7 +54,7 @@ pub(crate) fn node() -> v1::Node {
         node_seq: 7,
         chain_id: 0x5eed,
         held_from_seq: 5,
-        scan: Some(leveled_scan_to_wire(&scan(), &counts(), header(9))),
+        scan: Some(leveled_scan_to_wire(&scan(), Some(&counts()), header(9))),
         odometry: Some(odometry_to_wire(
             &TimedPose {
                 stamp_ns: STAMP_NS,

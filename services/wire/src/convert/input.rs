@@ -7,7 +7,7 @@ use super::localization::matching_scan;
 use super::node::{decode_odometry, validate_node};
 use super::odometry::{odometry_from_wire, odometry_to_wire};
 use super::pose::{pose2_from_wire, pose2_to_wire};
-use super::scan::{counts_from_wire, counts_to_wire, leveled_scan_from_wire, leveled_scan_to_wire};
+use super::scan::{counts_from_wire, leveled_scan_from_wire, leveled_scan_to_wire};
 use crate::{MAX_NODE_BYTES, MAX_SPEED_M_PER_S, Message, WireError, v1};
 use leveling::{ClassCounts, LeveledScan, TimedPose};
 use slam::Pose2;
@@ -94,9 +94,7 @@ impl NodeParts {
 /// The node as its message.
 fn node_to_wire(node: &NodeParts) -> v1::Node {
     let header = v1::Header::new(&node.fleet, &node.robot, 0, node.stamp_ns, 0);
-    let mut scan =
-        leveled_scan_to_wire(&node.scan, &node.counts.unwrap_or_default(), header.clone());
-    scan.counts = node.counts.as_ref().map(counts_to_wire);
+    let scan = leveled_scan_to_wire(&node.scan, node.counts.as_ref(), header.clone());
     let mut fixes: Vec<v1::GpsFix> = node
         .gps
         .iter()
@@ -272,9 +270,7 @@ impl LiveScan {
     /// Its message as sent: publication `seq` of the robot, sent at `sent_ns`.
     pub fn encode(&self, seq: u64, sent_ns: u64) -> Vec<u8> {
         let header = v1::Header::new(&self.fleet, &self.robot, seq, self.stamp_ns, sent_ns);
-        let mut scan =
-            leveled_scan_to_wire(&self.scan, &self.counts.unwrap_or_default(), header.clone());
-        scan.counts = self.counts.as_ref().map(counts_to_wire);
+        let scan = leveled_scan_to_wire(&self.scan, self.counts.as_ref(), header.clone());
         v1::LiveScan {
             header: Some(header.clone()),
             scan: Some(scan),
@@ -382,13 +378,10 @@ mod tests {
         assert_eq!(domain.node_seq, wire.node_seq);
         assert_eq!(domain.stamp_ns, STAMP_NS);
         let scan = wire.scan.as_ref().unwrap();
-        let ranges: Vec<f32> = domain
-            .scan
-            .beams
-            .iter()
-            .map(|b| b.range_m.unwrap_or(0.0))
-            .collect();
-        assert_eq!(ranges, scan.range_m);
+        assert_eq!(
+            domain.scan.polar(),
+            (scan.bearing_rad.clone(), scan.range_m.clone())
+        );
         assert_eq!(domain.counts, Some(counts()));
         assert_eq!(domain.gps.len(), wire.earlier_gps.len() + 1);
         assert_eq!(

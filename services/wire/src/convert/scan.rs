@@ -55,24 +55,21 @@ pub fn counts_from_wire(counts: &v1::SegmentationCounts) -> Result<ClassCounts, 
     })
 }
 
-/// A leveled scan on the wire. `header.stamp_ns` is set to `scan.stamp_ns` (the scan's
-/// measurement time); a beam without return is sent as range 0, and `columns` is the number
-/// of beams (one per column of the 3D scan).
+/// A leveled scan on the wire, with its class counts when known. `header.stamp_ns` is set to
+/// `scan.stamp_ns` (the scan's measurement time); a beam without return is sent as range 0,
+/// and `columns` is the number of beams (one per column of the 3D scan).
 pub fn leveled_scan_to_wire(
     scan: &LeveledScan,
-    counts: &ClassCounts,
+    counts: Option<&ClassCounts>,
     mut header: v1::Header,
 ) -> v1::LeveledScan {
     header.stamp_ns = scan.stamp_ns;
+    let (bearing_rad, range_m) = scan.polar();
     v1::LeveledScan {
         header: Some(header),
-        bearing_rad: scan.beams.iter().map(|b| b.bearing_rad).collect(),
-        range_m: scan
-            .beams
-            .iter()
-            .map(|b| b.range_m.unwrap_or(0.0))
-            .collect(),
-        counts: Some(counts_to_wire(counts)),
+        bearing_rad,
+        range_m,
+        counts: counts.map(counts_to_wire),
         columns: u32::try_from(scan.beams.len()).unwrap_or(u32::MAX),
     }
 }

@@ -101,7 +101,7 @@ fn node(r: usize, k: u64) -> v1::Node {
         held_from_seq: 0,
         scan: Some(wire::leveled_scan_to_wire(
             &scan,
-            &Default::default(),
+            Some(&Default::default()),
             header(k),
         )),
         odometry: Some(wire::odometry_to_wire(
