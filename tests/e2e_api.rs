@@ -67,7 +67,8 @@ fn every_documented_route_is_served(http: &str, doc: &common::openapi::OpenApiDo
             .replace("{robot}", "robot0")
             .replace("{node}", "0")
             .replace("{version}", "1")
-            .replace("{file}", "style.css");
+            .replace("{file}", "style.css")
+            .replace("{z}/{x}/{y}", "18/138142/86126.png");
         let (status, body) = match method.as_str() {
             "get" => read(http, &path).unwrap_or_else(|| panic!("GET {path}: no answer")),
             "post" => (http_post(http, &path, None), String::from("(not read)")),
@@ -248,6 +249,20 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
     let c = &geo["features"][0]["geometry"]["coordinates"];
     assert!((c[0].as_f64().unwrap() - 9.71).abs() < 0.01, "{c}");
     assert!((c[1].as_f64().unwrap() - 52.39).abs() < 0.01, "{c}");
+    // The grid on the Earth (tests/e2e_geo.rs reads both with rasterio): a little-endian
+    // TIFF, and web tiles, transparent away from the map, refused past the scheme.
+    let tif = read(http, &format!("{base}/map.tif")).unwrap();
+    assert_eq!(tif.0, 200, "{}", tif.1);
+    assert!(tif.1.starts_with("II*\0"), "a TIFF");
+    for (tile, status) in [
+        ("25/0/0.png", 400),
+        ("3/8/0", 400),
+        ("3/0/x.png", 400),
+        ("18/0/0.png", 200),
+    ] {
+        let answer = read(http, &format!("{base}/tiles/{tile}")).unwrap();
+        assert_eq!(answer.0, status, "tiles/{tile}: {}", answer.1);
+    }
     // OpenAPI names the routes; metrics are Prometheus text.
     let openapi = json("/api/v1/openapi.json");
     assert!(openapi["paths"]["/api/v1/fleets/{fleet}/summary"].is_object());

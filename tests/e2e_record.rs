@@ -151,7 +151,7 @@ fn a_recorded_run_reads_back_in_python_and_replays_to_the_same_map() {
     let script =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/record_check.py");
     let read: Value =
-        serde_json::from_str(&testdata::run_ros2_python(&script, &[&out])).expect("JSON");
+        serde_json::from_str(&testdata::run_reference_python(&script, &[&out])).expect("JSON");
     eprintln!("python mcap: {read:#}");
     assert_eq!(read["topics"], report["topics"], "per-topic counts");
     assert_eq!(read["messages"], report["messages"]);

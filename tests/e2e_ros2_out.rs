@@ -98,7 +98,7 @@ fn the_bridge_style_puts_the_same_on_plain_topic_keys() {
 
 fn read_back(style: &str, namespace: &str) {
     let rmw_zenoh = style == "rmw_zenoh";
-    let python = testdata::rosbags_python();
+    let python = testdata::reference_python();
     let dir = temp_dir(&format!("ros2-out-{style}"));
     let zenoh = format!("tcp/127.0.0.1:{}", free_port());
     let ros_out = |node: &str| {

@@ -1,5 +1,5 @@
 //! `[source.mcap]` on a recording written by rosbags (PyPI, its own MCAP and CDR code; the
-//! script is `rosbags_recording.py`, run by `testdata::rosbags_python`): odometry with the
+//! script is `rosbags_recording.py`, run by `testdata::reference_python`): odometry with the
 //! IMU's roll, scans with their columns' times and the lidar's mount from /tf_static, fixes
 //! with their odometry, and the bad samples counted. The same recording cut mid-file still
 //! yields what came before the cut.

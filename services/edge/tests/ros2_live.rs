@@ -1,6 +1,6 @@
 //! `[source.ros2]` live: a rosbags-written recording (`rosbags_recording.py`) is put on
 //! rmw_zenoh keys, or zenoh-bridge-ros2dds's, by the Python Zenoh (`zenoh_publisher.py`,
-//! eclipse-zenoh from PyPI, in the venv `testdata::rosbags_python` makes); the live source
+//! eclipse-zenoh from PyPI, in the venv `testdata::reference_python` makes); the live source
 //! must give the events the same recording gives through `[source.mcap]`.
 
 mod common;
@@ -48,7 +48,7 @@ fn live_ros2dds_bridge_topics_give_what_the_recording_gives() {
 }
 
 fn live_topics_give_what_the_recording_gives(style: KeyStyle, name: &str) {
-    let python = testdata::rosbags_python();
+    let python = testdata::reference_python();
     let rec = recording(&format!("ros2-live-{name}"));
     let expected = summary(&play(&rec).0);
     let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");

@@ -161,7 +161,7 @@ fn the_park_run_recorded_by_rosbags_maps_as_the_simulated_source_does() {
     let events = sim_events();
     let columns = export(&events, &dir);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/sim_recording.py");
-    testdata::run_ros2_python(&script, &[&dir]);
+    testdata::run_reference_python(&script, &[&dir]);
 
     let (sim_ate, sim_nodes) = map(events);
     let mut source = McapSource::new(&McapSourceConfig {
@@ -216,7 +216,7 @@ fn live_events(rec: &Path, columns: usize, wanted: usize) -> Vec<SourceEvent> {
     );
     let publisher_script =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../edge/tests/zenoh_publisher.py");
-    let mut publisher = Command::new(testdata::rosbags_python())
+    let mut publisher = Command::new(testdata::reference_python())
         .arg(publisher_script)
         .arg(&endpoint)
         .arg(rec)

@@ -5,15 +5,19 @@
 //! The map products (docs/slam.md, "Map products") are encoded here too, to bytes or text and
 //! never to a file, so the command line and the HTTP API serve the same bytes: the occupancy
 //! grid as PNG and as PGM + YAML for ROS map_server ([`gridmap`]), nodes and trajectories as
-//! GeoJSON ([`geojson`]), trajectories as TUM text ([`trajectory`]), the graph as g2o
+//! GeoJSON ([`geojson`]), the grid on the Earth as a GeoTIFF ([`georaster`]) and as XYZ web
+//! tiles ([`webtiles`]), trajectories as TUM text ([`trajectory`]), the graph as g2o
 //! ([`posegraph::to_g2o`]).
 
 pub mod carmen;
 pub mod geojson;
+pub mod georaster;
 pub mod gridmap;
 pub mod posegraph;
 pub mod relations;
+mod tiff;
 pub mod trajectory;
+pub mod webtiles;
 
 use std::path::PathBuf;
 

@@ -1,7 +1,7 @@
 //! Cross-implementation: every message levelmap reads, encoded by rosbags (PyPI, its own
 //! CDR code) in both byte orders, decodes here to the message rosbags describes in JSON;
 //! the messages levelmap writes, decoded by rosbags, are the ones written. The Python side
-//! is `rosbags_messages.py`, run by `testdata::rosbags_python` (a venv made once beside the build).
+//! is `rosbags_messages.py`, run by `testdata::reference_python` (a venv made once beside the build).
 
 use ros2msg::{
     CloudPoints, Imu, NavSatFix, OccupancyGrid, Odometry, TfMessage, decode, decode_cloud, encode,
@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 fn rosbags(mode: &str, dir: &Path) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rosbags_messages.py");
-    testdata::run_ros2_python(&script, &[std::ffi::OsStr::new(mode), dir.as_os_str()]);
+    testdata::run_reference_python(&script, &[std::ffi::OsStr::new(mode), dir.as_os_str()]);
 }
 
 fn scratch(name: &str) -> PathBuf {

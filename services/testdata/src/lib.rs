@@ -29,30 +29,32 @@ pub fn shared_data(relative: &str) -> PathBuf {
 
 /// What the cross-implementation tests check levelmap against, from PyPI: rosbags (CDR, MCAP,
 /// rosbag2) and the Python Zenoh (live rmw_zenoh keys) for ROS 2; the MCAP reference reader
-/// with its protobuf decoder for `levelmap record`'s files.
-pub const ROS2_PYTHON: [&str; 6] = [
+/// with its protobuf decoder for `levelmap record`'s files; rasterio (GDAL and PROJ in its
+/// wheel) for the GeoTIFF and the web tiles.
+pub const REFERENCE_PYTHON: [&str; 7] = [
     "rosbags==0.11.9",
     "eclipse-zenoh==1.10.2",
     "numpy",
     "mcap==1.6.0",
     "mcap-protobuf-support==0.6.0",
     "protobuf==7.36.2",
+    "rasterio==1.4.4",
 ];
 
-/// A python with [`ROS2_PYTHON`]: a venv made on first use beside the build
-/// (`target/ros2-python-venv-2`; the number changes with the list). Panics, naming the step, when python3 or PyPI is missing:
+/// A python with [`REFERENCE_PYTHON`]: a venv made on first use beside the build
+/// (`target/reference-python-venv-3`; the number changes with the list). Panics, naming the step, when python3 or PyPI is missing:
 /// the tests that need it must fail, not skip.
-pub fn rosbags_python() -> PathBuf {
+pub fn reference_python() -> PathBuf {
     let exe = std::env::current_exe().expect("the test's path");
     // target/<profile>/deps/<test>: the venv goes in target/.
     let target = exe
         .ancestors()
         .nth(3)
         .expect("a test runs from target/<profile>/deps");
-    let venv = target.join("ros2-python-venv-2");
+    let venv = target.join("reference-python-venv-3");
     let python = venv.join("bin/python");
     // Tests run in parallel, and in several processes: one makes the venv, the others wait.
-    let lock = std::fs::File::create(target.join("ros2-python-venv-2.lock"))
+    let lock = std::fs::File::create(target.join("reference-python-venv-3.lock"))
         .expect("a lock file beside the build");
     lock.lock().expect("the venv's lock");
     // Written last: a venv whose install failed half-way is made again.
@@ -70,16 +72,19 @@ pub fn rosbags_python() -> PathBuf {
             .arg(&venv));
         run(std::process::Command::new(venv.join("bin/pip"))
             .args(["install", "-q"])
-            .args(ROS2_PYTHON));
-        std::fs::write(&ready, ROS2_PYTHON.join("\n")).expect("the venv's marker");
+            .args(REFERENCE_PYTHON));
+        std::fs::write(&ready, REFERENCE_PYTHON.join("\n")).expect("the venv's marker");
     }
     python
 }
 
-/// Runs `script` with `args` in [`rosbags_python`]'s python: its stdout. Panics with its
+/// Runs `script` with `args` in [`reference_python`]'s python: its stdout. Panics with its
 /// stderr when it fails.
-pub fn run_ros2_python<S: AsRef<std::ffi::OsStr>>(script: &std::path::Path, args: &[S]) -> String {
-    let out = std::process::Command::new(rosbags_python())
+pub fn run_reference_python<S: AsRef<std::ffi::OsStr>>(
+    script: &std::path::Path,
+    args: &[S],
+) -> String {
+    let out = std::process::Command::new(reference_python())
         .arg(script)
         .args(args)
         .output()

@@ -11,7 +11,7 @@ pub fn recording(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("scratch folder");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/rosbags_recording.py");
-    testdata::run_ros2_python(&script, &[&dir]);
+    testdata::run_reference_python(&script, &[&dir]);
     dir.join("rec")
 }
 

@@ -1,5 +1,5 @@
 //! The map products: the occupancy grid (PNG, Nav2's PGM + YAML, its placement as JSON) and
-//! the nodes and trajectories as GeoJSON.
+//! the nodes and trajectories as GeoJSON; the grid on the Earth is `geo`'s.
 
 use super::{Api, ApiError, Reply};
 use axum::Json;
@@ -12,7 +12,7 @@ use utoipa::{IntoParams, ToSchema};
 
 #[derive(Deserialize, IntoParams)]
 #[into_params(parameter_in = Query)]
-pub(super) struct GridQuery {
+pub(crate) struct GridQuery {
     /// Cell size (m); the grid's default when absent.
     resolution_m: Option<f64>,
     /// Only this part of the map: `min_x,min_y,max_x,max_y` (m).
@@ -23,7 +23,7 @@ pub(super) struct GridQuery {
 }
 
 impl GridQuery {
-    fn params(&self) -> Reply<slam::GridParams> {
+    pub(super) fn params(&self) -> Reply<slam::GridParams> {
         let mut params = slam::GridParams::default();
         if let Some(res) = self.resolution_m {
             params.resolution_m = res;
@@ -214,11 +214,7 @@ pub(super) async fn map_json(
     ))]
 pub(super) async fn map_geojson(State(api): State<Api>, Path(fleet): Path<String>) -> Reply {
     let v = api.view(&fleet)?;
-    let datum = v.datum.ok_or_else(|| {
-        ApiError::NotFound(format!(
-            "fleet {fleet:?} has no GPS datum yet: no fix, none configured"
-        ))
-    })?;
+    let datum = super::geo::datum_of(&v)?;
     let geojson = api
         .limits
         .heavy(move || {

@@ -9,6 +9,7 @@ mod access;
 mod events;
 mod faults;
 mod fleets;
+mod geo;
 mod graph;
 mod limits;
 mod live;
@@ -249,6 +250,8 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(map::map_yaml))
         .routes(routes!(map::map_json))
         .routes(routes!(map::map_geojson))
+        .routes(routes!(geo::map_tif))
+        .routes(routes!(geo::map_tile))
         .routes(routes!(window::robot_map_png))
         .routes(routes!(nodes::node_detail))
         .routes(routes!(nodes::node_cloud))

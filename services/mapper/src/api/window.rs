@@ -5,6 +5,7 @@ use super::{Api, ApiError, Reply};
 use axum::extract::{Path, Query, State};
 use axum::http::header;
 use axum::response::IntoResponse;
+use fleetmap::tiles::TileKey;
 use serde::Deserialize;
 use utoipa::IntoParams;
 
@@ -71,16 +72,7 @@ pub(super) async fn robot_map_png(
             Ok((bytes, placement, stats, stale))
         })
         .await?;
-    if !stale.is_empty() {
-        let tiles = api.tiles.clone();
-        tokio::task::spawn_blocking(move || {
-            for key in &stale {
-                if let Err(e) = tiles.refresh(&v, key) {
-                    tracing::warn!(fleet = %key.fleet, "tile not made again: {e}");
-                }
-            }
-        });
-    }
+    refresh_stale(&api, v, stale);
     let stats = format!(
         r#"{{"made":{},"cached":{},"stale":{}}}"#,
         stats.made, stats.cached, stats.stale
@@ -94,4 +86,24 @@ pub(super) async fn robot_map_png(
         bytes,
     )
         .into_response())
+}
+
+/// Makes the `stale` tiles of `view` again in the background (a served window or web tile
+/// took them as they were).
+pub(super) fn refresh_stale(
+    api: &Api,
+    view: std::sync::Arc<fleetmap::FleetView>,
+    stale: Vec<TileKey>,
+) {
+    if stale.is_empty() {
+        return;
+    }
+    let tiles = api.tiles.clone();
+    tokio::task::spawn_blocking(move || {
+        for key in &stale {
+            if let Err(e) = tiles.refresh(&view, key) {
+                tracing::warn!(fleet = %key.fleet, "tile not made again: {e}");
+            }
+        }
+    });
 }
