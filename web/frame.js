@@ -1,9 +1,10 @@
-// One frame of the map canvas, from the bottom up: the grid, the layer (trajectories and
+// One frame of the map canvas, from the bottom up: the base map (when configured), the grid, the layer (trajectories and
 // network), each robot's live tail and arrow, the selected node, the scale bar.
 
 import { scaleBarMetres, formatMetres, visibleBox, inBox, segInBox } from "./view.js";
 import { state, view, canvas, ctx, index, trackMap, robot, onRedraw } from "./state.js";
 import { drawGrid } from "./grid.js";
+import { drawBaseMap } from "./basemap.js";
 import { drawLayerAndBlit, layerUpToDate } from "./layer.js";
 import { drawFollowScan } from "./follow.js";
 
@@ -45,6 +46,7 @@ function drawFrame() {
   ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
   ctx.clearRect(0, 0, w, h);
 
+  drawBaseMap();
   drawGrid();
   const box = visibleBox(view);
   drawLayerAndBlit(dpr);

@@ -43,6 +43,19 @@ export function enuToGeodetic(datum, east, north, up = 0) {
   ]);
 }
 
+/// Local (east, north) metres of a WGS84 position {latitude_deg, longitude_deg} on the datum's
+/// ellipsoid height: the inverse of enuToGeodetic.
+export function geodeticToEnu(datum, g) {
+  const lat = datum.latitude_deg * RAD;
+  const lon = datum.longitude_deg * RAD;
+  const [sl, cl] = [Math.sin(lat), Math.cos(lat)];
+  const [so, co] = [Math.sin(lon), Math.cos(lon)];
+  const o = toEcef(datum.latitude_deg, datum.longitude_deg, datum.height_m);
+  const p = toEcef(g.latitude_deg, g.longitude_deg, datum.height_m);
+  const d = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
+  return [-so * d[0] + co * d[1], -sl * co * d[0] - sl * so * d[1] + cl * d[2]];
+}
+
 /// 52.390012° N, 9.710034° E
 export function formatLatLon(g) {
   const lat = `${Math.abs(g.latitude_deg).toFixed(7)}° ${g.latitude_deg >= 0 ? "N" : "S"}`;

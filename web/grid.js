@@ -95,6 +95,9 @@ export function drawGrid() {
   if (!state.showGrid) return;
   const dpr = window.devicePixelRatio || 1;
   ctx.globalAlpha = 0.9;
+  // Over a base map the grid multiplies: free (white) shows the map as it is, unknown greys
+  // it a little, occupied stays black.
+  if (state.baseMap && state.showBaseMap) ctx.globalCompositeOperation = "multiply";
   for (const g of [state.grid, state.gridDetail]) {
     if (!g) continue;
     const [x0, y0] = view.toScreen(g.origin_m[0], g.origin_m[1] + g.height * g.resolution_m);
@@ -107,4 +110,5 @@ export function drawGrid() {
     ctx.drawImage(picture, x0, y0, picture.width * cellM * view.scale, picture.height * cellM * view.scale);
   }
   ctx.globalAlpha = 1;
+  ctx.globalCompositeOperation = "source-over";
 }

@@ -149,6 +149,11 @@ $("toggle-grid").addEventListener("change", (e) => {
   state.showGrid = e.target.checked;
   redraw();
 });
+$("toggle-base-map").addEventListener("change", (e) => {
+  state.showBaseMap = e.target.checked;
+  $("attribution").hidden = !state.showBaseMap;
+  redraw();
+});
 $("fit").addEventListener("click", () => {
   unfollow();
   renderRobots();

@@ -20,6 +20,10 @@ export const state = {
   gridDetailLoads: 0,
   showNetwork: false,
   showGrid: true,
+  baseMap: null, // {url, attribution, max_zoom} of /api/v1/dashboard, when configured
+  showBaseMap: true,
+  baseMapZoom: null, // the zoom of the tiles drawn last
+  baseMapTiles: 0, // tiles loaded
   inspector: null, // {id, points, counts}
   covariances: new Map(), // node id -> 3 × 3 marginal covariance of (x, y, θ), for the ellipses
   covariancesAsked: new Set(), // node ids whose covariance is of the current graph

@@ -13,6 +13,7 @@ import { mkdtempSync, mkdirSync, rmSync, existsSync } from "node:fs";
 import { tmpdir } from "node:os";
 import path from "node:path";
 import net from "node:net";
+import { createServer } from "node:http";
 import { fileURLToPath } from "node:url";
 import { chromium } from "playwright-core";
 
@@ -50,6 +51,10 @@ const TOKEN = "web-test-token";
 const READ_TOKEN = "web-test-read-token";
 let demo;
 let demoLog = "";
+// A base map's tile server: every tile one green square, and the tiles asked for.
+const BASE_GREEN = [0, 200, 0];
+const baseTiles = [];
+let tileServer;
 let dir;
 let browser;
 let page;
@@ -78,12 +83,20 @@ before(async () => {
   const http = await freePort();
   const zenoh = await freePort();
   base = `http://127.0.0.1:${http}`;
+  tileServer = createServer((req, res) => {
+    baseTiles.push(req.url);
+    res.writeHead(200, { "content-type": "image/svg+xml", "access-control-allow-origin": "*" });
+    res.end(`<svg xmlns="http://www.w3.org/2000/svg" width="256" height="256"><rect width="256" height="256" fill="rgb(${BASE_GREEN})"/></svg>`);
+  });
+  const tilePort = await freePort();
+  await new Promise((ok) => tileServer.listen(tilePort, "127.0.0.1", ok));
   // 120 s of simulated driving at 4x: 30 s of wall time with the robots moving, time enough
   // for the page to load and for two screenshots seconds apart.
   demo = spawn(
     findBinary(),
     ["demo", "--speed", "4", "--duration", "120", "--serve", "--http", `127.0.0.1:${http}`,
-      "--zenoh", `tcp/127.0.0.1:${zenoh}`, "--dir", dir],
+      "--zenoh", `tcp/127.0.0.1:${zenoh}`, "--dir", dir,
+      "--base-map", `http://127.0.0.1:${tilePort}/tiles/{z}/{x}/{y}.svg`],
     { stdio: ["ignore", "pipe", "pipe"], env: { ...process.env, LEVELMAP_TOKEN: TOKEN, LEVELMAP_READ_TOKEN: READ_TOKEN } },
   );
   demo.stdout.on("data", (d) => (demoLog += d));
@@ -116,6 +129,7 @@ async function enterToken(p, token) {
 
 after(async () => {
   await browser?.close();
+  tileServer?.close();
   if (demo && demo.exitCode === null) {
     demo.kill("SIGINT");
     const exited = new Promise((ok) => demo.once("exit", ok));
@@ -282,6 +296,38 @@ test("the occupancy grid is drawn where the mapper placed it", async () => {
   assert.ok(shown - hidden > 100, `obstacle pixels zoomed out: ${shown} with the grid, ${hidden} without`);
   console.log(`near-black pixels zoomed out (${(await cellPx()).toFixed(2)} device px per cell): ${shown} with the grid, ${hidden} without`);
   await page.click("#fit");
+});
+
+test("a configured base map is drawn under the grid, at the screen's zoom, and toggles", async () => {
+  await waitFor("base map tiles", () => page.evaluate(() => window.levelmapState.baseMapTiles > 0), 20_000);
+  const green = () =>
+    page.evaluate(([r, g, b]) => {
+      const c = document.getElementById("map");
+      const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+      let n = 0;
+      // Free cells multiply the base map by white: its own green, give or take a few levels.
+      for (let i = 0; i < d.length; i += 4) if (Math.abs(d[i] - r) < 30 && Math.abs(d[i + 1] - g) < 30 && Math.abs(d[i + 2] - b) < 30) n += 1;
+      return n;
+    }, BASE_GREEN);
+  await sleep(300);
+  const shown = await green();
+  const zoom = await page.evaluate(() => window.levelmapState.baseMapZoom);
+  await page.screenshot({ path: path.join(artifacts, "3c-base-map.png") });
+  await page.click("#toggle-base-map");
+  await sleep(300);
+  const hidden = await green();
+  await page.click("#toggle-base-map");
+  const total = await page.evaluate(() => document.getElementById("map").width * document.getElementById("map").height);
+  assert.ok(shown > total / 4 && hidden < total / 100, `green pixels: ${shown} with the base map, ${hidden} without, of ${total}`);
+  // The tiles asked for are the park's (52.39° N, 9.71° E) at the zoom drawn.
+  const asked = baseTiles.map((u) => u.match(/^\/tiles\/(\d+)\/(\d+)\/(\d+)\.svg$/)).filter(Boolean).map((m) => m.slice(1).map(Number));
+  assert.equal(asked.length, baseTiles.length, baseTiles.join(" "));
+  const [z, x, y] = asked.find(([tz]) => tz === zoom) ?? [];
+  assert.ok(z >= 14 && z <= 19, `zoom ${zoom}, tiles ${baseTiles.slice(-4).join(" ")}`);
+  const n = 2 ** z, lat = (52.39 * Math.PI) / 180;
+  const [px, py] = [((9.71 + 180) / 360) * n, ((1 - Math.log(Math.tan(lat) + 1 / Math.cos(lat)) / Math.PI) / 2) * n];
+  assert.ok(Math.abs(x - px) < 8 && Math.abs(y - py) < 8, `tile ${z}/${x}/${y} for the park's ${px.toFixed(1)}, ${py.toFixed(1)}`);
+  console.log(`base map: zoom ${zoom}, ${baseTiles.length} tiles asked for, ${shown} green pixels with it, ${hidden} without`);
 });
 
 test("the token is checked before any write, and re-optimize works with it", async () => {

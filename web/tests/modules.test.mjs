@@ -28,3 +28,12 @@ test("index.html preloads every module app.js imports, and nothing else", () => 
   const onDisk = readdirSync(web).filter((f) => f.endsWith(".js"));
   assert.deepEqual(onDisk.sort(), ["app.js", ...imported].sort());
 });
+
+test("geo.js: east-north metres to WGS84 and back within a millimetre", async () => {
+  const { enuToGeodetic, geodeticToEnu } = await import("../geo.js");
+  const datum = { latitude_deg: 52.39, longitude_deg: 9.71, height_m: 55 };
+  for (const [e, n] of [[0, 0], [120.5, -80.25], [-900, 1500]]) {
+    const [e2, n2] = geodeticToEnu(datum, enuToGeodetic(datum, e, n));
+    assert.ok(Math.hypot(e2 - e, n2 - n) < 1e-3, `${e}, ${n} came back as ${e2}, ${n2}`);
+  }
+});

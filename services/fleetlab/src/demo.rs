@@ -78,6 +78,10 @@ pub struct DemoArgs {
         hide_env_values = true
     )]
     pub read_token: String,
+    /// XYZ tiles the dashboard draws under the grid (`[http.base_map]`), e.g.
+    /// `https://tile.openstreetmap.org/{z}/{x}/{y}.png`; none by default.
+    #[arg(long, value_name = "URL")]
+    pub base_map: Option<String>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -137,7 +141,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
 async fn run_async(args: &DemoArgs) -> Result<()> {
     let started = Instant::now();
-    let park = crate::park_mapper_config(&args.dir, &args.http, &args.zenoh)?;
+    let mut park = crate::park_mapper_config(&args.dir, &args.http, &args.zenoh)?;
+    if let Some(url) = &args.base_map {
+        park.http.base_map = Some(mapper::config::BaseMap {
+            url: url.clone().try_into().map_err(anyhow::Error::msg)?,
+            attribution: String::new(),
+            max_zoom: 19,
+        });
+    }
     let mapper = mapper::start(MapperConfig {
         mapping: slam::Mapper2dParams {
             coverage: slam::CoverageParams {

@@ -121,6 +121,57 @@ pub struct HttpConfig {
     /// Origins (`https://host[:port]`) whose pages may call the API (CORS); empty: no CORS
     /// headers, so only pages served by the mapper itself can read its answers.
     pub cors_origins: Vec<CorsOrigin>,
+    /// A web map the dashboard may draw under the grid (`[http.base_map]`); none (the
+    /// default): the page asks no other server for anything, as offline sites need.
+    pub base_map: Option<BaseMap>,
+}
+
+/// A base map's XYZ tiles (Web Mercator, 256 px), drawn under the dashboard's grid.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct BaseMap {
+    /// The tiles' address with `{z}`, `{x}` and `{y}`, e.g.
+    /// `https://tile.openstreetmap.org/{z}/{x}/{y}.png`. The browser fetches them itself, so
+    /// the server must send CORS headers (OpenStreetMap's do).
+    pub url: BaseMapUrl,
+    /// Credit the tiles' provider asks for, shown over the map.
+    #[serde(default)]
+    pub attribution: String,
+    /// The deepest zoom level the server has.
+    #[serde(default = "default_base_map_zoom")]
+    pub max_zoom: u8,
+}
+
+fn default_base_map_zoom() -> u8 {
+    19
+}
+
+/// An XYZ tile address template: http(s), with `{z}`, `{x}` and `{y}`.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(try_from = "String", into = "String")]
+#[schema(value_type = String)]
+pub struct BaseMapUrl(String);
+
+impl TryFrom<String> for BaseMapUrl {
+    type Error = String;
+
+    fn try_from(url: String) -> Result<Self, String> {
+        let web = url.starts_with("https://") || url.starts_with("http://");
+        let placeholders = ["{z}", "{x}", "{y}"].iter().all(|p| url.contains(p));
+        if web && placeholders {
+            Ok(BaseMapUrl(url))
+        } else {
+            Err(format!(
+                "base_map.url: {url:?} is not a tile address: want http[s]://… with {{z}}, {{x}} and {{y}}"
+            ))
+        }
+    }
+}
+
+impl From<BaseMapUrl> for String {
+    fn from(u: BaseMapUrl) -> String {
+        u.0
+    }
 }
 
 impl Default for HttpConfig {
@@ -130,6 +181,7 @@ impl Default for HttpConfig {
             heavy_timeout_ms: NonZeroU64::new(10_000).expect("nonzero"),
             event_streams: NonZeroUsize::new(256).expect("nonzero"),
             cors_origins: Vec::new(),
+            base_map: None,
         }
     }
 }
@@ -402,6 +454,24 @@ mod tests {
         }
         let e = toml::from_str::<MapperConfig>("[http]\nheavy_requests = 0").unwrap_err();
         assert!(e.to_string().contains("heavy_requests"), "{e}");
+    }
+
+    #[test]
+    fn a_base_map_needs_a_tile_address() {
+        let ok: MapperConfig = toml::from_str(
+            "[http.base_map]\nurl = \"https://tile.openstreetmap.org/{z}/{x}/{y}.png\"",
+        )
+        .unwrap();
+        let base = ok.http.base_map.unwrap();
+        assert_eq!((base.max_zoom, base.attribution.as_str()), (19, ""));
+        for bad in [
+            "tile.example.org/{z}/{x}/{y}.png",
+            "https://tile.example.org/{z}/{x}.png",
+        ] {
+            let text = format!("[http.base_map]\nurl = {bad:?}");
+            let e = toml::from_str::<MapperConfig>(&text).unwrap_err();
+            assert!(e.to_string().contains("not a tile address"), "{bad}: {e}");
+        }
     }
 
     #[test]

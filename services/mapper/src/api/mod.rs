@@ -63,6 +63,8 @@ struct Api {
     maps: Arc<crate::localization::MapCache>,
     /// Held while a fleet's modes change: stored and handed to the worker in one order.
     modes_lock: Arc<tokio::sync::Mutex<()>>,
+    /// The base map the dashboard may draw (`[http.base_map]`).
+    base_map: Option<Arc<crate::config::BaseMap>>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -235,6 +237,7 @@ fn open_routes() -> OpenApiRouter<Api> {
 fn guarded_routes() -> OpenApiRouter<Api> {
     OpenApiRouter::new()
         .routes(routes!(service::openapi))
+        .routes(routes!(web::dashboard_settings))
         .routes(routes!(fleets::fleets))
         .routes(routes!(fleets::summary))
         .routes(routes!(fleets::robots))
@@ -308,6 +311,7 @@ pub fn router(
         max_versions: config.versions.max_versions.get(),
         maps,
         modes_lock: Arc::default(),
+        base_map: config.http.base_map.clone().map(Arc::new),
     };
     let (router, doc) = parts(Some(&api));
     let _ = api

@@ -1,8 +1,10 @@
 //! The dashboard: the page and its modules, compiled in (or read from a folder while working
 //! on the page).
 
-use super::{ApiError, Reply};
-use axum::extract::Path;
+use super::{Api, ApiError, Reply};
+use crate::config::BaseMap;
+use axum::Json;
+use axum::extract::{Path, State};
 use axum::http::header;
 use axum::response::IntoResponse;
 
@@ -32,6 +34,11 @@ const WEB_FILES: &[(&str, &str, &str)] = &[
         "geo.js",
         "text/javascript; charset=utf-8",
         include_str!("../../../../web/geo.js"),
+    ),
+    (
+        "basemap.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../../../web/basemap.js"),
     ),
     (
         "panel.js",
@@ -159,6 +166,23 @@ pub(super) async fn web_index() -> Reply {
     ))]
 pub(super) async fn web_file(Path(file): Path<String>) -> Reply {
     web_reply(&file)
+}
+
+/// What the dashboard draws beyond the mapper's own answers.
+#[derive(serde::Serialize, utoipa::ToSchema)]
+pub(super) struct DashboardSettings {
+    /// The base map under the grid (`[http.base_map]`); null when none is configured.
+    base_map: Option<BaseMap>,
+}
+
+/// The dashboard's settings from the mapper's config: the base map, if any.
+#[utoipa::path(get, path = "/api/v1/dashboard", tag = "web", responses(
+    (status = 200, description = "The dashboard's settings", body = DashboardSettings),
+))]
+pub(super) async fn dashboard_settings(State(api): State<Api>) -> Json<DashboardSettings> {
+    Json(DashboardSettings {
+        base_map: api.base_map.as_deref().cloned(),
+    })
 }
 
 #[cfg(test)]
