@@ -46,7 +46,7 @@ fn limits(heavy: usize, timeout_ms: u64, streams: usize) -> HttpConfig {
         heavy_requests: NonZeroUsize::new(heavy).unwrap(),
         heavy_timeout_ms: NonZeroU64::new(timeout_ms).unwrap(),
         event_streams: NonZeroUsize::new(streams).unwrap(),
-        cors_origins: Vec::new(),
+        ..HttpConfig::default()
     }
 }
 

@@ -124,7 +124,7 @@ mod tests {
             heavy_requests: NonZeroUsize::new(heavy).unwrap(),
             heavy_timeout_ms: NonZeroU64::new(timeout_ms).unwrap(),
             event_streams: NonZeroUsize::new(streams).unwrap(),
-            cors_origins: Vec::new(),
+            ..HttpConfig::default()
         })
     }
 
