@@ -249,6 +249,24 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
     let c = &geo["features"][0]["geometry"]["coordinates"];
     assert!((c[0].as_f64().unwrap() - 9.71).abs() < 0.01, "{c}");
     assert!((c[1].as_f64().unwrap() - 52.39).abs() < 0.01, "{c}");
+    // map_server's scale mode: the PNG carries the evidence, the YAML says so.
+    let scale_yaml = get(&format!("{base}/map.yaml?mode=scale"));
+    assert!(
+        scale_yaml.contains("image: map.png\n") && scale_yaml.contains("mode: scale\n"),
+        "{scale_yaml}"
+    );
+    assert!(
+        scale_yaml.contains("occupied_thresh: 0.65\nfree_thresh: 0.35\n"),
+        "{scale_yaml}"
+    );
+    assert_eq!(
+        read(http, &format!("{base}/map.png?mode=scale")).unwrap().0,
+        200
+    );
+    assert_eq!(
+        read(http, &format!("{base}/map.png?mode=raw")).unwrap().0,
+        400
+    );
     // The grid on the Earth (tests/e2e_geo.rs reads both with rasterio): a little-endian
     // TIFF, and web tiles, transparent away from the map, refused past the scheme.
     let tif = read(http, &format!("{base}/map.tif")).unwrap();

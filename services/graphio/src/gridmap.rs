@@ -2,8 +2,11 @@
 //! exactly as ROS map_server's `map_saver` writes them, so `map_server` (ROS 1) and
 //! `nav2_map_server` load levelmap maps unchanged.
 //!
-//! Both images are trinary, with map_saver's grey levels: free 254, occupied 0, unknown 205
-//! (the tri-state of [`OccupancyGrid::state`]). Rows go from the top of the map (largest y,
+//! Both images are trinary by default, with map_saver's grey levels: free 254, occupied 0,
+//! unknown 205 (the tri-state of [`OccupancyGrid::state`]). In map_server's `scale` mode
+//! ([`MapMode::Scale`]) the PNG carries the evidence instead: each known cell's grey is
+//! 255·(1 − p), unknown is transparent, and map_server loads the cells between the two
+//! thresholds as 1–99 ([`map_server_value`]). Rows go from the top of the map (largest y,
 //! north) down, as image rows do; the grid's row 0 is its bottom row.
 
 use crate::EncodeError;
@@ -23,6 +26,72 @@ pub const UNKNOWN: u8 = 205;
 pub const OCCUPIED_THRESH: f64 = 0.65;
 /// `free_thresh` of the YAML (see [`OCCUPIED_THRESH`]).
 pub const FREE_THRESH: f64 = 0.196;
+
+/// How map_server reads a map image (its YAML's `mode`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MapMode {
+    /// Free, occupied or unknown (map_saver's default).
+    #[default]
+    Trinary,
+    /// The evidence: between the thresholds a cell is 1–99, unknown from the alpha channel.
+    Scale,
+}
+
+impl std::str::FromStr for MapMode {
+    type Err = String;
+
+    /// `trinary` or `scale`, as the YAML's `mode` names them.
+    fn from_str(s: &str) -> Result<MapMode, String> {
+        match s {
+            "trinary" => Ok(MapMode::Trinary),
+            "scale" => Ok(MapMode::Scale),
+            other => Err(format!("mode={other:?}: want trinary or scale")),
+        }
+    }
+}
+
+/// The value map_server (ROS 1 and Nav2) gives a cell of `grid` holding `occupancy` (−1 or
+/// 0–100) when it loads this module's image in `mode`: −1 unknown, 0 free, 100 occupied and,
+/// in `Scale` mode, (p − free)/(occupied − free) × 100 in between, rounded. The ROS 2 map
+/// publication uses it, so it carries what a map_server would.
+pub fn map_server_value(grid: &OccupancyGrid, occupancy: i8, mode: MapMode) -> i8 {
+    match (grid.classify(occupancy), mode) {
+        (CellState::Free, _) => 0,
+        (CellState::Occupied, _) => 100,
+        (CellState::Unknown, MapMode::Trinary) => -1,
+        (CellState::Unknown, MapMode::Scale) if occupancy < 0 => -1,
+        (CellState::Unknown, MapMode::Scale) => {
+            let (free, occupied) = (
+                f64::from(grid.free_percent),
+                f64::from(grid.occupied_percent),
+            );
+            ((f64::from(occupancy) - free) / (occupied - free) * 100.0).round() as i8
+        }
+    }
+}
+
+/// The grid as map_server's `scale` mode reads it: a grey-and-alpha PNG, each known cell
+/// 255·(1 − p) and opaque, unknown transparent, north up. Its YAML
+/// ([`to_map_yaml_with`] in [`MapMode::Scale`]) carries the grid's own thresholds.
+pub fn to_png_scale(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
+    crate::georaster::check_grid(grid)?;
+    let mut pixels = Vec::with_capacity(2 * grid.cells.len());
+    for row in grid.cells.chunks_exact(grid.width).rev() {
+        pixels.extend(row.iter().flat_map(|&c| {
+            if c < 0 {
+                [UNKNOWN, 0]
+            } else {
+                [(255.0 * (1.0 - f64::from(c) / 100.0)).round() as u8, 255]
+            }
+        }));
+    }
+    encode_png(
+        grid,
+        &pixels,
+        png::ColorType::GrayscaleAlpha,
+        PngSpeed::Small,
+    )
+}
 
 /// The grid's pixels, one grey byte a cell, top row (largest y) first.
 pub fn trinary_pixels(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
@@ -63,6 +132,16 @@ pub fn to_png(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
 /// [`to_png`] at the given compression.
 pub fn to_png_with(grid: &OccupancyGrid, speed: PngSpeed) -> Result<Vec<u8>, EncodeError> {
     let pixels = trinary_pixels(grid)?;
+    encode_png(grid, &pixels, png::ColorType::Grayscale, speed)
+}
+
+/// `pixels` (top row first) as an 8-bit PNG of the grid's size.
+fn encode_png(
+    grid: &OccupancyGrid,
+    pixels: &[u8],
+    color: png::ColorType,
+    speed: PngSpeed,
+) -> Result<Vec<u8>, EncodeError> {
     let too_large = || EncodeError::GridTooLarge {
         width: grid.width,
         height: grid.height,
@@ -71,17 +150,17 @@ pub fn to_png_with(grid: &OccupancyGrid, speed: PngSpeed) -> Result<Vec<u8>, Enc
     let h = u32::try_from(grid.height).map_err(|_| too_large())?;
     let mut out = Vec::with_capacity(pixels.len() / 8 + 64);
     let mut encoder = png::Encoder::new(&mut out, w, h);
-    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_color(color);
     encoder.set_depth(png::BitDepth::Eight);
     encoder.set_compression(match speed {
         PngSpeed::Small => png::Compression::Balanced,
         PngSpeed::Fast => png::Compression::Fast,
     });
-    // Trinary maps are long runs of three values: the default filter and compression
-    // already make them small.
+    // Maps are long runs of a few values: the default filter and compression already make
+    // them small.
     encoder
         .write_header()
-        .and_then(|mut writer| writer.write_image_data(&pixels))
+        .and_then(|mut writer| writer.write_image_data(pixels))
         .map_err(|e| EncodeError::Png(e.to_string()))?;
     Ok(out)
 }
@@ -104,6 +183,22 @@ pub fn to_pgm(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
 /// writes it), with map_saver's fields and number format. The origin is the grid's
 /// lower-left corner, with yaw 0 (the grid is axis-aligned with the map frame).
 pub fn to_map_yaml(grid: &OccupancyGrid, image: &str) -> String {
+    to_map_yaml_with(grid, image, MapMode::Trinary)
+}
+
+/// [`to_map_yaml`] for an image in `mode`: in `Scale` mode with `mode: scale` and the grid's
+/// own thresholds (so map_server's free, occupied and in-between are the grid's).
+pub fn to_map_yaml_with(grid: &OccupancyGrid, image: &str, mode: MapMode) -> String {
+    if mode == MapMode::Scale {
+        let mut s = to_map_yaml(grid, image);
+        let occupied = f64::from(grid.occupied_percent) / 100.0;
+        let free = f64::from(grid.free_percent) / 100.0;
+        s = s.replace(
+            &format!("occupied_thresh: {OCCUPIED_THRESH}\nfree_thresh: {FREE_THRESH}\n"),
+            &format!("occupied_thresh: {occupied}\nfree_thresh: {free}\nmode: scale\n"),
+        );
+        return s;
+    }
     let mut s = String::with_capacity(160);
     let _ = writeln!(s, "image: {}", yaml_scalar(image));
     let _ = writeln!(s, "resolution: {:.6}", grid.resolution_m);
@@ -198,6 +293,51 @@ mod tests {
         let p = |v: u8| f64::from(255 - v) / 255.0;
         assert!(p(OCCUPIED) > OCCUPIED_THRESH && p(FREE) < FREE_THRESH);
         assert!((FREE_THRESH..=OCCUPIED_THRESH).contains(&p(UNKNOWN)));
+    }
+
+    #[test]
+    fn scale_mode_carries_the_evidence_as_map_server_reads_it() {
+        let g = small();
+        let png = to_png_scale(&g).unwrap();
+        let mut reader = png::Decoder::new(std::io::Cursor::new(png))
+            .read_info()
+            .unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        assert_eq!(info.color_type, png::ColorType::GrayscaleAlpha);
+        // Top row: never seen (transparent), 50 %, 10 %; bottom: 0 %, never seen, 100 %.
+        assert_eq!(
+            &buf[..info.buffer_size()],
+            &[205, 0, 128, 255, 230, 255, 255, 255, 205, 0, 0, 255]
+        );
+        // map_server's scale mode on those pixels: occ = 1 − grey/255 against the YAML's
+        // thresholds, in between scaled; transparent is unknown.
+        let yaml = to_map_yaml_with(&g, "m.png", MapMode::Scale);
+        assert!(
+            yaml.contains("occupied_thresh: 0.65\nfree_thresh: 0.35\nmode: scale\n"),
+            "{yaml}"
+        );
+        let load = |grey: u8, alpha: u8| -> i8 {
+            let occ = 1.0 - f64::from(grey) / 255.0;
+            if alpha != 255 {
+                -1
+            } else if occ > 0.65 {
+                100
+            } else if occ < 0.35 {
+                0
+            } else {
+                ((occ - 0.35) / 0.30 * 100.0).round() as i8
+            }
+        };
+        for (&cell, px) in [-1i8, 50, 10, 0, -1, 100].iter().zip(buf.chunks(2)) {
+            let ours = map_server_value(&g, cell, MapMode::Scale);
+            assert!(
+                (i16::from(ours) - i16::from(load(px[0], px[1]))).abs() <= 1,
+                "{cell}: {ours}"
+            );
+        }
+        assert_eq!(map_server_value(&g, 50, MapMode::Trinary), -1);
+        assert_eq!(map_server_value(&g, 50, MapMode::Scale), 50);
     }
 
     #[test]

@@ -20,9 +20,21 @@ pub(crate) struct GridQuery {
     /// At most this many cells: coarser cells than `resolution_m` when the map needs more
     /// (without it, such a map is refused with 422).
     max_cells: Option<usize>,
+    /// How map_server is to read the picture (`map.png` and `map.yaml`): `trinary` (the
+    /// default: free, occupied, unknown) or `scale` (each known cell's evidence as its grey,
+    /// unknown transparent, `mode: scale` in the YAML).
+    mode: Option<String>,
 }
 
 impl GridQuery {
+    /// The map_server mode asked for.
+    fn mode(&self) -> Reply<graphio::gridmap::MapMode> {
+        self.mode
+            .as_deref()
+            .map_or(Ok(graphio::gridmap::MapMode::Trinary), str::parse)
+            .map_err(ApiError::BadRequest)
+    }
+
     pub(super) fn params(&self) -> Reply<slam::GridParams> {
         let mut params = slam::GridParams::default();
         if let Some(res) = self.resolution_m {
@@ -122,7 +134,8 @@ async fn grid_reply(
         .into_response())
 }
 
-/// The occupancy grid as a PNG picture (white free, black occupied, grey unknown).
+/// The occupancy grid as a PNG picture (white free, black occupied, grey unknown; with
+/// `mode=scale`, map_server's scale mode: the evidence as grey, unknown transparent).
 #[utoipa::path(get, path = "/api/v1/fleets/{fleet}/map.png", tag = "map",
     params(("fleet" = String, Path, description = "Fleet id"), GridQuery),
     responses(
@@ -138,7 +151,11 @@ pub(super) async fn map_png(
     Path(fleet): Path<String>,
     Query(q): Query<GridQuery>,
 ) -> Reply {
-    grid_reply(&api, &fleet, q, "image/png", graphio::gridmap::to_png).await
+    let png: Encode = match q.mode()? {
+        graphio::gridmap::MapMode::Trinary => graphio::gridmap::to_png,
+        graphio::gridmap::MapMode::Scale => graphio::gridmap::to_png_scale,
+    };
+    grid_reply(&api, &fleet, q, "image/png", png).await
 }
 
 /// The occupancy grid as Nav2's map_server PGM.
@@ -160,7 +177,8 @@ pub(super) async fn map_pgm(
     grid_reply(&api, &fleet, q, "image/x-portable-graymap", pgm).await
 }
 
-/// The map_server YAML beside `map.pgm` (same query, same grid).
+/// The map_server YAML beside `map.pgm` (same query, same grid); with `mode=scale`, beside
+/// `map.png?mode=scale`.
 #[utoipa::path(get, path = "/api/v1/fleets/{fleet}/map.yaml", tag = "map",
     params(("fleet" = String, Path, description = "Fleet id"), GridQuery),
     responses(
@@ -175,7 +193,16 @@ pub(super) async fn map_yaml(
     Path(fleet): Path<String>,
     Query(q): Query<GridQuery>,
 ) -> Reply {
-    let yaml: Encode = |g| Ok(graphio::gridmap::to_map_yaml(g, "map.pgm").into_bytes());
+    // In scale mode the picture is the PNG: a PGM has no alpha for the unknown cells.
+    let yaml: Encode = match q.mode()? {
+        graphio::gridmap::MapMode::Trinary => {
+            |g| Ok(graphio::gridmap::to_map_yaml(g, "map.pgm").into_bytes())
+        }
+        graphio::gridmap::MapMode::Scale => |g| {
+            let mode = graphio::gridmap::MapMode::Scale;
+            Ok(graphio::gridmap::to_map_yaml_with(g, "map.png", mode).into_bytes())
+        },
+    };
     grid_reply(&api, &fleet, q, "application/yaml", yaml).await
 }
 

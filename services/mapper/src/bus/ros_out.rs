@@ -60,10 +60,8 @@ pub fn occupancy_grid_sample(view: &FleetView, frame: &str) -> Result<Vec<u8>, s
         data: grid
             .cells
             .iter()
-            .map(|&c| match grid.classify(c) {
-                slam::CellState::Free => 0,
-                slam::CellState::Occupied => 100,
-                slam::CellState::Unknown => -1,
+            .map(|&c| {
+                graphio::gridmap::map_server_value(&grid, c, graphio::gridmap::MapMode::Trinary)
             })
             .collect(),
     };
