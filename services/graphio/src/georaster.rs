@@ -9,7 +9,7 @@
 //! tiles ([`crate::webtiles`]) are sampled the same way.
 
 use crate::EncodeError;
-use crate::gridmap::{FREE, OCCUPIED, UNKNOWN};
+use crate::gridmap::{FREE, OCCUPIED, UNKNOWN, check_grid};
 use slam::geodesy::{GeoDatum, Geodetic};
 use slam::grid::{CellState, OccupancyGrid};
 use slam::nalgebra::Vector3;
@@ -86,22 +86,6 @@ pub(crate) fn sample(
         }
     }
     states
-}
-
-/// Checks that `grid` has cells and that they match its size.
-pub(crate) fn check_grid(grid: &OccupancyGrid) -> Result<(), EncodeError> {
-    let (w, h) = (grid.width, grid.height);
-    let finite = grid.resolution_m.is_finite()
-        && grid.resolution_m > 0.0
-        && grid.origin_m.iter().all(|v| v.is_finite());
-    if w == 0 || h == 0 || w.checked_mul(h) != Some(grid.cells.len()) || !finite {
-        return Err(EncodeError::BadGrid {
-            width: w,
-            height: h,
-            cells: grid.cells.len(),
-        });
-    }
-    Ok(())
 }
 
 impl GeoRaster {

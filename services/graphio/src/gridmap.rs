@@ -74,7 +74,7 @@ pub fn map_server_value(grid: &OccupancyGrid, occupancy: i8, mode: MapMode) -> i
 /// 255·(1 − p) and opaque, unknown transparent, north up. Its YAML
 /// ([`to_map_yaml_with`] in [`MapMode::Scale`]) carries the grid's own thresholds.
 pub fn to_png_scale(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
-    crate::georaster::check_grid(grid)?;
+    check_grid(grid)?;
     let mut pixels = Vec::with_capacity(2 * grid.cells.len());
     for row in grid.cells.chunks_exact(grid.width).rev() {
         pixels.extend(row.iter().flat_map(|&c| {
@@ -93,18 +93,27 @@ pub fn to_png_scale(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
     )
 }
 
-/// The grid's pixels, one grey byte a cell, top row (largest y) first.
-pub fn trinary_pixels(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
+/// Checks that `grid` has cells, that they match its size, and that it lies somewhere.
+pub(crate) fn check_grid(grid: &OccupancyGrid) -> Result<(), EncodeError> {
     let (w, h) = (grid.width, grid.height);
-    if w == 0 || h == 0 || w.checked_mul(h) != Some(grid.cells.len()) {
+    let placed = grid.resolution_m.is_finite()
+        && grid.resolution_m > 0.0
+        && grid.origin_m.iter().all(|v| v.is_finite());
+    if w == 0 || h == 0 || w.checked_mul(h) != Some(grid.cells.len()) || !placed {
         return Err(EncodeError::BadGrid {
             width: w,
             height: h,
             cells: grid.cells.len(),
         });
     }
-    let mut pixels = Vec::with_capacity(w * h);
-    for row in grid.cells.chunks_exact(w).rev() {
+    Ok(())
+}
+
+/// The grid's pixels, one grey byte a cell, top row (largest y) first.
+pub fn trinary_pixels(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
+    check_grid(grid)?;
+    let mut pixels = Vec::with_capacity(grid.cells.len());
+    for row in grid.cells.chunks_exact(grid.width).rev() {
         pixels.extend(row.iter().map(|&c| match grid.classify(c) {
             CellState::Free => FREE,
             CellState::Occupied => OCCUPIED,

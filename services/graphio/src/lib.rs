@@ -56,8 +56,11 @@ pub enum FileError {
 /// Why a map product could not be encoded. Never a panic, whatever the input's fields hold.
 #[derive(Debug, thiserror::Error)]
 pub enum EncodeError {
-    /// The grid has no cell, or its `cells` do not match `width × height`.
-    #[error("grid of {width} × {height} cells holds {cells} cell values")]
+    /// The grid has no cell, its `cells` do not match `width × height`, or its cell size or
+    /// origin is not a finite place.
+    #[error(
+        "grid of {width} × {height} cells holding {cells} cell values, or not placed (cell size, origin)"
+    )]
     BadGrid {
         /// Cells across (x).
         width: usize,

@@ -5,7 +5,8 @@
 //! so that a base map shows under the map.
 
 use crate::EncodeError;
-use crate::georaster::{check_grid, sample};
+use crate::georaster::sample;
+use crate::gridmap::check_grid;
 use slam::geodesy::{GeoDatum, Geodetic};
 use slam::grid::{CellState, OccupancyGrid};
 use std::f64::consts::PI;
