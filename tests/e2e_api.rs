@@ -249,6 +249,8 @@ fn check_routes(http: &str, sent_cloud: &wire::v1::SegmentedCloud) {
     let c = &geo["features"][0]["geometry"]["coordinates"];
     assert!((c[0].as_f64().unwrap() - 9.71).abs() < 0.01, "{c}");
     assert!((c[1].as_f64().unwrap() - 52.39).abs() < 0.01, "{c}");
+    // No base map unless the config names one: the page then asks no other server.
+    assert!(json("/api/v1/dashboard")["base_map"].is_null());
     // map_server's scale mode: the PNG carries the evidence, the YAML says so.
     let scale_yaml = get(&format!("{base}/map.yaml?mode=scale"));
     assert!(

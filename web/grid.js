@@ -8,12 +8,20 @@ import { apiFetch, state, view, ctx, throttled } from "./state.js";
 const GRID_MAX_CELLS = 2048 * 2048;
 const GRID_FINEST_M = 0.1; // the mapper's default cell
 
+// The grid in map_server's scale mode: each known cell's grey is 255·(1 − p), unknown cells
+// are transparent; `picture` turns it into what the map shows.
 async function fetchGrid(query) {
-  const r = await apiFetch(`/fleets/${state.fleet}/map.png?max_cells=${GRID_MAX_CELLS}${query}`, { cache: "no-store" });
+  const r = await apiFetch(`/fleets/${state.fleet}/map.png?mode=scale&max_cells=${GRID_MAX_CELLS}${query}`, { cache: "no-store" });
   if (!r.ok) throw new Error(`map.png${query}: ${r.status} ${(await r.text()).trim()}`);
   // Where the picture lies comes with it, so it always matches the picture.
   const placement = JSON.parse(r.headers.get("levelmap-grid"));
-  return { ...placement, image: await createImageBitmap(await r.blob()) };
+  const bitmap = await createImageBitmap(await r.blob());
+  const c = new OffscreenCanvas(bitmap.width, bitmap.height).getContext("2d");
+  c.drawImage(bitmap, 0, 0);
+  const cells = c.getImageData(0, 0, bitmap.width, bitmap.height);
+  const g = { ...placement, cells };
+  g.image = picture(g, 1);
+  return g;
 }
 
 async function loadGrid() {
@@ -53,38 +61,49 @@ async function loadGridDetail() {
 export const refreshGrid = throttled(loadGrid, 3000);
 export const refreshGridDetail = throttled(loadGridDetail, 300);
 
-// The picture's greys (map_saver's trinary PNG): occupied 0, unknown 205, free 254.
-const OCCUPIED = 0, UNKNOWN = 205, FREE = 254;
+// The scale PNG's greys against the grid's thresholds (0.65 and 0.35): occupied at or below
+// OCCUPIED_MAX, free at or above FREE_MIN, seen but undecided in between.
+const OCCUPIED_MAX = 89, FREE_MIN = 166;
+// What the map shows: occupied darker with more evidence (0–71), free whiter with more
+// (235–255), unknown (never seen, or undecided) a blue-grey told apart from both.
+const UNKNOWN_RGB = [196, 202, 214];
+function shade(grey) {
+  if (grey <= OCCUPIED_MAX) return Math.round(grey * 0.8);
+  if (grey >= FREE_MIN) return Math.round(235 + ((grey - FREE_MIN) * 20) / (255 - FREE_MIN));
+  return -1;
+}
 
-/// The picture reduced by `k` × `k` blocks, each block the state that matters most in it:
-/// occupied over free over unknown. Averaging (the canvas's smoothing) would fade a tree's
-/// few cells into the free space around it and lose it when zoomed out. Kept per factor.
-function reduced(g, k) {
-  g.reduced ??= new Map();
-  if (g.reduced.has(k)) return g.reduced.get(k);
-  const src = new OffscreenCanvas(g.image.width, g.image.height).getContext("2d");
-  src.drawImage(g.image, 0, 0);
-  const { data } = src.getImageData(0, 0, g.image.width, g.image.height);
-  const [w, h] = [Math.ceil(g.image.width / k), Math.ceil(g.image.height / k)];
+/// The picture of the grid reduced by `k` × `k` blocks (1: every cell), each block the state
+/// that matters most in it: occupied (its darkest) over free (its palest) over unknown.
+/// Averaging (the canvas's smoothing) would fade a tree's few cells into the free space around
+/// it and lose it when zoomed out. Kept per factor.
+function picture(g, k) {
+  g.pictures ??= new Map();
+  if (g.pictures.has(k)) return g.pictures.get(k);
+  const { data, width, height } = g.cells;
+  const [w, h] = [Math.ceil(width / k), Math.ceil(height / k)];
   const out = new ImageData(w, h);
   for (let by = 0; by < h; by++) {
     for (let bx = 0; bx < w; bx++) {
-      let v = UNKNOWN;
-      for (let y = by * k; y < Math.min((by + 1) * k, g.image.height) && v !== OCCUPIED; y++) {
-        for (let x = bx * k; x < Math.min((bx + 1) * k, g.image.width); x++) {
-          const c = data[4 * (y * g.image.width + x)];
-          if (c < 100) { v = OCCUPIED; break; }
-          if (c > 230) v = FREE;
+      let occupied = 256, free = -1;
+      for (let y = by * k; y < Math.min((by + 1) * k, height); y++) {
+        for (let x = bx * k; x < Math.min((bx + 1) * k, width); x++) {
+          const i = 4 * (y * width + x);
+          if (data[i + 3] === 0) continue;
+          const v = shade(data[i]);
+          if (v < 0) continue;
+          if (data[i] <= OCCUPIED_MAX) occupied = Math.min(occupied, v);
+          else free = Math.max(free, v);
         }
       }
       const o = 4 * (by * w + bx);
-      out.data[o] = out.data[o + 1] = out.data[o + 2] = v;
-      out.data[o + 3] = 255;
+      const rgb = occupied < 256 ? [occupied, occupied, occupied] : free >= 0 ? [free, free, free] : UNKNOWN_RGB;
+      out.data.set([...rgb, 255], o);
     }
   }
   const canvas = new OffscreenCanvas(w, h);
   canvas.getContext("2d").putImageData(out, 0, 0);
-  g.reduced.set(k, canvas);
+  g.pictures.set(k, canvas);
   return canvas;
 }
 
@@ -103,11 +122,11 @@ export function drawGrid() {
     const [x0, y0] = view.toScreen(g.origin_m[0], g.origin_m[1] + g.height * g.resolution_m);
     const cellPx = view.scale * g.resolution_m * dpr;
     const k = cellPx < 1 ? Math.ceil(1 / cellPx) : 1;
-    const picture = k > 1 ? reduced(g, k) : g.image;
+    const shown = picture(g, k);
     // A reduced picture's last blocks may reach past the grid: its own size, in cells.
     const cellM = g.resolution_m * (k > 1 ? k : 1);
     ctx.imageSmoothingEnabled = false;
-    ctx.drawImage(picture, x0, y0, picture.width * cellM * view.scale, picture.height * cellM * view.scale);
+    ctx.drawImage(shown, x0, y0, shown.width * cellM * view.scale, shown.height * cellM * view.scale);
   }
   ctx.globalAlpha = 1;
   ctx.globalCompositeOperation = "source-over";

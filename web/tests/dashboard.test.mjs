@@ -300,6 +300,7 @@ test("the occupancy grid is drawn where the mapper placed it", async () => {
 
 test("a configured base map is drawn under the grid, at the screen's zoom, and toggles", async () => {
   await waitFor("base map tiles", () => page.evaluate(() => window.levelmapState.baseMapTiles > 0), 20_000);
+  assert.ok(await page.isVisible("#toggle-base-map"), "the base map's toggle shows when one is configured");
   const green = () =>
     page.evaluate(([r, g, b]) => {
       const c = document.getElementById("map");
