@@ -64,6 +64,29 @@ pub struct WindowStats {
     pub stale: usize,
 }
 
+/// The cell size of the grid behind a picture whose pixels are `pixel_m` wide (a web tile at
+/// some zoom): the finest of the map's cell × 2^k that is not finer than a pixel, so the
+/// pictures of one scale share their tiles, and an obstacle is a cell at any scale.
+pub fn resolution_for_pixels(pixel_m: f64) -> f64 {
+    let finest = slam::GridParams::default().resolution_m;
+    let k = (pixel_m / finest).log2().ceil().max(0.0);
+    finest * k.exp2()
+}
+
+/// The box the scans of `view` can reach, `[min_x, min_y, max_x, max_y]` (m): their poses
+/// grown by the grid's range. None before the first node.
+pub fn reach_box(view: &FleetView) -> Option<[f64; 4]> {
+    let reach = slam::GridParams::default().max_range_m;
+    let first = view.poses.first()?;
+    let b = view
+        .poses
+        .iter()
+        .fold([first.x, first.y, first.x, first.y], |b, p| {
+            [b[0].min(p.x), b[1].min(p.y), b[2].max(p.x), b[3].max(p.y)]
+        });
+    Some([b[0] - reach, b[1] - reach, b[2] + reach, b[3] + reach])
+}
+
 fn grid_params(resolution_m: f64, window_m: [f64; 4]) -> slam::GridParams {
     slam::GridParams {
         resolution_m,

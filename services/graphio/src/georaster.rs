@@ -44,7 +44,7 @@ fn grey(state: CellState) -> u8 {
 }
 
 /// The east-north point (m) of a WGS84 position at the datum's height.
-fn enu_of(datum: &GeoDatum, latitude_deg: f64, longitude_deg: f64) -> [f64; 2] {
+pub(crate) fn enu_of(datum: &GeoDatum, latitude_deg: f64, longitude_deg: f64) -> [f64; 2] {
     let enu = datum.geodetic_to_enu(&Geodetic {
         latitude_deg,
         longitude_deg,
@@ -98,22 +98,13 @@ impl GeoRaster {
         let x1 = x0 + grid.width as f64 * grid.resolution_m;
         let y1 = y0 + grid.height as f64 * grid.resolution_m;
         let corners = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)].map(|(e, n)| geodetic(e, n));
-        let west = corners
-            .iter()
-            .map(|g| g.longitude_deg)
-            .fold(f64::MAX, f64::min);
-        let east = corners
-            .iter()
-            .map(|g| g.longitude_deg)
-            .fold(f64::MIN, f64::max);
-        let south = corners
-            .iter()
-            .map(|g| g.latitude_deg)
-            .fold(f64::MAX, f64::min);
-        let north = corners
-            .iter()
-            .map(|g| g.latitude_deg)
-            .fold(f64::MIN, f64::max);
+        let [west, south, east, north] =
+            corners
+                .iter()
+                .fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, g| {
+                    let (lon, lat) = (g.longitude_deg, g.latitude_deg);
+                    [b[0].min(lon), b[1].min(lat), b[2].max(lon), b[3].max(lat)]
+                });
         // Degrees per metre at the datum, from a kilometre east and north.
         let o = datum.origin;
         let r = grid.resolution_m;
@@ -165,11 +156,13 @@ impl GeoRaster {
     }
 }
 
+/// What the tests of the map products on the Earth share.
 #[cfg(test)]
-mod tests {
+pub(crate) mod fixtures {
     use super::*;
 
-    fn datum() -> GeoDatum {
+    /// A datum near Hannover (the simulated park's).
+    pub(crate) fn datum() -> GeoDatum {
         GeoDatum {
             origin: Geodetic {
                 latitude_deg: 52.39,
@@ -179,21 +172,37 @@ mod tests {
         }
     }
 
-    /// A free 60 m × 40 m grid at 0.1 m with one occupied cell at (`e`, `n`).
-    fn grid_with_post(e: f64, n: f64) -> OccupancyGrid {
-        let (w, h) = (600, 400);
+    /// A free grid of 0.1 m cells, `size` cells from `origin_m`, with one occupied cell at
+    /// `post` (m).
+    pub(crate) fn free_grid_with_post(
+        origin_m: [f64; 2],
+        (width, height): (usize, usize),
+        post: [f64; 2],
+    ) -> OccupancyGrid {
         let mut grid = OccupancyGrid {
             resolution_m: 0.1,
-            origin_m: [-20.0, -15.0],
-            width: w,
-            height: h,
-            cells: vec![0; w * h],
+            origin_m,
+            width,
+            height,
+            cells: vec![0; width * height],
             occupied_percent: 65,
             free_percent: 35,
         };
-        let (ix, iy) = grid.cell_at([e, n]).unwrap();
-        grid.cells[iy * w + ix] = 100;
+        let (ix, iy) = grid.cell_at(post).expect("the post is on the grid");
+        grid.cells[iy * width + ix] = 100;
         grid
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    use super::fixtures::{datum, free_grid_with_post};
+
+    /// A free 60 m × 40 m grid at 0.1 m with one occupied cell at (`e`, `n`).
+    fn grid_with_post(e: f64, n: f64) -> OccupancyGrid {
+        free_grid_with_post([-20.0, -15.0], (600, 400), [e, n])
     }
 
     #[test]

@@ -198,17 +198,7 @@ pub fn to_map_yaml(grid: &OccupancyGrid, image: &str) -> String {
 /// [`to_map_yaml`] for an image in `mode`: in `Scale` mode with `mode: scale` and the grid's
 /// own thresholds (so map_server's free, occupied and in-between are the grid's).
 pub fn to_map_yaml_with(grid: &OccupancyGrid, image: &str, mode: MapMode) -> String {
-    if mode == MapMode::Scale {
-        let mut s = to_map_yaml(grid, image);
-        let occupied = f64::from(grid.occupied_percent) / 100.0;
-        let free = f64::from(grid.free_percent) / 100.0;
-        s = s.replace(
-            &format!("occupied_thresh: {OCCUPIED_THRESH}\nfree_thresh: {FREE_THRESH}\n"),
-            &format!("occupied_thresh: {occupied}\nfree_thresh: {free}\nmode: scale\n"),
-        );
-        return s;
-    }
-    let mut s = String::with_capacity(160);
+    let mut s = String::with_capacity(176);
     let _ = writeln!(s, "image: {}", yaml_scalar(image));
     let _ = writeln!(s, "resolution: {:.6}", grid.resolution_m);
     let _ = writeln!(
@@ -217,8 +207,21 @@ pub fn to_map_yaml_with(grid: &OccupancyGrid, image: &str, mode: MapMode) -> Str
         grid.origin_m[0], grid.origin_m[1], 0.0
     );
     let _ = writeln!(s, "negate: 0");
-    let _ = writeln!(s, "occupied_thresh: {OCCUPIED_THRESH}");
-    let _ = writeln!(s, "free_thresh: {FREE_THRESH}");
+    match mode {
+        MapMode::Trinary => {
+            let _ = writeln!(s, "occupied_thresh: {OCCUPIED_THRESH}");
+            let _ = writeln!(s, "free_thresh: {FREE_THRESH}");
+        }
+        MapMode::Scale => {
+            let _ = writeln!(
+                s,
+                "occupied_thresh: {}",
+                f64::from(grid.occupied_percent) / 100.0
+            );
+            let _ = writeln!(s, "free_thresh: {}", f64::from(grid.free_percent) / 100.0);
+            let _ = writeln!(s, "mode: scale");
+        }
+    }
     s.push('\n');
     s
 }

@@ -5,9 +5,9 @@
 //! so that a base map shows under the map.
 
 use crate::EncodeError;
-use crate::georaster::sample;
+use crate::georaster::{enu_of, sample};
 use crate::gridmap::check_grid;
-use slam::geodesy::{GeoDatum, Geodetic};
+use slam::geodesy::GeoDatum;
 use slam::grid::{CellState, OccupancyGrid};
 use std::f64::consts::PI;
 
@@ -98,17 +98,8 @@ impl TileId {
         for px in [0.0, 0.5 * edge, edge] {
             for py in [0.0, 0.5 * edge, edge] {
                 let (lat, lon) = self.geodetic_at([px, py]);
-                let enu = datum.geodetic_to_enu(&Geodetic {
-                    latitude_deg: lat,
-                    longitude_deg: lon,
-                    height_m: datum.origin.height_m,
-                });
-                b = [
-                    b[0].min(enu.x),
-                    b[1].min(enu.y),
-                    b[2].max(enu.x),
-                    b[3].max(enu.y),
-                ];
+                let [e, n] = enu_of(datum, lat, lon);
+                b = [b[0].min(e), b[1].min(n), b[2].max(e), b[3].max(n)];
             }
         }
         b
@@ -187,26 +178,10 @@ mod tests {
 
     #[test]
     fn a_post_is_drawn_where_it_stands() {
-        let datum = GeoDatum {
-            origin: Geodetic {
-                latitude_deg: 52.39,
-                longitude_deg: 9.71,
-                height_m: 55.0,
-            },
-        };
-        let (w, h) = (400, 400);
-        let mut grid = OccupancyGrid {
-            resolution_m: 0.1,
-            origin_m: [-20.0, -20.0],
-            width: w,
-            height: h,
-            cells: vec![0; w * h],
-            occupied_percent: 65,
-            free_percent: 35,
-        };
+        let datum = crate::georaster::fixtures::datum();
         let post = [3.05, 4.05];
-        let (ix, iy) = grid.cell_at(post).unwrap();
-        grid.cells[iy * w + ix] = 100;
+        let grid =
+            crate::georaster::fixtures::free_grid_with_post([-20.0, -20.0], (400, 400), post);
         let g = datum.enu_to_geodetic(&Vector3::new(post[0], post[1], 0.0));
         for z in [19u32, 21] {
             let n = f64::from(1u32 << z);
@@ -227,12 +202,8 @@ mod tests {
             assert!(!dark.is_empty(), "z {z}: the post is drawn");
             for px in dark {
                 let (lat, lon) = tile.geodetic_at(px);
-                let p = datum.geodetic_to_enu(&Geodetic {
-                    latitude_deg: lat,
-                    longitude_deg: lon,
-                    height_m: datum.origin.height_m,
-                });
-                let off = (p.x - post[0]).hypot(p.y - post[1]);
+                let [e, n] = enu_of(&datum, lat, lon);
+                let off = (e - post[0]).hypot(n - post[1]);
                 assert!(off < 0.1 + tile.pixel_m(52.39), "z {z}: {off} m off");
             }
         }

@@ -56,28 +56,9 @@ pub(super) async fn map_tif(
     Ok(([(header::CONTENT_TYPE, "image/tiff")], tif).into_response())
 }
 
-/// The finest cell of a tile's grid (m): the map's own.
-const TILE_GRID_RESOLUTION_M: f64 = 0.1;
-
-/// The cell size a tile's grid is made at: the finest of 0.1 m × 2^k that is not finer than
-/// the tile's pixels, so that the tiles of one zoom share the mapper's cached grid tiles.
+/// The cell size a tile's grid is made at (`fleetmap::tiles::resolution_for_pixels`).
 fn grid_resolution(tile: &TileId, datum: &GeoDatum) -> f64 {
-    let pixel = tile.pixel_m(datum.origin.latitude_deg);
-    let k = (pixel / TILE_GRID_RESOLUTION_M).log2().ceil().max(0.0);
-    TILE_GRID_RESOLUTION_M * k.exp2()
-}
-
-/// The box the fleet's scans can reach: their poses, grown by the grid's range.
-fn map_box(v: &FleetView) -> Option<[f64; 4]> {
-    let reach = slam::GridParams::default().max_range_m;
-    let first = v.poses.first()?;
-    let b = v
-        .poses
-        .iter()
-        .fold([first.x, first.y, first.x, first.y], |b, p| {
-            [b[0].min(p.x), b[1].min(p.y), b[2].max(p.x), b[3].max(p.y)]
-        });
-    Some([b[0] - reach, b[1] - reach, b[2] + reach, b[3] + reach])
+    fleetmap::tiles::resolution_for_pixels(tile.pixel_m(datum.origin.latitude_deg))
 }
 
 /// The fleet's map as an XYZ web tile (`{z}/{x}/{y}.png`, Web Mercator, 256 px): Leaflet,
@@ -119,7 +100,7 @@ pub(super) async fn map_tile(
     let datum = datum_of(&v)?;
     let b = tile.enu_box(&datum);
     let apart = |m: [f64; 4]| b[2] < m[0] || b[0] > m[2] || b[3] < m[1] || b[1] > m[3];
-    if map_box(&v).is_none_or(apart) {
+    if fleetmap::tiles::reach_box(&v).is_none_or(apart) {
         static EMPTY: OnceLock<Vec<u8>> = OnceLock::new();
         let png = EMPTY.get_or_init(graphio::webtiles::empty_tile).clone();
         return Ok(([(header::CONTENT_TYPE, "image/png")], png).into_response());
