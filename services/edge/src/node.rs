@@ -247,6 +247,8 @@ impl NodeBuilder {
                 .map(|(&bearing_rad, &r)| leveling::Beam {
                     bearing_rad,
                     range_m: (r != 0.0).then_some(r),
+                    sensor_xy_m: [0.0, 0.0],
+                    ground_to_m: None,
                 })
                 .collect(),
         };

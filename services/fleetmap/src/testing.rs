@@ -13,6 +13,8 @@ pub fn node(robot: &str, chain: u64, seq: u64, held_from: u64, x: f64) -> Node {
         .map(|k| Beam {
             bearing_rad: k as f32 * 0.07,
             range_m: Some(5.0 + (k % 7) as f32),
+            sensor_xy_m: [0.0, 0.0],
+            ground_to_m: None,
         })
         .collect();
     Node::new(NodeParts {

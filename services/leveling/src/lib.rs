@@ -70,7 +70,7 @@ impl Leveler {
     pub fn segment_and_project(&mut self, cloud: Scan3d) -> Leveled {
         let mut classes = Vec::new();
         let (first_landmarks, counts) = self.segmenter.segment(&cloud, &mut classes);
-        let scan = project(&cloud, &first_landmarks);
+        let scan = project(&cloud, &first_landmarks, &classes);
         Leveled {
             cloud,
             classes,

@@ -2,6 +2,7 @@
 
 use crate::deskew::leveled_xyz;
 use crate::scan::Scan3d;
+use crate::segment::PointClass;
 use serde::{Deserialize, Serialize};
 
 /// One beam of a leveled range scan: the first landmark point of a column, bottom-up,
@@ -12,6 +13,18 @@ pub struct Beam {
     pub bearing_rad: f32,
     /// Horizontal range from the sensor at scan start (m); `None`: the column has no landmark.
     pub range_m: Option<f32>,
+    /// Where the sensor's axis was when the column was measured, in the scan's frame (m):
+    /// the beam was seen from there, so free space is cleared from there. `[0, 0]` for a
+    /// scan taken from one place. A beam without a return points along `bearing_rad` from
+    /// here.
+    #[serde(default)]
+    pub sensor_xy_m: [f32; 2],
+    /// A beam without a return: how far from `sensor_xy_m` its column saw the ground, with
+    /// nothing standing on it (m; the farthest ground point's horizontal range short of any
+    /// overhang). The beam to that point passed over everything nearer, so the space up to
+    /// it is free; 0: the column saw no such ground. `None`: not known (a planar scan).
+    #[serde(default)]
+    pub ground_to_m: Option<f32>,
 }
 
 /// The paper's leveled range scan L_i = (r_i, φ_i), one beam per column, in column order.
@@ -48,8 +61,14 @@ impl LeveledScan {
 }
 
 /// Builds the leveled range scan from each column's first landmark point (indices into
-/// `scan.points`, as [`crate::Segmenter::segment`] returns them).
-pub fn project(scan: &Scan3d, first_landmarks: &[Option<u32>]) -> LeveledScan {
+/// `scan.points`, as [`crate::Segmenter::segment`] returns them with `classes`, one per
+/// point). A column without a landmark gives a beam without a return, and how far it saw the
+/// ground.
+pub fn project(
+    scan: &Scan3d,
+    first_landmarks: &[Option<u32>],
+    classes: &[PointClass],
+) -> LeveledScan {
     let beams = scan
         .columns
         .iter()
@@ -61,6 +80,8 @@ pub fn project(scan: &Scan3d, first_landmarks: &[Option<u32>]) -> LeveledScan {
                     Beam {
                         bearing_rad: point.phi_rad,
                         range_m: Some(point.r_m),
+                        sensor_xy_m: [0.0, 0.0],
+                        ground_to_m: None,
                     }
                 } else {
                     // Motion-compensated column: measure from the sensor at scan start.
@@ -68,19 +89,40 @@ pub fn project(scan: &Scan3d, first_landmarks: &[Option<u32>]) -> LeveledScan {
                     Beam {
                         bearing_rad: p.y.atan2(p.x),
                         range_m: Some(p.x.hypot(p.y)),
+                        sensor_xy_m: column.origin_xy_m,
+                        ground_to_m: None,
                     }
                 }
             }
             None => {
-                let points =
-                    &scan.points[column.start as usize..(column.start + column.len) as usize];
-                let bearing = points
+                let range = column.start as usize..(column.start + column.len) as usize;
+                let (points, classes) = (&scan.points[range.clone()], &classes[range]);
+                // Ground is taken as seen free only short of the column's first overhang:
+                // under a crown, a roof or a bridge deck stand the trunk, the pillars or, on
+                // the deck, the rails, which a beam skimming the ground below may just miss.
+                let overhang_from = points
                     .iter()
-                    .find(|p| p.is_valid())
+                    .zip(classes)
+                    .filter(|(_, class)| **class == PointClass::Overhang)
+                    .map(|(p, _)| p.r_m)
+                    .fold(f32::INFINITY, f32::min);
+                let farthest_ground = points
+                    .iter()
+                    .zip(classes)
+                    .filter(|(p, class)| **class == PointClass::Ground && p.r_m < overhang_from)
+                    .map(|(p, _)| p)
+                    .max_by(|a, b| a.r_m.total_cmp(&b.r_m));
+                // A tilted sensor's column is no vertical plane: the beam points at the
+                // farthest ground it saw, not along its first point.
+                let bearing = farthest_ground
+                    .or_else(|| points.iter().find(|p| p.is_valid()))
                     .map_or(0.0, |p| p.phi_rad);
+                let ground_to_m = Some(farthest_ground.map_or(0.0, |p| p.r_m));
                 Beam {
                     bearing_rad: bearing,
                     range_m: None,
+                    sensor_xy_m: column.origin_xy_m,
+                    ground_to_m,
                 }
             }
         })
@@ -107,4 +149,69 @@ pub fn horizontal_cut(raw: &Scan3d, max_elevation_rad: f32) -> Vec<(f32, f32)> {
                 .map(|(_, p)| (p.phi_rad, p.r_m))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::scan::Scan3d;
+    use crate::{Leveler, SegmentParams};
+
+    /// Ground every metre from 1 m to `to_m` along azimuth `phi(r)`, 1.2 m below the sensor,
+    /// then `above`: further points (x, y, z), bottom-up.
+    fn column(scan: &mut Scan3d, to_m: u32, phi: impl Fn(f32) -> f32, above: &[[f32; 3]]) {
+        scan.begin_column(0);
+        for r in 1..=to_m {
+            let (r, a) = (r as f32, phi(r as f32));
+            scan.push_xyz(r * a.cos(), r * a.sin(), -1.2);
+        }
+        for &[x, y, z] in above {
+            scan.push_xyz(x, y, z);
+        }
+    }
+
+    #[test]
+    fn a_column_without_a_landmark_tells_how_far_it_saw_the_ground() {
+        let mut scan = Scan3d::default();
+        // Open ground to 20 m.
+        column(&mut scan, 20, |_| 0.0, &[]);
+        // Ground to 10 m under a crown from 6 m on: free only to 5 m.
+        column(
+            &mut scan,
+            10,
+            |_| 0.5,
+            &[[6.0 * 0.5f32.cos(), 6.0 * 0.5f32.sin(), 2.0]],
+        );
+        // A tilted sensor's column drifts in azimuth: the beam points at its farthest ground.
+        column(&mut scan, 20, |r| 1.0 + 0.01 * r, &[]);
+        // A wall at 8 m: a return, no ground reach.
+        column(
+            &mut scan,
+            6,
+            |_| -1.0,
+            &[
+                [8.0 * (-1f32).cos(), 8.0 * (-1f32).sin(), -1.2],
+                [8.0 * (-1f32).cos(), 8.0 * (-1f32).sin(), -0.4],
+            ],
+        );
+        // Only sky: no ground seen, so nothing to clear.
+        scan.begin_column(0);
+        scan.push_invalid();
+        scan.columns[3].origin_xy_m = [0.5, -0.25];
+        let leveled = Leveler::new(SegmentParams::default()).segment_and_project(scan);
+        let beams = &leveled.scan.beams;
+        assert_eq!(beams[0].range_m, None);
+        assert_eq!(beams[0].ground_to_m, Some(20.0));
+        assert_eq!(beams[1].ground_to_m, Some(5.0));
+        assert!((beams[1].bearing_rad - 0.5).abs() < 1e-6);
+        assert!((beams[2].ground_to_m.unwrap() - 20.0).abs() < 1e-4);
+        assert!(
+            (beams[2].bearing_rad - 1.2).abs() < 1e-5,
+            "{}",
+            beams[2].bearing_rad
+        );
+        assert!(beams[3].range_m.is_some());
+        assert_eq!(beams[3].ground_to_m, None);
+        assert_eq!(beams[3].sensor_xy_m, [0.5, -0.25]);
+        assert_eq!(beams[4].ground_to_m, Some(0.0));
+    }
 }

@@ -52,6 +52,8 @@ mod tests {
             .map(|k| Beam {
                 bearing_rad: k as f32 * 0.07,
                 range_m: (k % 11 != 0).then_some(5.0 + (k % 7) as f32),
+                sensor_xy_m: [0.0, 0.0],
+                ground_to_m: None,
             })
             .collect();
         Node::new(NodeParts {

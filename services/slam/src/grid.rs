@@ -15,7 +15,7 @@ mod fan;
 mod params;
 mod raycast;
 
-pub use fan::BeamFan;
+pub use fan::{BeamFan, FanBeam};
 pub use params::{GridError, GridParams};
 
 // The tests reach these through `use super::*`.

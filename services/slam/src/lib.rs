@@ -20,7 +20,7 @@ pub mod robust;
 pub mod se2;
 
 pub use gnss::GpsObservation;
-pub use grid::{BeamFan, CellState, GridError, GridParams, OccupancyGrid};
+pub use grid::{BeamFan, CellState, FanBeam, GridError, GridParams, OccupancyGrid};
 pub use nalgebra;
 pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
 pub use parts::PartTracker;

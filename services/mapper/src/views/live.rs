@@ -207,6 +207,8 @@ mod tests {
                 beams: vec![Beam {
                     bearing_rad: 0.0,
                     range_m: Some(3.0),
+                    sensor_xy_m: [0.0, 0.0],
+                    ground_to_m: None,
                 }],
             },
             counts: None,

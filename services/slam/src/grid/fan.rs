@@ -1,24 +1,59 @@
-//! A scan as the grid takes it: every beam in bearing order, with or without a return, so
-//! that neighbouring beams can fill the wedge between them.
+//! A scan as the grid takes it: every beam in bearing order, with or without a return, each
+//! from the place it was seen from, so that neighbouring beams can fill the wedge between
+//! them.
 
 use crate::matching::Scan2;
 
-/// A scan's beams in ascending bearing order: (bearing in rad, range in m or `None` for a
-/// beam without a return).
+/// One beam of a [`BeamFan`], in the scan's frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FanBeam {
+    /// Where the sensor was when it measured the beam (m): the scan's origin for a scan taken
+    /// from one place, elsewhere for a column of a scan taken while driving.
+    pub from_m: [f64; 2],
+    /// Direction from `from_m` (rad).
+    pub bearing_rad: f64,
+    /// Range from `from_m` (m); `None` for a beam without a return.
+    pub range_m: Option<f64>,
+    /// A beam without a return: how far from `from_m` the space is known free (m; a
+    /// leveled scan's column saw the ground that far). `None`: the grid's
+    /// `no_return_free_m` applies.
+    pub free_to_m: Option<f64>,
+}
+
+impl From<(f64, Option<f64>)> for FanBeam {
+    /// A beam seen from the scan's origin: (bearing in rad, range in m or `None`).
+    fn from((bearing_rad, range_m): (f64, Option<f64>)) -> FanBeam {
+        FanBeam {
+            from_m: [0.0, 0.0],
+            bearing_rad,
+            range_m,
+            free_to_m: None,
+        }
+    }
+}
+
+/// A scan's beams in ascending bearing order (each bearing as seen from its own place).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct BeamFan {
-    beams: Vec<(f64, Option<f64>)>,
+    beams: Vec<FanBeam>,
 }
 
 impl BeamFan {
-    /// The beams, sorted by bearing; a beam with a non-finite bearing, or a range that is not
-    /// finite and positive, is left out (a zero range is no return: give `None`).
-    pub fn new(beams: impl IntoIterator<Item = (f64, Option<f64>)>) -> BeamFan {
-        let mut beams: Vec<(f64, Option<f64>)> = beams
+    /// The beams, sorted by bearing; a beam with a non-finite bearing or place, a range that
+    /// is not finite and positive (a zero range is no return: give `None`), or a negative or
+    /// non-finite free length is left out.
+    pub fn new(beams: impl IntoIterator<Item = impl Into<FanBeam>>) -> BeamFan {
+        let mut beams: Vec<FanBeam> = beams
             .into_iter()
-            .filter(|(b, r)| b.is_finite() && r.is_none_or(|r| r.is_finite() && r > 0.0))
+            .map(Into::into)
+            .filter(|b| {
+                b.bearing_rad.is_finite()
+                    && b.from_m.iter().all(|v| v.is_finite())
+                    && b.range_m.is_none_or(|r| r.is_finite() && r > 0.0)
+                    && b.free_to_m.is_none_or(|r| r.is_finite() && r >= 0.0)
+            })
             .collect();
-        beams.sort_by(|a, b| a.0.total_cmp(&b.0));
+        beams.sort_by(|a, b| a.bearing_rad.total_cmp(&b.bearing_rad));
         BeamFan { beams }
     }
 
@@ -33,7 +68,7 @@ impl BeamFan {
     }
 
     /// The beams, in ascending bearing.
-    pub fn beams(&self) -> &[(f64, Option<f64>)] {
+    pub fn beams(&self) -> &[FanBeam] {
         &self.beams
     }
 
@@ -46,7 +81,7 @@ impl BeamFan {
             .map(|i| (i, i + 1))
             .chain(wrap)
             .filter_map(move |(i, j)| {
-                let mut gap = self.beams[j].0 - self.beams[i].0;
+                let mut gap = self.beams[j].bearing_rad - self.beams[i].bearing_rad;
                 if j < i {
                     gap += std::f64::consts::TAU;
                 }

@@ -18,6 +18,13 @@ pub struct GridParams {
     /// Log-odds added to a cell a beam crosses: −0.7 is p ≈ 0.33, so one pass reads as
     /// free, and a cell with two returns survives one grazing pass.
     pub log_odds_miss: f32,
+    /// A pass through a cell beside a cell that holds a return (of any scan) counts this
+    /// share of `log_odds_miss`: poses are off by about a cell, so a beam passing that close
+    /// to a surface may have passed through it. Without it the inside of a trunk or a thick
+    /// wall, where no return ever lands, turns free at the first stray pass. 0.25: four such
+    /// passes weigh one clean pass, so a cell that only a parked car or a standing person
+    /// stood beside still clears over time.
+    pub miss_weight_beside_return: f32,
     /// Clamp of the log-odds (keeps a cell able to change its mind after many scans).
     pub log_odds_min: f32,
     /// Upper clamp of the log-odds (see `log_odds_min`).
@@ -56,6 +63,11 @@ pub struct GridParams {
     /// between two lines would stay unknown. 3° fills scans of 1° beams (the Freiburg logs)
     /// and every finer one, and leaves the gaps where beams were dropped.
     pub max_wedge_rad: f64,
+    /// A wedge is filled only as far as its two beams are at most this far apart (m): an
+    /// obstacle thinner than the gap between two beams can stand between them unseen. 0.15 m
+    /// is the thinnest obstacle the map must keep (a lamp post); with beams 1° apart the
+    /// wedges fill up to 8.6 m, and beyond each beam clears its own line.
+    pub wedge_max_width_m: f64,
     /// Two returns fill their wedge only when their ranges differ by at most this (m)…
     pub wedge_max_jump_m: f64,
     /// …or this fraction of the nearer range, whichever is more: a larger jump is an edge
@@ -71,6 +83,7 @@ impl Default for GridParams {
             max_range_m: 40.0,
             log_odds_hit: 0.85,
             log_odds_miss: -0.7,
+            miss_weight_beside_return: 0.25,
             log_odds_min: -2.0,
             log_odds_max: 3.5,
             occupied_threshold: 0.65,
@@ -82,6 +95,7 @@ impl Default for GridParams {
             clear_short_of_hit_m: 0.1,
             no_return_free_m: 5.0,
             max_wedge_rad: 3f64.to_radians(),
+            wedge_max_width_m: 0.15,
             wedge_max_jump_m: 0.5,
             wedge_max_jump_ratio: 0.1,
         }
@@ -148,6 +162,7 @@ pub(super) fn check(params: &GridParams) -> Result<(), GridError> {
         p.clear_short_of_hit_m,
         p.no_return_free_m,
         p.max_wedge_rad,
+        p.wedge_max_width_m,
         p.wedge_max_jump_m,
         p.wedge_max_jump_ratio,
     ]
@@ -160,6 +175,9 @@ pub(super) fn check(params: &GridParams) -> Result<(), GridError> {
     }
     if p.max_wedge_rad >= std::f64::consts::PI {
         return bad("max_wedge_rad must be below π");
+    }
+    if !(0.0..=1.0).contains(&p.miss_weight_beside_return) {
+        return bad("miss_weight_beside_return must be within [0, 1]");
     }
     if !(p.log_odds_hit > 0.0 && p.log_odds_miss < 0.0) {
         return bad("log_odds_hit must be positive and log_odds_miss negative");

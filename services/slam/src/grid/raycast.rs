@@ -1,48 +1,108 @@
 //! Building the grid: every scan's beams ray cast at its pose into log-odds, the wedges
 //! between neighbouring beams filled.
 
-use super::fan::BeamFan;
+use super::fan::{BeamFan, FanBeam};
 use super::params::check;
 use super::{GridError, GridParams, OccupancyGrid};
 use crate::matching::Scan2;
 use crate::se2::Pose2;
 
-/// One beam as the grid uses it, in the scan's frame: its direction, how far it clears, and
-/// whether its end holds a return (within `max_range_m`).
+/// One beam as the grid uses it, in the scan's frame: where it starts, its direction, how
+/// far it clears, and whether its end holds a return (within `max_range_m`).
 #[derive(Clone, Copy)]
 struct Ray {
+    from: [f64; 2],
     direction: [f64; 2],
     clear_m: f64,
     hit: bool,
+    /// A return's ray clears up to this much short of it (m).
+    short_m: f64,
 }
 
 impl Ray {
-    fn of(bearing: f64, range: Option<f64>, params: &GridParams) -> Ray {
-        let (clear_m, hit) = match range {
+    fn of(beam: &FanBeam, params: &GridParams) -> Ray {
+        let (clear_m, hit) = match beam.range_m {
             Some(r) if r <= params.max_range_m => (r, true),
             Some(_) => (params.max_range_m, false),
-            None => (params.no_return_free_m.min(params.max_range_m), false),
+            None => (
+                beam.free_to_m
+                    .unwrap_or(params.no_return_free_m)
+                    .min(params.max_range_m),
+                false,
+            ),
         };
         Ray {
-            direction: [bearing.cos(), bearing.sin()],
+            from: beam.from_m,
+            direction: [beam.bearing_rad.cos(), beam.bearing_rad.sin()],
             clear_m,
             hit,
+            short_m: params.clear_short_of_hit_m,
         }
+    }
+
+    /// Where the ray ends, in the scan's frame.
+    fn end(&self) -> [f64; 2] {
+        [
+            self.from[0] + self.direction[0] * self.clear_m,
+            self.from[1] + self.direction[1] * self.clear_m,
+        ]
     }
 
     /// The point `at_m` along the ray, in the map frame.
     fn point(&self, pose: Pose2, at_m: f64) -> [f64; 2] {
-        pose.transform_point([self.direction[0] * at_m, self.direction[1] * at_m])
+        pose.transform_point([
+            self.from[0] + self.direction[0] * at_m,
+            self.from[1] + self.direction[1] * at_m,
+        ])
     }
 }
 
 /// The scan's rays and the wedges to fill between neighbours: (ray i, ray j, bearing gap).
+/// Neighbours share a wedge when they were seen from places at most a cell apart (the wedge
+/// has one apex) and see alike.
+///
+/// A return stops its ray `clear_short_of_hit_m` short of the surface measured across the
+/// surface (its direction taken from the chords to the neighbouring returns), not along the
+/// ray: a ray grazing a wall would otherwise clear the wall's own cells beyond its hit
+/// whenever the pose is a little off. Neighbours across an edge (a trunk before a wall) give a
+/// chord nearly along the beams: the ray then stops further short, which costs a little free
+/// space and never calls a surface free.
 fn rays(fan: &BeamFan, params: &GridParams) -> (Vec<Ray>, Vec<(usize, usize, f64)>) {
     let beams = fan.beams();
-    let rays: Vec<Ray> = beams.iter().map(|&(b, r)| Ray::of(b, r, params)).collect();
-    let wedges = fan
+    let mut rays: Vec<Ray> = beams.iter().map(|b| Ray::of(b, params)).collect();
+    let neighbours: Vec<(usize, usize, f64)> = fan
         .neighbours(params.max_wedge_rad)
-        .filter(|&(i, j, _)| match (beams[i].1, beams[j].1) {
+        .filter(|&(i, j, _)| {
+            let (a, b) = (&beams[i].from_m, &beams[j].from_m);
+            (a[0] - b[0]).hypot(a[1] - b[1]) <= params.resolution_m
+        })
+        .collect();
+    // The smallest sine between a return's ray and a chord to a neighbouring return.
+    let mut sine = vec![1f64; rays.len()];
+    for &(i, j, _) in &neighbours {
+        let (a, b) = (rays[i], rays[j]);
+        if !(a.hit && b.hit) {
+            continue;
+        }
+        let (ea, eb) = (a.end(), b.end());
+        let chord = [eb[0] - ea[0], eb[1] - ea[1]];
+        let length = chord[0].hypot(chord[1]);
+        if length == 0.0 {
+            continue;
+        }
+        for k in [i, j] {
+            let d = rays[k].direction;
+            let across = (d[0] * chord[1] - d[1] * chord[0]).abs() / length;
+            sine[k] = sine[k].min(across);
+        }
+    }
+    for (ray, sine) in rays.iter_mut().zip(sine) {
+        // Below about 6° a grazing return says little about where the surface is.
+        ray.short_m = params.clear_short_of_hit_m / sine.max(0.1);
+    }
+    let wedges = neighbours
+        .into_iter()
+        .filter(|&(i, j, _)| match (beams[i].range_m, beams[j].range_m) {
             (Some(a), Some(b)) => {
                 let allowed = params
                     .wedge_max_jump_m
@@ -97,7 +157,9 @@ impl OccupancyGrid {
         for &(pose, fan) in &scans {
             let (rays, wedges) = rays(fan, params);
             let (mut slo, mut shi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            let ends = rays.iter().map(|ray| ray.point(pose, ray.clear_m));
+            let ends = rays
+                .iter()
+                .flat_map(|ray| [ray.point(pose, 0.0), ray.point(pose, ray.clear_m)]);
             for q in ends.chain([[pose.x, pose.y]]) {
                 for d in 0..2 {
                     slo[d] = slo[d].min(q[d]);
@@ -164,6 +226,14 @@ impl OccupancyGrid {
         let mut mark = vec![0u32; width * height];
         let clamp = |l: f32| l.clamp(params.log_odds_min, params.log_odds_max);
         let blind = params.blind_zone_m;
+        let returns = scans.iter().flat_map(|(pose, rays, _)| {
+            rays.iter()
+                .filter(|ray| ray.hit)
+                .map(|ray| ray.point(*pose, ray.clear_m))
+        });
+        let beside_return = beside_a_return(returns, width, height, |q| index(cell(q)));
+        let miss = params.log_odds_miss;
+        let miss_beside = miss * params.miss_weight_beside_return;
         for (k, (pose, rays, wedges)) in scans.iter().enumerate() {
             let pose = *pose;
             let (pass, ret) = (2 * k as u32 + 1, 2 * k as u32 + 2);
@@ -180,16 +250,19 @@ impl OccupancyGrid {
                 let Some(c) = index((x, y)) else { return };
                 if mark[c] != ret && mark[c] != pass {
                     mark[c] = pass;
-                    log_odds[c] = clamp(log_odds[c] + params.log_odds_miss);
+                    let miss = if beside_return[c] { miss_beside } else { miss };
+                    log_odds[c] = clamp(log_odds[c] + miss);
                 }
             };
-            // From the blind zone to `to_m` along `direction`, the end cell cleared when
-            // `to_end`.
-            let mut clear_line = |direction: [f64; 2], to_m: f64, to_end: bool| {
+            // From the blind zone to `to_m` along `direction` from `from`, the end cell
+            // cleared when `to_end`.
+            let mut clear_line = |from: [f64; 2], direction: [f64; 2], to_m: f64, to_end: bool| {
                 if to_m <= blind {
                     return;
                 }
-                let along = |m: f64| pose.transform_point([direction[0] * m, direction[1] * m]);
+                let along = |m: f64| {
+                    pose.transform_point([from[0] + direction[0] * m, from[1] + direction[1] * m])
+                };
                 let end = along(to_m);
                 traverse(units(along(blind)), units(end), &mut clear);
                 if to_end {
@@ -197,28 +270,34 @@ impl OccupancyGrid {
                     clear(x, y);
                 }
             };
-            let short = params.clear_short_of_hit_m;
             for ray in rays {
                 if ray.hit {
-                    clear_line(ray.direction, ray.clear_m - short, true);
+                    clear_line(ray.from, ray.direction, ray.clear_m - ray.short_m, true);
                 } else {
-                    clear_line(ray.direction, ray.clear_m, true);
+                    clear_line(ray.from, ray.direction, ray.clear_m, true);
                 }
             }
             for &(i, j, gap) in wedges {
                 let (a, b) = (rays[i], rays[j]);
                 // The chord between the two ends: a surface both beams saw lies along it.
                 let chord = [
-                    b.direction[0] * b.clear_m - a.direction[0] * a.clear_m,
-                    b.direction[1] * b.clear_m - a.direction[1] * a.clear_m,
+                    b.from[0] + b.direction[0] * b.clear_m - a.from[0] - a.direction[0] * a.clear_m,
+                    b.from[1] + b.direction[1] * b.clear_m - a.from[1] - a.direction[1] * a.clear_m,
                 ];
                 let chord_m = chord[0].hypot(chord[1]);
+                // Filled only as far as the two beams are `wedge_max_width_m` apart: beyond,
+                // something thinner could stand between them unseen.
+                let reach = params.wedge_max_width_m / (2.0 * (0.5 * gap).sin());
                 // Rays between the two, one a cell apart at the far end.
-                let far = a.clear_m.max(b.clear_m);
+                let far = a.clear_m.max(b.clear_m).min(reach);
                 let between = ((gap * far / res).ceil() as usize).saturating_sub(1);
                 let bearing_a = a.direction[1].atan2(a.direction[0]);
                 for s in 1..=between {
                     let t = s as f64 / (between + 1) as f64;
+                    let from = [
+                        a.from[0] + (b.from[0] - a.from[0]) * t,
+                        a.from[1] + (b.from[1] - a.from[1]) * t,
+                    ];
                     let bearing = bearing_a + gap * t;
                     let direction = [bearing.cos(), bearing.sin()];
                     // Each stops 1.5 cells (measured across the chord) short of it: a beam
@@ -230,8 +309,8 @@ impl OccupancyGrid {
                         1.0
                     };
                     let margin = 1.5 * res / across.max(0.05);
-                    let to_m = a.clear_m + (b.clear_m - a.clear_m) * t - margin;
-                    clear_line(direction, to_m, false);
+                    let to_m = (a.clear_m + (b.clear_m - a.clear_m) * t - margin).min(reach);
+                    clear_line(from, direction, to_m, false);
                 }
             }
         }
@@ -256,6 +335,32 @@ impl OccupancyGrid {
             free_percent: (params.free_threshold * 100.0).round() as i8,
         })
     }
+}
+
+/// Per cell (row-major, `width` × `height`): does one of its eight neighbours hold one of
+/// the `returns` (map points)? `cell_of` gives a map point's cell index, if in the grid.
+fn beside_a_return(
+    returns: impl Iterator<Item = [f64; 2]>,
+    width: usize,
+    height: usize,
+    cell_of: impl Fn([f64; 2]) -> Option<usize>,
+) -> Vec<bool> {
+    let mut holds = vec![false; width * height];
+    for c in returns.filter_map(cell_of) {
+        holds[c] = true;
+    }
+    let mut beside = vec![false; width * height];
+    for (c, _) in holds.iter().enumerate().filter(|(_, h)| **h) {
+        let (x, y) = (c % width, c / width);
+        for ny in y.saturating_sub(1)..(y + 2).min(height) {
+            for nx in x.saturating_sub(1)..(x + 2).min(width) {
+                if (nx, ny) != (x, y) {
+                    beside[ny * width + nx] = true;
+                }
+            }
+        }
+    }
+    beside
 }
 
 /// Cells `(x, y)` the segment from `a` to `b` crosses, in order, the cell of `b` excluded;

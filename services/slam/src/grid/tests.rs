@@ -47,15 +47,26 @@ fn square_room_has_occupied_walls_free_inside_unknown_outside() {
     }
     let (unknown, free, occupied) = grid.counts();
     assert!((240..=244).contains(&occupied), "{occupied}");
-    // Everything inside the walls is free: 60 × 60 cells; the rest was never seen.
-    assert_eq!(free, 3600);
-    assert_eq!(unknown, 64 * 64 - occupied - 3600);
+    // Inside the walls 60 × 60 cells. The ring of cells beside the walls takes a quarter of
+    // a pass per scan (`miss_weight_beside_return`): one scan leaves it undecided, the
+    // 58 × 58 cells within it are free; the rest was never seen.
+    assert_eq!(free, 58 * 58);
+    assert_eq!(unknown, 64 * 64 - occupied - 58 * 58);
     for i in 0..60 {
         for j in 0..60 {
             let (x, y) = (-2.95 + 0.1 * i as f64, -2.95 + 0.1 * j as f64);
-            assert_eq!(state(x, y), CellState::Free, "({x}, {y})");
+            let beside_wall = i == 0 || j == 0 || i == 59 || j == 59;
+            let expected = if beside_wall {
+                CellState::Unknown
+            } else {
+                CellState::Free
+            };
+            assert_eq!(state(x, y), expected, "({x}, {y})");
         }
     }
+    // Four scans weigh one clean pass: then the ring is free too.
+    let four = OccupancyGrid::from_scans([(pose, &scan); 4], &seeing_all).unwrap();
+    assert_eq!(four.counts().1, 60 * 60);
 }
 
 #[test]
@@ -191,7 +202,8 @@ fn coarsen_to_fit_grows_the_cells_until_the_grid_fits() {
         coarsen_to_fit: true,
         ..small
     };
-    let grid = OccupancyGrid::from_scans([(pose, &scan)], &fit).unwrap();
+    // Four scans, so that the cells beside the walls are cleared too.
+    let grid = OccupancyGrid::from_scans([(pose, &scan); 4], &fit).unwrap();
     assert!(
         grid.width * grid.height <= 1000,
         "{} × {}",
@@ -245,29 +257,42 @@ fn states_between(grid: &OccupancyGrid, beyond_m: f64, inside_m: f64) -> (usize,
 }
 
 #[test]
-fn neighbouring_beams_fill_the_wedge_between_them() {
-    // 130 beams (2.8°) in a 20 m room: at 9 m two beams are 0.43 m apart, so one line per
-    // beam leaves most cells there unseen.
-    let fan = fan_in_room(20.0, 130);
+fn neighbouring_beams_fill_the_wedge_between_them_while_they_are_close() {
+    // 360 beams (1°) in a 20 m room: at 8 m two beams are 0.14 m apart, so one line per
+    // beam leaves cells unseen between them. The wedges are filled as far as the beams are
+    // `wedge_max_width_m` (0.15 m) apart: 8.6 m.
+    let fan = fan_in_room(20.0, 360);
     let params = GridParams::default();
     let grid = OccupancyGrid::from_fans([(Pose2::IDENTITY, &fan)], &params).unwrap();
-    let (unknown, free, occupied) = states_between(&grid, 0.6, 9.7);
+    // The square of half-side 6 m lies within 8.5 m.
+    let (unknown, free, occupied) = states_between(&grid, 0.6, 6.0);
     assert_eq!(occupied, 0);
     assert!(
         unknown * 200 <= free,
-        "{unknown} unknown of {} cells inside the walls",
+        "{unknown} unknown of {} cells within 6 m",
         unknown + free
     );
     let lines_only = GridParams {
         max_wedge_rad: 0.0,
-        ..params
+        ..params.clone()
     };
     let lines = OccupancyGrid::from_fans([(Pose2::IDENTITY, &fan)], &lines_only).unwrap();
-    let (unknown_lines, _, _) = states_between(&lines, 0.6, 9.7);
+    let (unknown_lines, _, _) = states_between(&lines, 0.6, 6.0);
     assert!(
         unknown_lines > 10 * unknown.max(1),
         "{unknown_lines} vs {unknown}"
     );
+    // Beyond 8.6 m only the lines: a lamp post could stand there between two beams.
+    let far = |g: &OccupancyGrid| {
+        let (u, f, _) = states_between(g, 9.0, 9.7);
+        (u, f)
+    };
+    let (far_unknown, far_free) = far(&grid);
+    assert!(
+        far_unknown * 10 > far_unknown + far_free,
+        "{far_unknown} unknown, {far_free} free beyond the wedges' reach"
+    );
+    assert_eq!(far(&grid), far(&lines));
     // The walls are still walls: every beam's return cell is occupied.
     assert_eq!(grid.counts().2, lines.counts().2);
 }
@@ -340,4 +365,83 @@ fn the_blind_zone_stays_unknown_and_an_edge_is_not_filled() {
         OccupancyGrid::from_fans([(Pose2::IDENTITY, &alike)], &GridParams::default()).unwrap();
     let (ix, iy) = grid.cell_at([8.0 * half.cos(), 8.0 * half.sin()]).unwrap();
     assert_eq!(grid.state(ix, iy), CellState::Free);
+}
+
+#[test]
+fn a_beam_clears_from_where_it_was_seen() {
+    // A scan taken while driving: its last column was measured 3 m along x from the start,
+    // looking left, and hit something 2 m away, at (3, 2).
+    let fan = BeamFan::new([FanBeam {
+        from_m: [3.0, 0.0],
+        bearing_rad: std::f64::consts::FRAC_PI_2,
+        range_m: Some(2.0),
+        free_to_m: None,
+    }]);
+    let grid = OccupancyGrid::from_fans([(Pose2::IDENTITY, &fan)], &GridParams::default()).unwrap();
+    let state = |x: f64, y: f64| {
+        let (ix, iy) = grid.cell_at([x, y]).expect("inside");
+        grid.state(ix, iy)
+    };
+    assert_eq!(state(3.05, 2.05), CellState::Occupied);
+    for y in [0.65, 1.05, 1.55] {
+        assert_eq!(state(3.05, y), CellState::Free, "y = {y}");
+    }
+    // Not along the line from the scan's start: nothing was seen there.
+    for (x, y) in [(1.05, 0.75), (2.05, 1.35)] {
+        assert_eq!(state(x, y), CellState::Unknown, "({x}, {y})");
+    }
+}
+
+#[test]
+fn a_grazing_return_stops_short_across_the_surface_not_along_the_beam() {
+    // A wall along y = 2 m seen at 2.5°…50° by a scan whose pose is 6 cm off towards it:
+    // the returns land 6 cm inside the wall's row of cells. Stopping 0.1 m short along a beam
+    // that meets the wall at 5° is 1 cm across it: the beams would clear the wall's cells.
+    let bearings: Vec<f64> = (1..=20)
+        .map(|k| f64::from(k) * 2.5f64.to_radians())
+        .collect();
+    let fan = BeamFan::new(bearings.iter().map(|&b| (b, Some(2.0 / b.sin()))));
+    let off = Pose2::new(0.0, 0.06, 0.0);
+    let grid = OccupancyGrid::from_fans([(off, &fan)], &GridParams::default()).unwrap();
+    for ix in 0..grid.width {
+        let [x, _] = grid.cell_center(ix, 0);
+        if !(3.0..=30.0).contains(&x) {
+            continue;
+        }
+        let (cx, cy) = grid.cell_at([x, 2.05]).expect("inside");
+        assert_ne!(
+            grid.state(cx, cy),
+            CellState::Free,
+            "wall cell at x = {x:.2} cleared"
+        );
+    }
+}
+
+#[test]
+fn a_beam_without_a_return_clears_as_far_as_its_column_saw_the_ground() {
+    let beam = |free_to_m| FanBeam {
+        from_m: [0.0, 0.0],
+        bearing_rad: 0.0,
+        range_m: None,
+        free_to_m,
+    };
+    let free_up_to = |free_to_m: Option<f64>| {
+        let fan = BeamFan::new([beam(free_to_m)]);
+        let grid =
+            OccupancyGrid::from_fans([(Pose2::IDENTITY, &fan)], &GridParams::default()).unwrap();
+        (0..grid.width)
+            .filter(|&ix| {
+                let (_, iy) = grid.cell_at([0.0, 0.0]).unwrap();
+                grid.state(ix, iy) == CellState::Free
+            })
+            .map(|ix| grid.cell_center(ix, 0)[0])
+            .fold(0.0, f64::max)
+    };
+    // Ground seen 12 m away: free to there. Not known (a planar scan): `no_return_free_m`.
+    assert!((free_up_to(Some(12.0)) - 11.95).abs() < 1e-9);
+    assert!((free_up_to(None) - 4.95).abs() < 1e-9);
+    // A column that saw no ground clears nothing.
+    let fan = BeamFan::new([beam(Some(0.0))]);
+    let grid = OccupancyGrid::from_fans([(Pose2::IDENTITY, &fan)], &GridParams::default()).unwrap();
+    assert_eq!(grid.counts().1, 0);
 }

@@ -16,6 +16,8 @@ pub(crate) fn scan() -> LeveledScan {
         .map(|i| Beam {
             bearing_rad: (i as f32).to_radians() - std::f32::consts::PI,
             range_m: (i % 7 != 0).then_some(1.5 + i as f32 * 0.1),
+            sensor_xy_m: [0.0, 0.0],
+            ground_to_m: None,
         })
         .collect();
     LeveledScan {

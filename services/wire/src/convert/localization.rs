@@ -168,13 +168,32 @@ pub fn matching_scan(scan: &LeveledScan, max_range_m: f32) -> Scan2 {
 }
 
 /// A leveled scan's beams as the grid takes them: every beam, a return or none, so that
-/// neighbouring beams fill the wedge between them (`slam::grid`).
+/// neighbouring beams fill the wedge between them (`slam::grid`), each from where the sensor
+/// was when it measured the beam.
 pub fn grid_fan(scan: &LeveledScan) -> slam::BeamFan {
-    slam::BeamFan::new(
-        scan.beams
-            .iter()
-            .map(|b| (f64::from(b.bearing_rad), b.range_m.map(f64::from))),
-    )
+    slam::BeamFan::new(scan.beams.iter().map(|b| {
+        let from_m = b.sensor_xy_m.map(f64::from);
+        let bearing = f64::from(b.bearing_rad);
+        match b.range_m {
+            // The return's place in the scan's frame, seen from the sensor's place.
+            Some(r) => {
+                let r = f64::from(r);
+                let d = [r * bearing.cos() - from_m[0], r * bearing.sin() - from_m[1]];
+                slam::FanBeam {
+                    from_m,
+                    bearing_rad: d[1].atan2(d[0]),
+                    range_m: Some(d[0].hypot(d[1])),
+                    free_to_m: None,
+                }
+            }
+            None => slam::FanBeam {
+                from_m,
+                bearing_rad: bearing,
+                range_m: None,
+                free_to_m: b.ground_to_m.map(f64::from),
+            },
+        }
+    }))
 }
 
 /// Returns (bearing in rad, range in m) as a `Scan2`, cut at `max_range_m`: the one place a
@@ -233,6 +252,8 @@ pub fn localize_query(
             Ok(Beam {
                 bearing_rad,
                 range_m: (range_m > 0.0).then_some(range_m),
+                sensor_xy_m: [0.0, 0.0],
+                ground_to_m: None,
             })
         })
         .collect::<Result<_, WireError>>()?;

@@ -65,12 +65,32 @@ pub fn leveled_scan_to_wire(
 ) -> v1::LeveledScan {
     header.stamp_ns = scan.stamp_ns;
     let (bearing_rad, range_m) = scan.polar();
+    // Sent only for a scan taken while moving: a still scan's are all zero.
+    let (sensor_x_m, sensor_y_m) = if scan.beams.iter().any(|b| b.sensor_xy_m != [0.0, 0.0]) {
+        scan.beams
+            .iter()
+            .map(|b| (b.sensor_xy_m[0], b.sensor_xy_m[1]))
+            .unzip()
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    let ground_to_m = if scan.beams.iter().any(|b| b.ground_to_m.is_some()) {
+        scan.beams
+            .iter()
+            .map(|b| b.ground_to_m.unwrap_or(0.0))
+            .collect()
+    } else {
+        Vec::new()
+    };
     v1::LeveledScan {
         header: Some(header),
         bearing_rad,
         range_m,
         counts: counts.map(counts_to_wire),
         columns: u32::try_from(scan.beams.len()).unwrap_or(u32::MAX),
+        sensor_x_m,
+        sensor_y_m,
+        ground_to_m,
     }
 }
 
@@ -103,7 +123,9 @@ pub(super) fn check_beam(
 
 /// A leveled scan from the wire, checked: header of this version, at least one beam,
 /// `bearing_rad` and `range_m` of equal length and matching `columns`, counts (if present)
-/// that add up, finite bearings, finite ranges ≥ 0. Range 0 becomes `None` (no return).
+/// that add up, finite bearings, finite ranges ≥ 0, sensor places and ground reaches none
+/// or one per beam, within [`MAX_RANGE_M`] (reaches ≥ 0). Range 0 becomes `None` (no
+/// return); a beam with a return carries no ground reach.
 pub fn leveled_scan_from_wire(msg: &v1::LeveledScan) -> Result<LeveledScan, WireError> {
     let header = check_header(msg.header.as_ref(), "LeveledScan.header")?;
     let n = msg.bearing_rad.len();
@@ -128,6 +150,43 @@ pub fn leveled_scan_from_wire(msg: &v1::LeveledScan) -> Result<LeveledScan, Wire
     if let Some(counts) = &msg.counts {
         counts_from_wire(counts)?;
     }
+    let moving = !(msg.sensor_x_m.is_empty() && msg.sensor_y_m.is_empty());
+    for (field, places) in [
+        ("LeveledScan.sensor_x_m", &msg.sensor_x_m),
+        ("LeveledScan.sensor_y_m", &msg.sensor_y_m),
+    ] {
+        if moving && places.len() != n {
+            return Err(WireError::Invalid {
+                field,
+                detail: format!("{} sensor places for {n} beams", places.len()),
+            });
+        }
+        for (i, &v) in places.iter().enumerate() {
+            bounded(field, Some(i), v.into(), MAX_RANGE_M, "implausible_range")?;
+        }
+    }
+    if !msg.ground_to_m.is_empty() && msg.ground_to_m.len() != n {
+        return Err(WireError::Invalid {
+            field: "LeveledScan.ground_to_m",
+            detail: format!("{} ground reaches for {n} beams", msg.ground_to_m.len()),
+        });
+    }
+    for (i, &v) in msg.ground_to_m.iter().enumerate() {
+        check_beam(
+            ("LeveledScan.bearing_rad", "LeveledScan.ground_to_m"),
+            i,
+            0.0,
+            v,
+        )?;
+    }
+    let ground_to = |i: usize| msg.ground_to_m.get(i).copied();
+    let sensor = |i: usize| {
+        if moving {
+            [msg.sensor_x_m[i], msg.sensor_y_m[i]]
+        } else {
+            [0.0, 0.0]
+        }
+    };
     let beams = msg
         .bearing_rad
         .iter()
@@ -143,6 +202,8 @@ pub fn leveled_scan_from_wire(msg: &v1::LeveledScan) -> Result<LeveledScan, Wire
             Ok(Beam {
                 bearing_rad,
                 range_m: (range_m > 0.0).then_some(range_m),
+                sensor_xy_m: sensor(i),
+                ground_to_m: if range_m > 0.0 { None } else { ground_to(i) },
             })
         })
         .collect::<Result<Vec<_>, _>>()?;
@@ -251,5 +312,55 @@ mod tests {
         ));
         let err = rejection(|n| wire_scan(n).counts.as_mut().unwrap().overhang = u64::MAX);
         assert!(err.to_string().contains("more than 2^64"), "{err}");
+    }
+
+    #[test]
+    fn sensor_places_go_only_with_a_moving_scan_and_are_checked() {
+        let still = leveled_scan_to_wire(&scan(), None, header(1));
+        assert!(still.sensor_x_m.is_empty() && still.sensor_y_m.is_empty());
+        let mut moving = scan();
+        for (i, beam) in moving.beams.iter_mut().enumerate() {
+            beam.sensor_xy_m = [i as f32 * 0.01, -0.5];
+            if beam.range_m.is_none() {
+                beam.ground_to_m = Some(4.5);
+            }
+        }
+        let wire = leveled_scan_to_wire(&moving, None, header(1));
+        assert_eq!(wire.sensor_x_m.len(), 360);
+        assert_eq!(wire.ground_to_m.len(), 360);
+        assert_eq!(leveled_scan_from_wire(&wire).unwrap(), moving);
+        let err = rejection(|n| wire_scan(n).ground_to_m = vec![1.0; 359]);
+        assert_eq!(
+            err.to_string(),
+            "LeveledScan.ground_to_m: 359 ground reaches for 360 beams"
+        );
+        let err = rejection(|n| {
+            let s = wire_scan(n);
+            s.ground_to_m = vec![1.0; 360];
+            s.ground_to_m[8] = -2.0;
+        });
+        assert_eq!(
+            err.to_string(),
+            "LeveledScan.ground_to_m[8] = -2 is negative"
+        );
+
+        let err = rejection(|n| wire_scan(n).sensor_x_m = vec![0.5; 360]);
+        assert_eq!(
+            err.to_string(),
+            "LeveledScan.sensor_y_m: 0 sensor places for 360 beams"
+        );
+        let err = rejection(|n| {
+            let s = wire_scan(n);
+            (s.sensor_x_m, s.sensor_y_m) = (vec![0.5; 360], vec![0.0; 360]);
+            s.sensor_y_m[42] = f32::NAN;
+        });
+        assert!(matches!(
+            err,
+            WireError::InvalidValue {
+                field: "LeveledScan.sensor_y_m",
+                index: Some(42),
+                ..
+            }
+        ));
     }
 }

@@ -69,6 +69,8 @@ fn node(r: usize, k: u64) -> v1::Node {
             .map(|(&b, &range)| Beam {
                 bearing_rad: b,
                 range_m: (range > 0.1 && range < 40.0).then_some(range),
+                sensor_xy_m: [0.0, 0.0],
+                ground_to_m: None,
             })
             .collect(),
     };
