@@ -199,6 +199,22 @@ fn window_is_the_map_around_the_robot(http: &str) {
     }
     assert_eq!(same, w * h, "{} of {} cells differ", w * h - same, w * h);
     assert!(known > 1000, "only {known} known cells around the robot");
+
+    // The same window in map_server's scale mode (the dashboard's colours): grey and alpha,
+    // free cells pale, occupied dark, never-seen transparent.
+    let (_, _, (sw, sh, scale)) = grid_png(http, &format!("{path}&mode=scale"));
+    assert_eq!((sw, sh, scale.len()), (w, h, 2 * w * h));
+    for (k, &trinary) in window.iter().enumerate() {
+        let (grey, alpha) = (scale[2 * k], scale[2 * k + 1]);
+        match trinary {
+            254 => assert!(alpha == 255 && grey >= 165, "free cell {k}: {grey}/{alpha}"),
+            0 => assert!(
+                alpha == 255 && grey <= 90,
+                "occupied cell {k}: {grey}/{alpha}"
+            ),
+            _ => assert!(alpha == 0 || (90..165).contains(&grey), "unknown cell {k}"),
+        }
+    }
 }
 
 fn robot_has_a_node(http: &str) -> bool {

@@ -74,6 +74,11 @@ pub fn map_server_value(grid: &OccupancyGrid, occupancy: i8, mode: MapMode) -> i
 /// 255·(1 − p) and opaque, unknown transparent, north up. Its YAML
 /// ([`to_map_yaml_with`] in [`MapMode::Scale`]) carries the grid's own thresholds.
 pub fn to_png_scale(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
+    to_png_scale_with(grid, PngSpeed::Small)
+}
+
+/// [`to_png_scale`] at the given compression.
+pub fn to_png_scale_with(grid: &OccupancyGrid, speed: PngSpeed) -> Result<Vec<u8>, EncodeError> {
     check_grid(grid)?;
     let mut pixels = Vec::with_capacity(2 * grid.cells.len());
     for row in grid.cells.chunks_exact(grid.width).rev() {
@@ -85,12 +90,7 @@ pub fn to_png_scale(grid: &OccupancyGrid) -> Result<Vec<u8>, EncodeError> {
             }
         }));
     }
-    encode_png(
-        grid,
-        &pixels,
-        png::ColorType::GrayscaleAlpha,
-        PngSpeed::Small,
-    )
+    encode_png(grid, &pixels, png::ColorType::GrayscaleAlpha, speed)
 }
 
 /// Checks that `grid` has cells, that they match its size, and that it lies somewhere.

@@ -22,6 +22,19 @@ pub enum KeyStyle {
     Ros2dds,
 }
 
+/// How the mapper's `OccupancyGrid` carries a cell, as Nav2's map_server publishes a map it
+/// loaded in that mode.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapValues {
+    /// 0 free, 100 occupied, −1 unknown (Nav2's static layer reads only 100 as an obstacle).
+    #[default]
+    Trinary,
+    /// The evidence: 0 free, 100 occupied, 1–99 for a cell seen but undecided between the
+    /// thresholds, −1 never seen.
+    Scale,
+}
+
 /// Where a ROS 2 network's topics are: the key style and its parameters.
 #[derive(Clone, Copy, Debug)]
 pub struct RosKeys<'a> {
@@ -98,6 +111,8 @@ pub struct RosOutConfig {
     pub odom_frame: String,
     /// The mapper publishes a fleet's changed grid at most this often (ms).
     pub map_period_ms: u64,
+    /// How the mapper's grid carries a cell.
+    pub map_values: MapValues,
     /// The Zenoh session to the ROS 2 network (rmw_zenohd, the bridge): a client of
     /// `tcp/localhost:7447` by default, as `[zenoh]`'s keys.
     pub zenoh: SessionConfig,
@@ -113,6 +128,7 @@ impl Default for RosOutConfig {
             map_frame: "map".into(),
             odom_frame: "odom".into(),
             map_period_ms: 2000,
+            map_values: MapValues::Trinary,
             zenoh: SessionConfig::default(),
         }
     }

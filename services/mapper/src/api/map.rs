@@ -26,13 +26,16 @@ pub(crate) struct GridQuery {
     mode: Option<String>,
 }
 
+/// The map_server mode a query asks for (`mode=`): trinary when absent.
+pub(super) fn map_mode(mode: Option<&str>) -> Reply<graphio::gridmap::MapMode> {
+    mode.map_or(Ok(graphio::gridmap::MapMode::Trinary), str::parse)
+        .map_err(ApiError::BadRequest)
+}
+
 impl GridQuery {
     /// The map_server mode asked for.
     fn mode(&self) -> Reply<graphio::gridmap::MapMode> {
-        self.mode
-            .as_deref()
-            .map_or(Ok(graphio::gridmap::MapMode::Trinary), str::parse)
-            .map_err(ApiError::BadRequest)
+        map_mode(self.mode.as_deref())
     }
 
     pub(super) fn params(&self) -> Reply<slam::GridParams> {

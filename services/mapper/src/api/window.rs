@@ -16,13 +16,16 @@ pub(super) struct WindowQuery {
     radius_m: Option<f64>,
     /// Cell size (m): 0.1 when absent, 0.02 to 2.
     resolution_m: Option<f64>,
+    /// As `map.png`'s: `trinary` (the default) or `scale` (each known cell's evidence as its
+    /// grey, unknown transparent: the colours of the dashboard's map and follow view).
+    mode: Option<String>,
 }
 
 /// Cells of a window, at most (2000 × 2000).
 const MAX_WINDOW_CELLS: f64 = 4e6;
 
 /// The occupancy grid of the square around the robot's live map pose, as a PNG (white free,
-/// black occupied, grey unknown), cut from tiles the mapper keeps: the first window over a
+/// black occupied, grey unknown; or in map_server's scale mode), cut from tiles the mapper keeps: the first window over a
 /// part of the map makes its tiles, the next ones cost a few milliseconds; a tile made before
 /// the map last changed is served and made again in the background (at most every second).
 /// Its placement in the `Levelmap-Grid` header (as `map.json`); the tiles it took in
@@ -31,7 +34,7 @@ const MAX_WINDOW_CELLS: f64 = 4e6;
     params(("fleet" = String, Path, description = "Fleet id"), ("robot" = String, Path, description = "Robot id"), WindowQuery),
     responses(
         (status = 200, description = "PNG; its placement in the Levelmap-Grid header (JSON)", content_type = "image/png", body = Vec<u8>),
-        (status = 400, description = "A radius or resolution out of range", body = String),
+        (status = 400, description = "A radius, resolution or mode out of range", body = String),
         (status = 404, description = "No such fleet or robot", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes, or not done in time", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
@@ -57,6 +60,7 @@ pub(super) async fn robot_map_png(
             "a window of {radius} m at {res} m has more than {MAX_WINDOW_CELLS} cells"
         )));
     }
+    let mode = super::map::map_mode(q.mode.as_deref())?;
     let tiles = api.tiles.clone();
     let view = v.clone();
     let (bytes, placement, stats, stale) = api
@@ -65,8 +69,14 @@ pub(super) async fn robot_map_png(
             let (grid, stale, stats) = tiles
                 .window(&view, [center.x, center.y], radius, res)
                 .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
-            let bytes = graphio::gridmap::to_png_with(&grid, graphio::gridmap::PngSpeed::Fast)
-                .map_err(ApiError::internal)?;
+            let fast = graphio::gridmap::PngSpeed::Fast;
+            let bytes = match mode {
+                graphio::gridmap::MapMode::Trinary => graphio::gridmap::to_png_with(&grid, fast),
+                graphio::gridmap::MapMode::Scale => {
+                    graphio::gridmap::to_png_scale_with(&grid, fast)
+                }
+            }
+            .map_err(ApiError::internal)?;
             let placement = serde_json::to_string(&GridPlacement::of(&grid, view.poses.len()))
                 .expect("serializes");
             Ok((bytes, placement, stats, stale))

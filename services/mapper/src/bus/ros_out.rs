@@ -1,8 +1,9 @@
 //! `[ros2_out]` on the mapper: each fleet's map as `nav_msgs/OccupancyGrid` on
 //! `/levelmap/<fleet>/map` (the fleet id made a ROS name token), for RViz, Nav2 and any ROS 2
 //! node. The grid is the one `map.png` and `map.pgm` serve at their default resolution
-//! (coarser when the map outgrows their cell cap), trinary as map_server publishes a loaded
-//! map (0 free, 100 occupied, −1 unknown), made off the mapping worker, at most every
+//! (coarser when the map outgrows their cell cap), as map_server publishes a map it loaded
+//! (`map_values`: trinary, 0 free, 100 occupied, −1 unknown; or scale, the evidence between
+//! the thresholds as 1–99), made off the mapping worker, at most every
 //! `map_period_ms` when the map changed, and again every [`REPUBLISH_PERIODS`] periods
 //! unchanged. Transient-local-like: a queryable on the same key answers the last grid to
 //! late joiners at once.
@@ -10,7 +11,7 @@
 use crate::views::Shared;
 use anyhow::Result;
 use fleetmap::FleetView;
-use runtime::ros2::{Durability, RosOut, RosOutConfig, RosPublisher, ros_name_token};
+use runtime::ros2::{Durability, MapValues, RosOut, RosOutConfig, RosPublisher, ros_name_token};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -32,9 +33,17 @@ fn grid_params() -> slam::GridParams {
     }
 }
 
-/// A fleet's view as an `OccupancyGrid` sample in `frame`.
-pub fn occupancy_grid_sample(view: &FleetView, frame: &str) -> Result<Vec<u8>, slam::GridError> {
+/// A fleet's view as an `OccupancyGrid` sample in `frame`, its cells as `values` says.
+pub fn occupancy_grid_sample(
+    view: &FleetView,
+    frame: &str,
+    values: MapValues,
+) -> Result<Vec<u8>, slam::GridError> {
     let grid = view.grid(&grid_params())?;
+    let mode = match values {
+        MapValues::Trinary => graphio::gridmap::MapMode::Trinary,
+        MapValues::Scale => graphio::gridmap::MapMode::Scale,
+    };
     let stamp = ros2msg::Time::from_ns(view.updated_ns);
     let message = ros2msg::OccupancyGrid {
         header: ros2msg::Header {
@@ -55,14 +64,11 @@ pub fn occupancy_grid_sample(view: &FleetView, frame: &str) -> Result<Vec<u8>, s
                 orientation: ros2msg::Quaternion::default(),
             },
         },
-        // Trinary, as map_server publishes a map: Nav2's static layer takes only 100 as an
-        // obstacle and every other known value as free.
+        // As map_server publishes a map it loaded in `mode`.
         data: grid
             .cells
             .iter()
-            .map(|&c| {
-                graphio::gridmap::map_server_value(&grid, c, graphio::gridmap::MapMode::Trinary)
-            })
+            .map(|&c| graphio::gridmap::map_server_value(&grid, c, mode))
             .collect(),
     };
     Ok(ros2msg::encode(&message))
@@ -129,6 +135,7 @@ pub async fn start(config: &RosOutConfig, shared: Arc<Shared>, fleets: &[String]
     }
     let period = Duration::from_millis(config.map_period_ms.max(100));
     let frame = config.map_frame.clone();
+    let values = config.map_values;
     let mut stopping = shared.stopping.subscribe();
     tokio::spawn(async move {
         let _ros = ros;
@@ -139,7 +146,7 @@ pub async fn start(config: &RosOutConfig, shared: Arc<Shared>, fleets: &[String]
                 _ = tick.tick() => {}
             }
             for (fleet, out) in outs.iter_mut() {
-                publish_fleet(&shared, fleet, out, &frame).await;
+                publish_fleet(&shared, fleet, out, &frame, values).await;
             }
         }
     });
@@ -147,7 +154,13 @@ pub async fn start(config: &RosOutConfig, shared: Arc<Shared>, fleets: &[String]
 }
 
 /// One period of one fleet: a new grid when the map changed, the last one again now and then.
-async fn publish_fleet(shared: &Shared, fleet: &str, out: &mut FleetMapOut, frame: &str) {
+async fn publish_fleet(
+    shared: &Shared,
+    fleet: &str,
+    out: &mut FleetMapOut,
+    frame: &str,
+    values: MapValues,
+) {
     let Some(view) = shared.fleet(fleet) else {
         return;
     };
@@ -164,7 +177,8 @@ async fn publish_fleet(shared: &Shared, fleet: &str, out: &mut FleetMapOut, fram
     }
     let updated_ns = view.updated_ns;
     let frame = frame.to_owned();
-    let made = tokio::task::spawn_blocking(move || occupancy_grid_sample(&view, &frame)).await;
+    let made =
+        tokio::task::spawn_blocking(move || occupancy_grid_sample(&view, &frame, values)).await;
     match made {
         Ok(Ok(sample)) => {
             let sample = Arc::new(sample);
@@ -175,5 +189,41 @@ async fn publish_fleet(shared: &Shared, fleet: &str, out: &mut FleetMapOut, fram
         }
         Ok(Err(e)) => tracing::warn!(fleet, "ROS 2 map not made: {e}"),
         Err(e) => tracing::error!(fleet, "ROS 2 map task: {e}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fleetmap::FleetMap;
+
+    #[test]
+    fn the_published_grid_is_trinary_or_the_evidence_as_map_server_loads_it() {
+        let mut map = FleetMap::new("site", slam::Mapper2dParams::default(), None, 40.0);
+        map.ingest(&fleetmap::testing::node("r0", 1, 0, 0, 0.0))
+            .expect("a node");
+        let view = FleetView::of(&map, None, 0.0, 5);
+        let grid = view.grid(&grid_params()).expect("a grid");
+        let decoded = |values| {
+            let sample = occupancy_grid_sample(&view, "map", values).expect("a sample");
+            ros2msg::decode::<ros2msg::OccupancyGrid>(&sample).expect("decodes")
+        };
+        let (trinary, scale) = (decoded(MapValues::Trinary), decoded(MapValues::Scale));
+        assert_eq!(trinary.data.len(), grid.cells.len());
+        assert!(trinary.data.iter().all(|v| [-1, 0, 100].contains(v)));
+        assert!(trinary.data.contains(&0) && trinary.data.contains(&100));
+        // Seen but undecided cells carry their evidence in scale mode only.
+        let (mut undecided, mut same) = (0, 0);
+        for ((&t, &s), &c) in trinary.data.iter().zip(&scale.data).zip(&grid.cells) {
+            match grid.classify(c) {
+                slam::CellState::Unknown if c >= 0 => {
+                    undecided += 1;
+                    assert!(t == -1 && (1..=99).contains(&s), "cell {c}: {t} / {s}");
+                }
+                _ => same += usize::from(t == s),
+            }
+        }
+        assert!(undecided > 0, "the test grid has undecided cells");
+        assert_eq!(same + undecided, grid.cells.len());
     }
 }

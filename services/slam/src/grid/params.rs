@@ -33,7 +33,7 @@ pub struct GridParams {
     pub occupied_threshold: f64,
     /// …free at or below this one; in between (and never seen) unknown.
     pub free_threshold: f64,
-    /// Refuse grids with more cells than this (8 bytes a cell while building): a stray
+    /// Refuse grids with more cells than this (10 bytes a cell while building): a stray
     /// pose kilometres away gives a clear error instead of a huge allocation. The default
     /// 2²⁴ cells is 410 m × 410 m at 0.1 m.
     pub max_cells: usize,

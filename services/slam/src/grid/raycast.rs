@@ -132,12 +132,14 @@ impl OccupancyGrid {
 
     /// Ray casts scans at their poses (the scanner's pose in the map frame), the one way a
     /// grid is made. Per scan: a return within `max_range_m` adds hit evidence to its cell;
-    /// each beam clears the cells it crosses from the blind zone on (a return beyond
-    /// `max_range_m` up to it, a beam without a return up to `no_return_free_m`); the wedge
-    /// between neighbouring beams that see alike is cleared too, a cell short of the line
-    /// between their ends. Within one scan a cell is updated once, and a return wins over a
-    /// clearing. The grid covers every scan origin and every cleared beam, with one cell of
-    /// margin.
+    /// each beam clears the cells it crosses from where it was seen, past the blind zone (a
+    /// return short of the surface, one beyond `max_range_m` up to it, a beam without a
+    /// return as far as it saw free space or up to `no_return_free_m`); the wedge between
+    /// neighbouring beams that see alike is cleared too, a cell short of the line between
+    /// their ends, while they are `wedge_max_width_m` apart. A pass beside a cell holding a
+    /// return counts `miss_weight_beside_return`. Within one scan a cell is updated once, and a
+    /// return wins over a clearing. The grid covers every scan origin, beam start and cleared
+    /// beam, with one cell of margin.
     pub fn from_fans<'a>(
         scans: impl IntoIterator<Item = (Pose2, &'a BeamFan)>,
         params: &GridParams,
