@@ -297,13 +297,18 @@ fn neighbouring_beams_fill_the_wedge_between_them_while_they_are_close() {
     assert_eq!(grid.counts().2, lines.counts().2);
 }
 
-#[test]
-fn a_wedge_stops_short_of_a_wall_seen_at_a_grazing_angle() {
-    // A long wall 2 m to the side, seen by beams 3° apart: between two hits far along it, the
-    // filled wedge must not clear the wall's own cells.
-    let bearings: Vec<f64> = (1..=20).map(|k| f64::from(k) * 3f64.to_radians()).collect();
+/// A long wall along y = 2 m seen from `pose` by 20 beams `step_deg` apart, from `step_deg`
+/// on: the grid.
+fn wall_seen_at_grazing_angles(step_deg: f64, pose: Pose2) -> OccupancyGrid {
+    let bearings: Vec<f64> = (1..=20)
+        .map(|k| f64::from(k) * step_deg.to_radians())
+        .collect();
     let fan = BeamFan::new(bearings.iter().map(|&b| (b, Some(2.0 / b.sin()))));
-    let grid = OccupancyGrid::from_fans([(Pose2::IDENTITY, &fan)], &GridParams::default()).unwrap();
+    OccupancyGrid::from_fans([(pose, &fan)], &GridParams::default()).unwrap()
+}
+
+/// No cell of the wall's row (y in [2, 2.1)) from x = 3 m to 30 m is free.
+fn assert_wall_row_kept(grid: &OccupancyGrid) {
     for ix in 0..grid.width {
         let [x, _] = grid.cell_center(ix, 0);
         if !(3.0..=30.0).contains(&x) {
@@ -316,6 +321,13 @@ fn a_wedge_stops_short_of_a_wall_seen_at_a_grazing_angle() {
             "wall cell at x = {x:.2} cleared"
         );
     }
+}
+
+#[test]
+fn a_wedge_stops_short_of_a_wall_seen_at_a_grazing_angle() {
+    // Beams 3° apart: between two hits far along the wall, the filled wedge must not clear
+    // the wall's own cells.
+    assert_wall_row_kept(&wall_seen_at_grazing_angles(3.0, Pose2::IDENTITY));
 }
 
 #[test]
@@ -397,24 +409,8 @@ fn a_grazing_return_stops_short_across_the_surface_not_along_the_beam() {
     // A wall along y = 2 m seen at 2.5°…50° by a scan whose pose is 6 cm off towards it:
     // the returns land 6 cm inside the wall's row of cells. Stopping 0.1 m short along a beam
     // that meets the wall at 5° is 1 cm across it: the beams would clear the wall's cells.
-    let bearings: Vec<f64> = (1..=20)
-        .map(|k| f64::from(k) * 2.5f64.to_radians())
-        .collect();
-    let fan = BeamFan::new(bearings.iter().map(|&b| (b, Some(2.0 / b.sin()))));
     let off = Pose2::new(0.0, 0.06, 0.0);
-    let grid = OccupancyGrid::from_fans([(off, &fan)], &GridParams::default()).unwrap();
-    for ix in 0..grid.width {
-        let [x, _] = grid.cell_center(ix, 0);
-        if !(3.0..=30.0).contains(&x) {
-            continue;
-        }
-        let (cx, cy) = grid.cell_at([x, 2.05]).expect("inside");
-        assert_ne!(
-            grid.state(cx, cy),
-            CellState::Free,
-            "wall cell at x = {x:.2} cleared"
-        );
-    }
+    assert_wall_row_kept(&wall_seen_at_grazing_angles(2.5, off));
 }
 
 #[test]
