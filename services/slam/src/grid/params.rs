@@ -48,15 +48,19 @@ pub struct GridParams {
     /// says nothing about the space (0.5 m: about the minimum range of the lidars levelmap
     /// reads; the robot's own body is often in it).
     pub blind_zone_m: f64,
-    /// A beam with a return clears up to this much short of it (m): the cells just in front
-    /// of a surface keep it when a scan's pose is a little off (0.1 m: a cell, and about the
-    /// error of a solved pose), and a ray crossing the corner of a cell that is mostly inside
-    /// the object does not call that cell free.
+    /// A beam with a return clears up to this much short of it (m), measured across the
+    /// surface (its direction from the chords to the neighbouring returns; at a grazing
+    /// angle the beam stops that much further back, at most ten times): the cells just in
+    /// front of a surface keep it when a scan's pose is a little off (0.1 m: a cell, and
+    /// about the error of a solved pose), and a ray crossing the corner of a cell that is
+    /// mostly inside the object does not call that cell free.
     pub clear_short_of_hit_m: f64,
-    /// A beam without a return clears free space up to this range (m) and no further: open
-    /// space is likely near the sensor, but the return may also have been lost (glass, black
-    /// paint, a reflection), and such a beam must not clear a wall that other scans saw.
-    /// 5 m, Cartographer's `missing_data_ray_length` in 2D.
+    /// A beam without a return whose free length is not known (a planar scanner's; a
+    /// leveled column tells how far it saw the ground, `FanBeam::free_to_m`) clears free
+    /// space up to this range (m) and no further: open space is likely near the sensor, but
+    /// the return may also have been lost (glass, black paint, a reflection), and such a beam
+    /// must not clear a wall that other scans saw. 5 m, Cartographer's
+    /// `missing_data_ray_length` in 2D.
     pub no_return_free_m: f64,
     /// Neighbouring beams at most this far apart in bearing (rad) clear the wedge between
     /// them, not only their own lines: beams diverge, and beyond a few metres the cells
