@@ -27,6 +27,20 @@ pub struct Beam {
     pub ground_to_m: Option<f32>,
 }
 
+impl Beam {
+    /// The beam as seen from where it was measured (`sensor_xy_m`): its bearing (rad) and, for
+    /// a return, its range (m) from there. A beam without a return already points from there.
+    pub fn seen_from_sensor(&self) -> (f64, Option<f64>) {
+        let bearing = f64::from(self.bearing_rad);
+        let Some(r) = self.range_m.map(f64::from) else {
+            return (bearing, None);
+        };
+        let [sx, sy] = self.sensor_xy_m.map(f64::from);
+        let d = [r * bearing.cos() - sx, r * bearing.sin() - sy];
+        (d[1].atan2(d[0]), Some(d[0].hypot(d[1])))
+    }
+}
+
 /// The paper's leveled range scan L_i = (r_i, φ_i), one beam per column, in column order.
 /// Bearings need not be uniform.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -167,6 +181,28 @@ mod tests {
         for &[x, y, z] in above {
             scan.push_xyz(x, y, z);
         }
+    }
+
+    #[test]
+    fn a_return_is_seen_from_where_its_column_was_measured() {
+        // A return at (3, 2) in the scan's frame, its column measured 3 m along x.
+        let beam = crate::Beam {
+            bearing_rad: 2f32.atan2(3.0),
+            range_m: Some(13f32.sqrt()),
+            sensor_xy_m: [3.0, 0.0],
+            ground_to_m: None,
+        };
+        let (bearing, range) = beam.seen_from_sensor();
+        assert!(
+            (bearing - std::f64::consts::FRAC_PI_2).abs() < 1e-6,
+            "{bearing}"
+        );
+        assert!((range.unwrap() - 2.0).abs() < 1e-6);
+        let none = crate::Beam {
+            range_m: None,
+            ..beam
+        };
+        assert_eq!(none.seen_from_sensor(), (f64::from(beam.bearing_rad), None));
     }
 
     #[test]

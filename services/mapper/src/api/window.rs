@@ -25,9 +25,9 @@ pub(super) struct WindowQuery {
 const MAX_WINDOW_CELLS: f64 = 4e6;
 
 /// The occupancy grid of the square around the robot's live map pose, as a PNG (white free,
-/// black occupied, grey unknown; or in map_server's scale mode), cut from tiles the mapper keeps: the first window over a
-/// part of the map makes its tiles, the next ones cost a few milliseconds; a tile made before
-/// the map last changed is served and made again in the background (at most every second).
+/// black occupied, grey unknown; or in map_server's scale mode), cut from tiles the mapper
+/// keeps: the first window over a part of the map makes its tiles, the next ones cost a few
+/// milliseconds; a tile made before the map last changed is served and made again in the background (at most every second).
 /// Its placement in the `Levelmap-Grid` header (as `map.json`); the tiles it took in
 /// `Levelmap-Tiles` (`{"made", "cached", "stale"}`).
 #[utoipa::path(get, path = "/api/v1/fleets/{fleet}/robots/{robot}/map.png", tag = "map",

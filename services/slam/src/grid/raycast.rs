@@ -57,6 +57,11 @@ impl Ray {
     }
 }
 
+/// The sine of the shallowest angle at which a return still places its surface: below about
+/// 6°, where a return lands along the surface says little about where the surface is, so a
+/// ray stops at most ten times `clear_short_of_hit_m` short.
+const MIN_SURFACE_SINE: f64 = 0.1;
+
 /// The scan's rays and the wedges to fill between neighbours: (ray i, ray j, bearing gap).
 /// Neighbours share a wedge when they were seen from places at most a cell apart (the wedge
 /// has one apex) and see alike.
@@ -97,8 +102,7 @@ fn rays(fan: &BeamFan, params: &GridParams) -> (Vec<Ray>, Vec<(usize, usize, f64
         }
     }
     for (ray, sine) in rays.iter_mut().zip(sine) {
-        // Below about 6° a grazing return says little about where the surface is.
-        ray.short_m = params.clear_short_of_hit_m / sine.max(0.1);
+        ray.short_m = params.clear_short_of_hit_m / sine.max(MIN_SURFACE_SINE);
     }
     let wedges = neighbours
         .into_iter()
@@ -189,6 +193,8 @@ impl OccupancyGrid {
             }
         }
         let mut res = params.resolution_m;
+        // A cell of margin all round: a window's edge cells then see the returns just beyond
+        // it (`beside_a_return`), as the whole grid's do, and its tiles are cut without it.
         let (origin_m, w, h) = loop {
             let origin_m = [
                 ((lo[0] / res).floor() - 1.0) * res,
@@ -282,10 +288,8 @@ impl OccupancyGrid {
             for &(i, j, gap) in wedges {
                 let (a, b) = (rays[i], rays[j]);
                 // The chord between the two ends: a surface both beams saw lies along it.
-                let chord = [
-                    b.from[0] + b.direction[0] * b.clear_m - a.from[0] - a.direction[0] * a.clear_m,
-                    b.from[1] + b.direction[1] * b.clear_m - a.from[1] - a.direction[1] * a.clear_m,
-                ];
+                let (ea, eb) = (a.end(), b.end());
+                let chord = [eb[0] - ea[0], eb[1] - ea[1]];
                 let chord_m = chord[0].hypot(chord[1]);
                 // Filled only as far as the two beams are `wedge_max_width_m` apart: beyond,
                 // something thinner could stand between them unseen.

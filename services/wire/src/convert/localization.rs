@@ -172,26 +172,12 @@ pub fn matching_scan(scan: &LeveledScan, max_range_m: f32) -> Scan2 {
 /// was when it measured the beam.
 pub fn grid_fan(scan: &LeveledScan) -> slam::BeamFan {
     slam::BeamFan::new(scan.beams.iter().map(|b| {
-        let from_m = b.sensor_xy_m.map(f64::from);
-        let bearing = f64::from(b.bearing_rad);
-        match b.range_m {
-            // The return's place in the scan's frame, seen from the sensor's place.
-            Some(r) => {
-                let r = f64::from(r);
-                let d = [r * bearing.cos() - from_m[0], r * bearing.sin() - from_m[1]];
-                slam::FanBeam {
-                    from_m,
-                    bearing_rad: d[1].atan2(d[0]),
-                    range_m: Some(d[0].hypot(d[1])),
-                    free_to_m: None,
-                }
-            }
-            None => slam::FanBeam {
-                from_m,
-                bearing_rad: bearing,
-                range_m: None,
-                free_to_m: b.ground_to_m.map(f64::from),
-            },
+        let (bearing_rad, range_m) = b.seen_from_sensor();
+        slam::FanBeam {
+            from_m: b.sensor_xy_m.map(f64::from),
+            bearing_rad,
+            range_m,
+            free_to_m: b.ground_to_m.map(f64::from),
         }
     }))
 }

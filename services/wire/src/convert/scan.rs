@@ -103,8 +103,13 @@ pub(super) fn check_beam(
     range_m: f32,
 ) -> Result<(), WireError> {
     finite(bearing_field, Some(index), bearing_rad.into())?;
+    check_range(range_field, index, range_m)
+}
+
+/// Value `index` of a range field: finite, from 0 to [`MAX_RANGE_M`].
+fn check_range(field: &'static str, index: usize, range_m: f32) -> Result<(), WireError> {
     bounded(
-        range_field,
+        field,
         Some(index),
         range_m.into(),
         MAX_RANGE_M,
@@ -112,7 +117,7 @@ pub(super) fn check_beam(
     )?;
     if range_m < 0.0 {
         return Err(WireError::InvalidValue {
-            field: range_field,
+            field,
             index: Some(index),
             value: range_m.into(),
             problem: "negative",
@@ -172,12 +177,7 @@ pub fn leveled_scan_from_wire(msg: &v1::LeveledScan) -> Result<LeveledScan, Wire
         });
     }
     for (i, &v) in msg.ground_to_m.iter().enumerate() {
-        check_beam(
-            ("LeveledScan.bearing_rad", "LeveledScan.ground_to_m"),
-            i,
-            0.0,
-            v,
-        )?;
+        check_range("LeveledScan.ground_to_m", i, v)?;
     }
     let ground_to = |i: usize| msg.ground_to_m.get(i).copied();
     let sensor = |i: usize| {
