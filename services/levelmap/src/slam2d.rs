@@ -5,6 +5,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use graphio::{carmen, gridmap};
 use serde::Serialize;
+use slam::matching::metric::return_to_start;
 use slam::{GridParams, Mapper2d, Mapper2dParams, MapperStats, OccupancyGrid, WrongClosures};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -92,6 +93,12 @@ struct Report {
     relation_trans_error_max: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     relation_rot_error_mean: Option<f64>,
+    /// The last pose's distance from the first (m), and the last scan matched against the
+    /// first from there: how far the match moves it (m, rad; null when they do not match).
+    /// For a run that ends where it started, a closed loop needs a small correction.
+    return_to_start_m: f64,
+    return_correction_m: Option<f64>,
+    return_correction_rad: Option<f64>,
 }
 
 pub fn run(args: &Slam2dArgs) -> Result<()> {
@@ -103,7 +110,8 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         );
     }
     let t0 = Instant::now();
-    let mut mapper = Mapper2d::new(load_params(args.config.as_deref())?);
+    let params = load_params(args.config.as_deref())?;
+    let mut mapper = Mapper2d::new(params.clone());
     let mut placed = Vec::with_capacity(log.scans.len());
     let mut wrong = args
         .inject_false_closures
@@ -153,6 +161,14 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
             write(&yaml_path, gridmap::to_map_yaml(&grid, &image).as_bytes())?;
         }
     }
+    let last = log.scans.len() - 1;
+    let ends = [0, last].map(|k| (pose_of_scan(k), log.scans[k].to_scan2()));
+    let back = return_to_start(
+        (&ends[0].0, &ends[0].1),
+        (&ends[1].0, &ends[1].1),
+        &params.idc,
+        &params.gate,
+    );
     let stats = mapper.stats();
     let r = Report {
         log: args.log.display().to_string(),
@@ -169,6 +185,9 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         relation_trans_error_std: metric.map(|m| m.1.translation_std_m),
         relation_trans_error_max: metric.map(|m| m.1.translation_max_m),
         relation_rot_error_mean: metric.map(|m| m.1.rotation_mean_rad),
+        return_to_start_m: back.distance_m,
+        return_correction_m: back.correction_m,
+        return_correction_rad: back.correction_rad,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
@@ -185,6 +204,13 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         if let (Some(m), Some(s)) = (r.relation_trans_error_mean, r.relation_trans_error_std) {
             println!("  relations: translation error {m:.4} ± {s:.4} m");
         }
+        let correction = r
+            .return_correction_m
+            .map_or("the scans do not match".into(), |c| format!("{c:.2} m"));
+        println!(
+            "  last pose {:.2} m from the first; last scan matched to the first: {correction}",
+            r.return_to_start_m
+        );
     }
     Ok(())
 }

@@ -23,6 +23,7 @@ pub mod consistency;
 mod coverage;
 mod edges;
 mod first_contact;
+mod global_search;
 mod local;
 mod near;
 mod params;
@@ -37,6 +38,7 @@ mod wrong_closures;
 
 pub use coverage::{CoverageParams, Passed};
 pub use first_contact::FirstContactParams;
+pub use global_search::GlobalSearchParams;
 pub use params::{ConsistencyParams, Mapper2dParams};
 pub use saved::{RestoreError, SavedMapper};
 pub use solve::{BackgroundSolve, SolvedInBackground};
@@ -95,6 +97,13 @@ pub struct MapperStats {
     pub submap_searches: usize,
     /// Of `loop_closures`, those found by a submap search.
     pub submap_closures: usize,
+    /// Global searches: a finished submap's returns in another submap, whole, every heading.
+    #[serde(default)]
+    pub global_searches: usize,
+    /// Of `global_searches`, the matches that passed every check and went to the
+    /// consistency check as closures.
+    #[serde(default)]
+    pub global_matches: usize,
     /// Searches of a lone robot's node in another robot's submap (whole, every heading).
     pub contact_searches: usize,
     /// Of `inter_robot_closures`, the first contacts those searches found.
@@ -150,6 +159,8 @@ pub struct Mapper2d {
     optimization_pending: bool,
     submaps: submaps::Submaps,
     contact: first_contact::ContactSearch,
+    #[serde(default)]
+    global: global_search::GlobalSearch,
     /// The network's parts, kept up to date by [`Self::sync_parts`].
     parts: crate::parts::PartTracker,
     /// The solves of a deferred mapper: windows now, the whole network in the background.
@@ -236,7 +247,11 @@ impl Mapper2d {
             let node = self.push_node(robot, odometry, odometry, 0.0, scan);
             self.record_chain_step(robot, node, None);
             let closed = self.close_loops(node);
-            let closed = closed + self.search_submaps(node, closed) + self.seek_first_contact() > 0;
+            let closed = closed
+                + self.search_submaps(node, closed)
+                + self.search_globally()
+                + self.seek_first_contact()
+                > 0;
             if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored(node)?;
             }
@@ -290,8 +305,12 @@ impl Mapper2d {
         self.record_chain_step(robot, node, Some(last));
         let expired = self.expire_closures(false);
         let closed = self.close_loops(node);
-        let closed =
-            expired + closed + self.search_submaps(node, closed) + self.seek_first_contact() > 0;
+        let closed = expired
+            + closed
+            + self.search_submaps(node, closed)
+            + self.search_globally()
+            + self.seek_first_contact()
+            > 0;
         if self.add_gps(node, gps) || closed {
             self.optimize_when_anchored(node)?;
         }

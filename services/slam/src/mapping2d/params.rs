@@ -72,6 +72,8 @@ pub struct Mapper2dParams {
     pub optimize: OptimizeParams,
     /// Loop closure by correlative search against submaps.
     pub submaps: super::SubmapSearchParams,
+    /// Loop closure by a global search: every finished submap in the others, whole.
+    pub global_search: super::GlobalSearchParams,
     /// A lone robot (no GPS, no closure with another) looked for in the others' submaps.
     pub first_contact: super::FirstContactParams,
     /// Bounded growth: when a place counts as covered (the fleet's map passes over it).
@@ -106,6 +108,7 @@ impl Default for Mapper2dParams {
             gate: QualityGate::default(),
             optimize: OptimizeParams::default(),
             submaps: super::SubmapSearchParams::default(),
+            global_search: super::GlobalSearchParams::default(),
             first_contact: super::FirstContactParams::default(),
             coverage: super::CoverageParams::default(),
         }

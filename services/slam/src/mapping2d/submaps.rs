@@ -45,10 +45,19 @@ impl Submap {
     }
 }
 
-/// The pooled grids made last, by submap, with when each was last used.
+/// Which of a submap's two pooled grids.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Resolution {
+    /// The local search's (`SubmapSearchParams::grid`).
+    Fine,
+    /// The global search's (`GlobalSearchParams::grid`).
+    Coarse,
+}
+
+/// The pooled grids made last, by submap and resolution, with when each was last used.
 #[derive(Debug, Default)]
 struct PooledGrids {
-    kept: Vec<(usize, Arc<PrecomputedGrids>, u64)>,
+    kept: Vec<((usize, Resolution), Arc<PrecomputedGrids>, u64)>,
     clock: u64,
 }
 
@@ -127,10 +136,20 @@ impl Mapper2d {
     /// Submap `k`'s grid pooled for the correlative search: made on first use, kept while it
     /// is among the [`POOLED_GRIDS_KEPT`] used last.
     pub(super) fn pooled_grids(&self, k: usize) -> Arc<PrecomputedGrids> {
+        self.pooled(k, Resolution::Fine)
+    }
+
+    /// Submap `k`'s grid at the global search's coarse resolution, pooled and kept likewise.
+    pub(super) fn pooled_coarse_grids(&self, k: usize) -> Arc<PrecomputedGrids> {
+        self.pooled(k, Resolution::Coarse)
+    }
+
+    fn pooled(&self, k: usize, resolution: Resolution) -> Arc<PrecomputedGrids> {
         let mut pooled = self.submaps.pooled.lock().expect("pooled grids lock");
         pooled.clock += 1;
         let now = pooled.clock;
-        if let Some(entry) = pooled.kept.iter_mut().find(|e| e.0 == k) {
+        let key = (k, resolution);
+        if let Some(entry) = pooled.kept.iter_mut().find(|e| e.0 == key) {
             entry.2 = now;
             return entry.1.clone();
         }
@@ -139,15 +158,39 @@ impl Mapper2d {
             .nodes
             .iter()
             .map(|&(n, pose)| (pose, &self.node_scans[n]));
-        let grids = Arc::new(
-            precompute(scans, &self.params.submaps.grid).expect("it was rasterized when finished"),
-        );
+        let params = match resolution {
+            Resolution::Fine => &self.params.submaps.grid,
+            Resolution::Coarse => &self.params.global_search.grid,
+        };
+        // A coarser grid of the same returns is never larger than the fine one.
+        let grids = Arc::new(precompute(scans, params).expect("it was rasterized when finished"));
         if pooled.kept.len() >= POOLED_GRIDS_KEPT
             && let Some(oldest) = (0..pooled.kept.len()).min_by_key(|&i| pooled.kept[i].2)
         {
             pooled.kept.swap_remove(oldest);
         }
-        pooled.kept.push((k, grids.clone(), now));
+        pooled.kept.push((key, grids.clone(), now));
         grids
+    }
+
+    /// Submap `k`'s returns gathered in the frame of its middle node, within the search's
+    /// range of that node (`nodes[nodes.len() / 2]`): one query with the submap's structure.
+    /// A single scan fits many places along a corridor, a submap with its doors and corners
+    /// fits one.
+    pub(super) fn submap_returns(&self, k: usize, max_range_m: f64) -> Vec<[f64; 2]> {
+        let nodes = &self.submaps.done[k].nodes;
+        let middle = nodes[nodes.len() / 2].1;
+        let to_middle = middle.inverse();
+        nodes
+            .iter()
+            .flat_map(|&(n, pose)| {
+                let into_middle = to_middle.compose(&pose);
+                self.node_scans[n]
+                    .points()
+                    .iter()
+                    .map(move |&p| into_middle.transform_point(p))
+            })
+            .filter(|p| p[0].hypot(p[1]) <= max_range_m)
+            .collect()
     }
 }

@@ -15,6 +15,7 @@ mod search;
 mod tests;
 
 pub use grid::{PrecomputedGrids, ProbabilityGrid};
+pub use search::thin_points;
 
 use super::Scan2;
 use crate::Pose2;
@@ -85,18 +86,19 @@ pub fn precompute<'a>(
     Some(PrecomputedGrids::new(grid, params.max_depth))
 }
 
-/// The best pose of `scan` in `grids`' frame within `window` around `initial`, by branch and
-/// bound; `None` when no pose scores at least `min_score` (or no return is within range).
+/// The best pose of `scan` (a [`Scan2`], or any points in one frame: several scans gathered)
+/// in `grids`' frame within `window` around `initial`, by branch and bound; `None` when no
+/// pose scores at least `min_score` (or no return is within range).
 pub fn search(
     grids: &PrecomputedGrids,
-    scan: &Scan2,
+    scan: &(impl AsRef<[[f64; 2]]> + ?Sized),
     initial: Pose2,
     window: &SearchWindow,
     min_score: f64,
     params: &CorrelativeParams,
 ) -> Option<CorrelativeMatch> {
     let r = grids.grid().resolution_m();
-    let points = search::thin_points(scan.points(), r, params.max_range_m);
+    let points = search::thin_points(scan.as_ref(), r, params.max_range_m);
     search::Problem::new(grids, &points, initial, window, min_score)?.branch_and_bound()
 }
 
@@ -116,7 +118,7 @@ pub struct Exclusion {
 /// scores at least `min_score`.
 pub fn runner_up(
     grids: &PrecomputedGrids,
-    scan: &Scan2,
+    scan: &(impl AsRef<[[f64; 2]]> + ?Sized),
     initial: Pose2,
     window: &SearchWindow,
     excluded: &Exclusion,
@@ -124,7 +126,7 @@ pub fn runner_up(
     params: &CorrelativeParams,
 ) -> Option<CorrelativeMatch> {
     let r = grids.grid().resolution_m();
-    let points = search::thin_points(scan.points(), r, params.max_range_m);
+    let points = search::thin_points(scan.as_ref(), r, params.max_range_m);
     search::Problem::new(grids, &points, initial, window, min_score)?
         .excluding(&excluded.pose, excluded.radius_m)
         .branch_and_bound()
@@ -134,13 +136,13 @@ pub fn runner_up(
 /// benches (it is far slower).
 pub fn exhaustive_search(
     grids: &PrecomputedGrids,
-    scan: &Scan2,
+    scan: &(impl AsRef<[[f64; 2]]> + ?Sized),
     initial: Pose2,
     window: &SearchWindow,
     min_score: f64,
     params: &CorrelativeParams,
 ) -> Option<CorrelativeMatch> {
     let r = grids.grid().resolution_m();
-    let points = search::thin_points(scan.points(), r, params.max_range_m);
+    let points = search::thin_points(scan.as_ref(), r, params.max_range_m);
     search::Problem::new(grids, &points, initial, window, min_score)?.exhaustive()
 }

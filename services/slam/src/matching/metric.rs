@@ -26,6 +26,39 @@ pub fn relation_error(from: &Pose2, to: &Pose2, delta: &Pose2) -> RelationError 
     }
 }
 
+/// How a map closes a run that ends where it started, for a log without relations: the last
+/// scan matched against the first by IDC, from where the map puts the one relative to the
+/// other. A closed loop needs only a small correction; an open one leaves the scans too far
+/// apart for IDC (or its quality gate), and no correction is found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReturnToStart {
+    /// The last pose's distance from the first on the map (m).
+    pub distance_m: f64,
+    /// How far the match moves the last scan from where the map has it (m), if they match.
+    pub correction_m: Option<f64>,
+    /// …and how far it turns it (rad).
+    pub correction_rad: Option<f64>,
+}
+
+/// The first and last scans, each at its pose on the map: see [`ReturnToStart`].
+pub fn return_to_start(
+    first: (&Pose2, &crate::matching::Scan2),
+    last: (&Pose2, &crate::matching::Scan2),
+    idc: &crate::matching::IdcParams,
+    gate: &crate::matching::QualityGate,
+) -> ReturnToStart {
+    let on_map = first.0.between(last.0);
+    let matched = crate::matching::idc(first.1, last.1, on_map, idc)
+        .ok()
+        .filter(|m| crate::matching::accept(m, gate));
+    let correction = matched.map(|m| on_map.between(&m.pose));
+    ReturnToStart {
+        distance_m: on_map.x.hypot(on_map.y),
+        correction_m: correction.map(|c| c.x.hypot(c.y)),
+        correction_rad: correction.map(|c| wrap_angle(c.theta).abs()),
+    }
+}
+
 /// Mean, standard deviation (population: divided by the count) and maximum of both parts
 /// of the relation errors.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -73,6 +73,14 @@ impl Scan2 {
     }
 }
 
+/// Its returns, for what takes any set of points in a scanner's frame (the correlative
+/// search takes one scan or several scans gathered into one frame).
+impl AsRef<[[f64; 2]]> for Scan2 {
+    fn as_ref(&self) -> &[[f64; 2]] {
+        &self.points
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -9,13 +9,10 @@ use super::{CorrelativeMatch, SearchWindow};
 use crate::Pose2;
 use std::collections::HashSet;
 
-/// The scan's returns kept for the search: within `max_range_m`, one per cell of the grid's
-/// resolution (in the scan frame), so dense parts of the scan do not outweigh the rest.
-pub(super) fn thin_points(
-    points: &[[f64; 2]],
-    resolution_m: f64,
-    max_range_m: f64,
-) -> Vec<[f64; 2]> {
+/// The scan's returns kept for the search: within `max_range_m`, one per cell of
+/// `resolution_m` (in the scan frame; the search thins at the grid's resolution), so dense
+/// parts of the scan do not outweigh the rest.
+pub fn thin_points(points: &[[f64; 2]], resolution_m: f64, max_range_m: f64) -> Vec<[f64; 2]> {
     let mut seen = HashSet::new();
     points
         .iter()
