@@ -249,7 +249,7 @@ impl Mapper2d {
             let closed = self.close_loops(node);
             let closed = closed
                 + self.search_submaps(node, closed)
-                + self.search_globally()
+                + self.search_globally(node)
                 + self.seek_first_contact()
                 > 0;
             if self.add_gps(node, gps) || closed {
@@ -308,7 +308,7 @@ impl Mapper2d {
         let closed = expired
             + closed
             + self.search_submaps(node, closed)
-            + self.search_globally()
+            + self.search_globally(node)
             + self.seek_first_contact()
             > 0;
         if self.add_gps(node, gps) || closed {

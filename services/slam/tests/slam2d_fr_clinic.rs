@@ -6,9 +6,12 @@
 //! search, the two scans lay 64 m apart and did not match at all). Wrong closures
 //! injected (10 % of the clean run's closures) must not open the loop again.
 
+mod common;
+
+use common::map_injecting;
 use graphio::carmen;
 use slam::matching::metric::{ReturnToStart, return_to_start};
-use slam::{Mapper2d, Mapper2dParams, MapperStats, Placed, Pose2, WrongClosures};
+use slam::{Mapper2dParams, MapperStats, Pose2};
 use testdata::shared_data;
 
 /// Maps the log with `fraction` wrong closures per loop-closure match: how the run's end
@@ -16,15 +19,8 @@ use testdata::shared_data;
 fn map(fraction: f64) -> (ReturnToStart, MapperStats, Pose2, usize) {
     let path = shared_data("radish_2d_laser_logs/fr-clinic_robotlaser.clf.bz2");
     let log = carmen::read(&path).expect("log");
+    let (mapper, placed, wrong) = map_injecting(&log, fraction);
     let params = Mapper2dParams::default();
-    let mut mapper = Mapper2d::new(params.clone());
-    let mut wrong = WrongClosures::new(fraction, 12);
-    let mut placed: Vec<Placed> = Vec::with_capacity(log.scans.len());
-    for s in &log.scans {
-        placed.push(mapper.add_scan(s.laser_pose, s.to_scan2()).expect("add"));
-        wrong.inject(&mut mapper).expect("inject");
-    }
-    mapper.finish().expect("optimize");
     let last = log.scans.len() - 1;
     let [first_pose, last_pose] = [0, last].map(|k| mapper.pose_of(placed[k]));
     let back = return_to_start(

@@ -4,8 +4,11 @@
 //! 0.5–2 m and 3–15°, claiming a good match's covariance), and the relation error
 //! (Kümmerle et al. 2009) must stay within 10 % of the clean run's.
 
+mod common;
+
+use common::map_injecting;
 use graphio::{carmen, relations};
-use slam::{Mapper2d, Mapper2dParams, MapperStats, Placed, WrongClosures};
+use slam::MapperStats;
 use testdata::shared_data;
 
 /// Maps `name` with `fraction` wrong closures per loop-closure match; the relation error's
@@ -19,14 +22,7 @@ fn map(name: &str, fraction: f64) -> (f64, MapperStats, usize, usize) {
         "radish_2d_laser_logs/{name}.relations"
     )))
     .expect("relations");
-    let mut mapper = Mapper2d::new(Mapper2dParams::default());
-    let mut wrong = WrongClosures::new(fraction, 12);
-    let mut placed: Vec<Placed> = Vec::with_capacity(log.scans.len());
-    for s in &log.scans {
-        placed.push(mapper.add_scan(s.laser_pose, s.to_scan2()).expect("add"));
-        wrong.inject(&mut mapper).expect("inject");
-    }
-    mapper.finish().expect("optimize");
+    let (mapper, placed, wrong) = map_injecting(&log, fraction);
     let m = relations::score(&rel, &log.scans, |k| mapper.pose_of(placed[k]))
         .expect("every relation has its scans");
     let accepted = wrong.accepted(mapper.graph());

@@ -7,7 +7,7 @@
 //! Cartographer's constraint builder does the same with a scan against every submap at a
 //! sampling ratio. Here the query is the whole submap's returns gathered in its middle
 //! node's frame: a single scan in a corridor fits many places along it, a submap with its
-//! doors and corners fits one. The work is bounded per node (`searches_per_node`): the
+//! doors and corners fits one. The work is bounded per metre travelled (`searches_per_m`): the
 //! newest submap searches first, its targets the most plausible first (nearest for the
 //! drift of the path between them), so a loop is tried soon after it is driven.
 //!
@@ -33,16 +33,17 @@ use serde::{Deserialize, Serialize};
 pub struct GlobalSearchParams {
     /// Search at all.
     pub enabled: bool,
-    /// Pairs of submaps searched per new node, on average (Cartographer's sampling ratio,
-    /// as a budget): one costs about 15 ms, against about 10 ms for the rest of a node's
-    /// work on the Freiburg logs. A submap spans 10 to 20 nodes, so each new submap tries
-    /// its 10 to 20 most plausible targets before the next one is finished. Half as many
-    /// left fr-clinic's last loop open.
-    pub searches_per_node: f64,
+    /// Pairs of submaps searched per metre the robot travels, on average (Cartographer's
+    /// sampling ratio, as a budget per path rather than per node, so that the node spacing
+    /// does not change it): one costs about 15 ms, against about 10 ms for the rest of a
+    /// node's work on the Freiburg logs at 0.5 m spacing. A submap spans 10 m, so each new
+    /// submap tries its 20 most plausible targets before the next one is finished. Half as
+    /// many left fr-clinic's last loop open.
+    pub searches_per_m: f64,
     /// The coarse grid of the whole-map search. 0.5 m cells: the walls of a 2 m corridor
     /// still stand four cells apart, and the search covers a 40 m submap at every heading
-    /// in about ten milliseconds (0.3 m cells took twice as long and found the same
-    /// closures on every log). Returns beyond 20 m are sparse and are not rasterized.
+    /// in about ten milliseconds (0.3 m cells took a quarter to a half longer and found
+    /// the same closures on every log). Returns beyond 20 m are sparse and are not rasterized.
     pub grid: CorrelativeParams,
     /// The query's returns are thinned to one per square of this side (m), two coarse
     /// cells: the search's cost grows with them, and a submap's walls, doors and corners
@@ -90,7 +91,7 @@ impl Default for GlobalSearchParams {
     fn default() -> Self {
         GlobalSearchParams {
             enabled: true,
-            searches_per_node: 1.0,
+            searches_per_m: 2.0,
             grid: CorrelativeParams {
                 resolution_m: 0.5,
                 hit_sigma_m: 0.5,
@@ -116,7 +117,7 @@ impl Default for GlobalSearchParams {
 pub(super) struct GlobalSearch {
     /// Finished submaps seen so far.
     seen: usize,
-    /// Searches earned and not yet spent (`searches_per_node` per node).
+    /// Searches earned and not yet spent (`searches_per_m` per metre travelled).
     credit: f64,
     queries: Vec<Query>,
 }
@@ -128,9 +129,9 @@ struct Query {
 }
 
 impl Mapper2d {
-    /// Spends this node's budget of global searches; returns how many edges the consistency
-    /// check let through.
-    pub(super) fn search_globally(&mut self) -> usize {
+    /// Spends the global searches that `node`'s step earned; returns how many edges the
+    /// consistency check let through.
+    pub(super) fn search_globally(&mut self, node: usize) -> usize {
         let p = self.params.global_search.clone();
         if !p.enabled || !self.params.submaps.enabled {
             return 0;
@@ -146,9 +147,13 @@ impl Mapper2d {
         state.queries.drain(..excess);
         self.sync_parts();
         let mut added = 0;
-        // Credit left unspent while there is nothing to search is not saved up.
-        self.global.credit =
-            (self.global.credit + p.searches_per_node).min(p.searches_per_node + 1.0);
+        let step_m = self
+            .chain_neighbour(node, -1)
+            .map_or(0.0, |last| self.node_path_m[node] - self.node_path_m[last]);
+        // Credit left unspent while there is nothing to search is not saved up beyond a
+        // metre's worth.
+        let earned = p.searches_per_m * step_m.max(0.0);
+        self.global.credit = (self.global.credit + earned).min(earned.max(p.searches_per_m) + 1.0);
         while self.global.credit >= 1.0 {
             let Some((query, target)) = self.next_pair(&p) else {
                 break;
@@ -165,11 +170,11 @@ impl Mapper2d {
     }
 
     /// The newest query's most plausible target not yet searched (marked searched). A query
-    /// that already closed a loop, or has no target left, is dropped.
+    /// already anchored, or with no target left, is dropped.
     fn next_pair(&mut self, p: &GlobalSearchParams) -> Option<(usize, usize)> {
         while let Some(query) = self.global.queries.last() {
             let q = query.submap;
-            let best = (!self.closed_a_loop(q))
+            let best = (!self.anchored(q))
                 .then(|| {
                     (0..q)
                         .filter(|t| !query.searched.contains(t))
@@ -191,31 +196,42 @@ impl Mapper2d {
         None
     }
 
-    /// Whether a closure joins one of submap `q`'s nodes to a node at least
-    /// `closure_min_path_m` of path away: then the map holds there, the local searches keep
-    /// it so, and a global search would only find what is known.
-    fn closed_a_loop(&self, q: usize) -> bool {
+    /// Whether submap `q`'s place on the map is already held: a GPS fix on one of its nodes
+    /// (the fix bounds the drift, and the local searches reach that far), or a closure from
+    /// one of them to a node at least `closure_min_path_m` of path away or another robot's
+    /// (the map holds there, and the local searches keep it so). A global search would
+    /// only find what is known.
+    fn anchored(&self, q: usize) -> bool {
         let query = &self.submaps.done[q];
-        let (first, last) = (
-            query.anchor,
-            query.nodes.last().map_or(query.anchor, |n| n.0),
-        );
+        let last = query.nodes.last().map_or(query.anchor, |n| n.0);
+        let inside =
+            |n: usize| (query.anchor..=last).contains(&n) && query.nodes.iter().any(|m| m.0 == n);
+        // Fixes are added with their node, in node order.
+        let gps = &self.graph.gps;
+        let from = gps.partition_point(|g| g.node < query.anchor);
+        if gps[from..]
+            .iter()
+            .take_while(|g| g.node <= last)
+            .any(|g| inside(g.node))
+        {
+            return true;
+        }
         let min_path = self.params.submaps.closure_min_path_m;
         let path = &self.node_path_m;
+        let far = |a: usize, b: usize| {
+            self.node_robot[a].0 != self.node_robot[b].0 || (path[a] - path[b]).abs() >= min_path
+        };
+        // Newest first, back to the sequential edge that made a node older than the anchor:
+        // everything before it was added before the anchor existed.
         self.graph
             .edges
             .iter()
-            .filter(|e| matches!(e.kind, EdgeKind::LoopClosure | EdgeKind::InterRobot))
-            .any(|e| {
-                let inside = |n: usize| query.nodes.iter().any(|m| m.0 == n);
-                let ends = [(e.from, e.to), (e.to, e.from)];
-                ends.iter().any(|&(a, b)| {
-                    (first..=last).contains(&a)
-                        && inside(a)
-                        && (self.node_robot[a].0 != self.node_robot[b].0
-                            || (path[a] - path[b]).abs() >= min_path)
-                })
+            .rev()
+            .take_while(|e| {
+                !matches!(e.kind, EdgeKind::Odometry | EdgeKind::ScanMatch) || e.to >= query.anchor
             })
+            .filter(|e| matches!(e.kind, EdgeKind::LoopClosure | EdgeKind::InterRobot))
+            .any(|e| (inside(e.from) && far(e.from, e.to)) || (inside(e.to) && far(e.to, e.from)))
     }
 
     /// How far target submap `t` lies from query `q`'s middle node, over the drift allowed

@@ -1,10 +1,13 @@
 //! A public 2D log mapped whole by `Mapper2d` at the default parameters, and scored by its
 //! relations: what the real-log tests share.
 
+// Each test crate that includes this module uses a part of it.
+#![allow(dead_code)]
+
 use graphio::carmen::{self, CarmenLog};
 use graphio::relations::{self, Relation};
 use slam::matching::metric::RelationMetric;
-use slam::{Mapper2d, Mapper2dParams, Placed};
+use slam::{Mapper2d, Mapper2dParams, Placed, WrongClosures};
 use testdata::shared_data;
 
 /// The log `radish_2d_laser_logs/{name}.clf.bz2` with its relations, mapped.
@@ -21,13 +24,7 @@ impl MappedLog {
         let path = |ext: &str| shared_data(&format!("radish_2d_laser_logs/{name}.{ext}"));
         let log = carmen::read(&path("clf.bz2")).expect("log");
         let relations = relations::read(&path("relations")).expect("relations");
-        let mut mapper = Mapper2d::new(Mapper2dParams::default());
-        let placed = log
-            .scans
-            .iter()
-            .map(|s| mapper.add_scan(s.laser_pose, s.to_scan2()).expect("add"))
-            .collect();
-        mapper.finish().expect("optimize");
+        let (mapper, placed, _) = map_injecting(&log, 0.0);
         MappedLog {
             log,
             relations,
@@ -43,4 +40,18 @@ impl MappedLog {
         })
         .expect("every relation has its scans")
     }
+}
+
+/// Maps every scan of `log` at the default parameters, injecting `fraction` wrong closures
+/// per loop-closure match (seed 12; 0: none), then optimizes once more.
+pub fn map_injecting(log: &CarmenLog, fraction: f64) -> (Mapper2d, Vec<Placed>, WrongClosures) {
+    let mut mapper = Mapper2d::new(Mapper2dParams::default());
+    let mut wrong = WrongClosures::new(fraction, 12);
+    let mut placed = Vec::with_capacity(log.scans.len());
+    for s in &log.scans {
+        placed.push(mapper.add_scan(s.laser_pose, s.to_scan2()).expect("add"));
+        wrong.inject(&mut mapper).expect("inject");
+    }
+    mapper.finish().expect("optimize");
+    (mapper, placed, wrong)
 }
