@@ -21,7 +21,7 @@
 use super::Mapper2d;
 use crate::grid::{CellState, GridParams, OccupancyGrid};
 use crate::matching::correlative::{
-    CorrelativeMatch, CorrelativeParams, Exclusion, SearchWindow, runner_up, search, thin_points,
+    CorrelativeMatch, CorrelativeParams, SearchWindow, search, thin_points, unambiguous_search,
 };
 use crate::network::EdgeKind;
 use crate::se2::Pose2;
@@ -35,15 +35,15 @@ pub struct GlobalSearchParams {
     pub enabled: bool,
     /// Pairs of submaps searched per metre the robot travels, on average (Cartographer's
     /// sampling ratio, as a budget per path rather than per node, so that the node spacing
-    /// does not change it): one costs about 15 ms, against about 10 ms for the rest of a
-    /// node's work on the Freiburg logs at 0.5 m spacing. A submap spans 10 m, so each new
-    /// submap tries its 20 most plausible targets before the next one is finished. Half as
-    /// many left fr-clinic's last loop open.
+    /// does not change it). A search took 15.5 ms (median) on fr-clinic at 0.3 m cells,
+    /// less at 0.5 m; the rest of a node's work there takes about 9 ms. A submap spans
+    /// 10 m, so each new submap tries its 20 most plausible targets before the next one is
+    /// finished. Half as many left fr-clinic's last loop open.
     pub searches_per_m: f64,
     /// The coarse grid of the whole-map search. 0.5 m cells: the walls of a 2 m corridor
-    /// still stand four cells apart, and the search covers a 40 m submap at every heading
-    /// in about ten milliseconds (0.3 m cells took a quarter to a half longer and found
-    /// the same closures on every log). Returns beyond 20 m are sparse and are not rasterized.
+    /// still stand four cells apart. 0.3 m cells found the same closures on every 2D log and
+    /// took longer (fr-clinic 50.3 against 40.3 s, mit-csail 16.8 against 10.9 s). Returns
+    /// beyond 20 m are sparse and are not rasterized.
     pub grid: CorrelativeParams,
     /// The query's returns are thinned to one per square of this side (m), two coarse
     /// cells: the search's cost grows with them, and a submap's walls, doors and corners
@@ -52,16 +52,16 @@ pub struct GlobalSearchParams {
     /// The query keeps the returns within this range of its middle node (m): the angular
     /// step that moves the farthest return by one cell, and so the search's cost, shrinks
     /// with it; a 10 m submap's returns within 10 m still hold its surroundings (12 m took
-    /// a third longer on fr-clinic and closed fewer loops).
+    /// 36.5–40.3 s on fr-clinic against 32.0 s, with 85 closures against 102).
     pub query_range_m: f64,
     /// Translations within the target's extent plus this margin (m): the query's middle
     /// node may stand outside what the target saw.
     pub margin_m: f64,
     /// The coarse best pose must score at least this (mean cell value under the returns):
     /// about half the returns on the target's surfaces. Two submaps of a place seen on
-    /// different paths share less than two scans of one path. Every match that passed the
-    /// later checks on the Freiburg logs scored above 0.65 here; the bar also prunes the
-    /// search (0.5 took an eighth longer).
+    /// different paths share less than two scans of one path. The matches that passed the
+    /// later checks on fr-clinic scored 0.76 to 0.88 (at 0.3 m cells); the bar also prunes
+    /// the search (fr-clinic with 0.5: 36.5–40.3 s, with 0.55: 37.0 s, one run each).
     pub coarse_min_score: f64,
     /// The fine pose (the local search's grid, around the coarse one) must score at least
     /// this: the local search's own bar.
@@ -111,6 +111,11 @@ impl Default for GlobalSearchParams {
         }
     }
 }
+
+/// The fine search's rotations around the coarse pose: a coarse angular step each way (at
+/// 0.5 m cells and returns within 10 m, the step that moves the farthest return by a cell
+/// is 2.9°). Its translations are two coarse cells each way.
+const FINE_WINDOW_RAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
 
 /// The submaps that still search, and the targets each has searched.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -273,11 +278,7 @@ impl Mapper2d {
         let fine = {
             let window = SearchWindow {
                 linear_m: 2.0 * p.grid.resolution_m,
-                angular_rad: self
-                    .params
-                    .submaps
-                    .angular_window_rad
-                    .min(3f64.to_radians()),
+                angular_rad: FINE_WINDOW_RAD,
             };
             let grids = self.pooled_grids(t);
             let grid = &self.params.submaps.grid;
@@ -307,22 +308,11 @@ impl Mapper2d {
             linear_m: reach + p.margin_m,
             angular_rad: std::f64::consts::PI,
         };
-        let found = search(
-            &grids,
-            returns,
-            initial,
-            &window,
-            p.coarse_min_score,
-            &p.grid,
-        )?;
-        let excluded = Exclusion {
-            pose: found.pose,
-            radius_m: p.ambiguity_radius_m,
-        };
-        let floor = found.score * p.max_runner_up_ratio;
-        runner_up(&grids, returns, initial, &window, &excluded, floor, &p.grid)
-            .is_none()
-            .then_some(found)
+        let (ratio, radius) = (p.max_runner_up_ratio, p.ambiguity_radius_m);
+        let min_score = p.coarse_min_score;
+        unambiguous_search(
+            &grids, returns, initial, &window, min_score, ratio, radius, &p.grid,
+        )
     }
 
     /// The share of `returns` (at `pose` in target `t`'s frame) that land in cells the

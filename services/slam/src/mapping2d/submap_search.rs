@@ -8,7 +8,7 @@
 
 use super::Mapper2d;
 use super::submaps::Submap;
-use crate::matching::correlative::{CorrelativeMatch, Exclusion, SearchWindow, runner_up, search};
+use crate::matching::correlative::{CorrelativeMatch, SearchWindow, unambiguous_search};
 use crate::matching::{accept, idc};
 use crate::network::{EdgeKind, RelativeEdge};
 use crate::se2::{Pose2, wrap_angle};
@@ -158,24 +158,11 @@ impl Mapper2d {
         min_score: f64,
     ) -> Option<CorrelativeMatch> {
         let p = &self.params.submaps;
-        let (grids, scan) = (self.pooled_grids(k), &self.node_scans[node]);
-        let grids = grids.as_ref();
-        let found = search(grids, scan, initial, window, min_score, &p.grid)?;
-        let excluded = Exclusion {
-            pose: found.pose,
-            radius_m: p.ambiguity_radius_m,
-        };
-        let rival_floor = found.score * p.max_runner_up_ratio;
-        runner_up(
-            grids,
-            scan,
-            initial,
-            window,
-            &excluded,
-            rival_floor,
-            &p.grid,
+        let grids = self.pooled_grids(k);
+        let (ratio, radius) = (p.max_runner_up_ratio, p.ambiguity_radius_m);
+        let scan = &self.node_scans[node];
+        unambiguous_search(
+            &grids, scan, initial, window, min_score, ratio, radius, &p.grid,
         )
-        .is_none()
-        .then_some(found)
     }
 }

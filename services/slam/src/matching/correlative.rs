@@ -132,6 +132,32 @@ pub fn runner_up(
         .branch_and_bound()
 }
 
+/// The best pose of [`search`], unless a pose farther than `ambiguity_radius_m` from it
+/// scores at least `max_runner_up_ratio` of its score ([`runner_up`]): a corridor or a row of
+/// like doors fits shifted poses nearly as well, and such a best pose is as likely wrong as
+/// right.
+#[allow(clippy::too_many_arguments)]
+pub fn unambiguous_search(
+    grids: &PrecomputedGrids,
+    scan: &(impl AsRef<[[f64; 2]]> + ?Sized),
+    initial: Pose2,
+    window: &SearchWindow,
+    min_score: f64,
+    max_runner_up_ratio: f64,
+    ambiguity_radius_m: f64,
+    params: &CorrelativeParams,
+) -> Option<CorrelativeMatch> {
+    let found = search(grids, scan, initial, window, min_score, params)?;
+    let excluded = Exclusion {
+        pose: found.pose,
+        radius_m: ambiguity_radius_m,
+    };
+    let floor = found.score * max_runner_up_ratio;
+    runner_up(grids, scan, initial, window, &excluded, floor, params)
+        .is_none()
+        .then_some(found)
+}
+
 /// The same as [`search`] by scoring every pose of the window: the reference for tests and
 /// benches (it is far slower).
 pub fn exhaustive_search(

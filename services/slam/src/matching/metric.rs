@@ -207,4 +207,34 @@ mod tests {
             MetricError::Empty
         );
     }
+
+    #[test]
+    fn a_closed_return_needs_a_small_correction_an_open_one_finds_none() {
+        use crate::matching::synthetic::{Scene, uniform_bearings};
+        use crate::matching::{IdcParams, QualityGate, Scan2};
+        let bearings = uniform_bearings(
+            361,
+            -std::f64::consts::PI / 2.0,
+            std::f64::consts::PI / 360.0,
+        );
+        let scan_at = |pose: &Pose2, seed: u64| {
+            let ranges = Scene::park().scan(pose, &bearings, 40.0, 0.01, seed);
+            Scan2::from_polar(&bearings, &ranges, 40.0).expect("same lengths")
+        };
+        let (start, end) = (Pose2::new(0.0, 0.0, 0.0), Pose2::new(1.0, 0.5, 0.1));
+        let (first, last) = (scan_at(&start, 1), scan_at(&end, 2));
+        let (idc, gate) = (IdcParams::default(), QualityGate::default());
+        // The map has the end 0.2 m off where it truly is.
+        let on_map = end.compose(&Pose2::new(0.2, 0.0, 0.0));
+        let closed = return_to_start((&start, &first), (&on_map, &last), &idc, &gate);
+        let correction = closed.correction_m.expect("they match");
+        assert!((correction - 0.2).abs() < 0.05, "{closed:?}");
+        // The map has it 30 m off: an open loop, no match.
+        let far = end.compose(&Pose2::new(30.0, 0.0, 0.0));
+        let open = return_to_start((&start, &first), (&far, &last), &idc, &gate);
+        assert_eq!(open.correction_m, None, "{open:?}");
+        assert!(
+            (open.distance_m - start.between(&far).x.hypot(start.between(&far).y)).abs() < 1e-9
+        );
+    }
 }
