@@ -2,11 +2,13 @@
 //! connections and refuses new ones) while it keeps driving and making nodes. Nothing is
 //! lost: after the link is back, every node it made is in the map, in order; and the gap the
 //! outage left is re-sent at once, while the robot keeps making nodes (not when it stops).
+//! And a link that stays open but reaches no mapper is replaced by the edge itself.
 
 mod common;
 
 use common::*;
 use std::time::Duration;
+use zenoh::Wait;
 
 #[test]
 fn no_node_is_lost_when_a_robot_is_cut_off_for_a_while() {
@@ -69,6 +71,54 @@ fn no_node_is_lost_when_a_robot_is_cut_off_for_a_while() {
     // Robots get their corrected poses back after the mapper's solves.
     assert!(other["map_pose_updates"].as_u64().unwrap() > 0, "{other}");
     assert!(other["map_pose"]["x"].is_number(), "{other}");
+    drop(mapper);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A transport Zenoh keeps open while nothing behind it routes the robot's nodes (what a
+/// reconnection racing the router's teardown of the old transport can leave,
+/// eclipse-zenoh/zenoh#1886; seen once in the partition drill). Here the robot's first
+/// connection lands on a router with no mapper behind it: it answers keepalives and never
+/// acks. The edge hears nothing for `reopen_link_after_ms` with nodes waiting, opens a new
+/// session, and the relay takes that one to the mapper. With the reopening off, the robot's
+/// nodes would wait in its outbox for good.
+#[test]
+fn a_link_that_stays_open_but_reaches_no_mapper_is_replaced() {
+    let dir = temp_dir("unrouted");
+    let mapper = MapperProcess::start(&dir);
+    let dead_end = format!("tcp/127.0.0.1:{}", free_port());
+    let mut config = zenoh::Config::default();
+    for (key, value) in [
+        ("mode", "\"router\"".to_owned()),
+        ("listen/endpoints", format!("[\"{dead_end}\"]")),
+        ("scouting/multicast/enabled", "false".to_owned()),
+    ] {
+        config.insert_json5(key, &value).expect("router config");
+    }
+    let router = zenoh::open(config)
+        .wait()
+        .expect("a router without a mapper");
+    let relay = Relay::start_to(&[&dead_end, &mapper.zenoh]);
+    let edge = spawn_edge_env(
+        &dir,
+        0,
+        &relay.endpoint,
+        (40.0, 4.0),
+        &[("LEVELMAP_REOPEN_LINK_AFTER_MS", "3000")],
+    );
+    let report = edge_report(edge, Duration::from_secs(120));
+    assert!(
+        report["link_reopens"].as_u64().expect("link_reopens") >= 1,
+        "{report}"
+    );
+    assert_eq!(report["outbox_pending"], 0, "{report}");
+    let made = report["nodes"].as_u64().expect("nodes");
+    assert_eq!(
+        node_seqs(&mapper.http, "park", "robot0"),
+        (0..made).collect::<Vec<_>>(),
+        "every node, once, in order"
+    );
+    router.close().wait().expect("router closes");
     drop(mapper);
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -404,18 +404,30 @@ pub struct Relay {
 
 impl Relay {
     pub fn start(target: &str) -> Relay {
-        let target = target.trim_start_matches("tcp/").to_owned();
+        Relay::start_to(&[target])
+    }
+
+    /// A relay whose n-th connection goes to `targets[n]`, and every one after the last to the
+    /// last.
+    pub fn start_to(targets: &[&str]) -> Relay {
+        let targets: Vec<String> = targets
+            .iter()
+            .map(|t| t.trim_start_matches("tcp/").to_owned())
+            .collect();
         let listener = TcpListener::bind("127.0.0.1:0").expect("relay port");
         let endpoint = format!("tcp/{}", listener.local_addr().expect("addr"));
         let up = Arc::new(AtomicBool::new(true));
         let flag = up.clone();
         std::thread::spawn(move || {
+            let mut relayed = 0;
             for client in listener.incoming() {
                 let Ok(client) = client else { continue };
                 if !flag.load(Ordering::SeqCst) {
                     continue; // dropped: refused
                 }
-                let Ok(server) = TcpStream::connect(&target) else {
+                let target = &targets[relayed.min(targets.len() - 1)];
+                relayed += 1;
+                let Ok(server) = TcpStream::connect(target) else {
                     continue;
                 };
                 for (from, to) in [

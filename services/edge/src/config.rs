@@ -34,6 +34,10 @@ pub struct EdgeConfig {
     pub live_scan_rate_hz: f64,
     /// Re-send every unacked node after this long without ack progress (ms).
     pub resend_after_ms: u64,
+    /// With nodes waiting and no ack for this long (ms), close the Zenoh session and open a
+    /// new one: a transport Zenoh keeps but the router no longer routes must not hold nodes
+    /// back for good; 0: never.
+    pub reopen_link_after_ms: u64,
     /// Source time per wall-clock time: 1 is real time, 0 as fast as possible.
     pub speed: f64,
     /// At the source's end, keep running until every node is acked (or shutdown); with
@@ -79,6 +83,7 @@ impl Default for EdgeConfig {
             odometry_rate_hz: 10.0,
             live_scan_rate_hz: 2.0,
             resend_after_ms: 1000,
+            reopen_link_after_ms: 15_000,
             speed: 1.0,
             linger_for_acks: true,
             source: SourceConfig::default(),

@@ -34,6 +34,8 @@ pub struct EdgeReport {
     pub node_sends: u64,
     /// Of `node_sends`, the re-sends.
     pub node_resends: u64,
+    /// Zenoh sessions closed and opened again after `reopen_link_after_ms` without an ack.
+    pub link_reopens: u64,
     /// Live odometry messages sent.
     pub odometry_sent: u64,
     /// Live leveled scans sent.
@@ -159,6 +161,10 @@ struct Sending {
     /// re-sends (new nodes do not count: a gap must not hide behind fresh sends).
     last_progress: Instant,
     resend_after: Duration,
+    /// The newest ack of our chain, or when a node began to wait with none waiting before:
+    /// with nodes waiting, silence since then longer than `reopen_after` reopens the link.
+    last_heard: Instant,
+    reopen_after: Option<Duration>,
     /// The last re-send the mapper asked for (`Ack.resend_from`), to answer a burst of such
     /// acks (one per batch it received after the gap) with one re-send.
     last_gap_resend: Option<Instant>,
@@ -191,8 +197,9 @@ impl Sending {
     async fn on_node(&mut self, link: &Link, frame: NodeFrame) -> Result<()> {
         self.made(frame);
         if self.next_to_send <= self.outbox.acked_below()? {
-            // Nothing was waiting for an ack: the timer starts with this node.
+            // Nothing was waiting for an ack: the timers start with this node.
             self.last_progress = Instant::now();
+            self.last_heard = Instant::now();
         }
         self.send_backlog(link).await
     }
@@ -260,6 +267,7 @@ impl Sending {
             self.report.acks_ignored += 1;
             return Ok(());
         }
+        self.last_heard = Instant::now();
         if let Some(seq) = ack.acked_node_seq {
             if self.report.acked_node_seq.is_none_or(|a| seq > a) {
                 self.report.acked_node_seq = Some(seq);
@@ -345,6 +353,17 @@ impl Sending {
         {
             self.report.tf_published += 1;
         }
+    }
+
+    /// Nodes wait and nothing was heard from the mapper for `reopen_after`. Zenoh mends a dead
+    /// transport by itself, but a reconnection racing the router's teardown of the old one
+    /// can leave a transport that stays open and is not routed (eclipse-zenoh/zenoh#1886): a
+    /// new session, with a new id, cannot meet that old state.
+    fn link_silent(&self) -> Result<bool> {
+        let Some(after) = self.reopen_after else {
+            return Ok(false);
+        };
+        Ok(self.last_heard.elapsed() >= after && self.outbox.len()? > 0)
     }
 
     /// Re-sends every unacked node, in order, after `resend_after` without progress;
@@ -442,6 +461,9 @@ pub async fn run(
         outbox,
         last_progress: Instant::now(),
         resend_after: Duration::from_millis(config.resend_after_ms),
+        last_heard: Instant::now(),
+        reopen_after: (config.reopen_link_after_ms > 0)
+            .then(|| Duration::from_millis(config.reopen_link_after_ms)),
         last_gap_resend: None,
         correction: MapCorrection::default(),
         tf_out: None,
@@ -452,7 +474,7 @@ pub async fn run(
     let robot = config.robot.as_str();
     let mut source_done = false;
     tokio::pin!(shutdown);
-    let connected = connect(
+    let mut connected = connect(
         &config,
         &mut sending,
         &mut rx,
@@ -460,57 +482,80 @@ pub async fn run(
         shutdown.as_mut(),
     )
     .await;
-    let Some(link) = connected else {
-        // Asked to stop (or the source ended) before the mapper was reachable: every node
-        // made is in the outbox for the next run.
-        drop(rx);
-        producer.abort();
-        let mut report = sending.report;
-        report.outbox_pending = sending.outbox.len()?;
-        return Ok(report);
-    };
-    sending.send_backlog(&link).await?;
-    let mut tick = tokio::time::interval(Duration::from_millis(100));
-    loop {
-        tokio::select! {
-            _ = &mut shutdown => break,
-            produced = rx.recv(), if !source_done => match produced {
-                Some(Produced::Node(frame)) => sending.on_node(&link, frame).await?,
-                Some(Produced::Odometry(odometry)) => sending.on_odometry(&link, odometry).await,
-                Some(Produced::LiveScan(scan)) => sending.on_live_scan(&link, scan).await,
-                Some(Produced::ScanError) => sending.report.scan_errors += 1,
-                Some(Produced::Quarantined) => sending.report.quarantined += 1,
-                Some(Produced::End) | None => {
-                    source_done = true;
-                    if !config.linger_for_acks { break; }
+    // Each pass is one session: it ends the run, or the link fell silent and a new one opens.
+    while let Some(link) = connected.take() {
+        sending.send_backlog(&link).await?;
+        let mut tick = tokio::time::interval(Duration::from_millis(100));
+        let silent = loop {
+            tokio::select! {
+                _ = &mut shutdown => break false,
+                produced = rx.recv(), if !source_done => match produced {
+                    Some(Produced::Node(frame)) => sending.on_node(&link, frame).await?,
+                    Some(Produced::Odometry(odometry)) => sending.on_odometry(&link, odometry).await,
+                    Some(Produced::LiveScan(scan)) => sending.on_live_scan(&link, scan).await,
+                    Some(Produced::ScanError) => sending.report.scan_errors += 1,
+                    Some(Produced::Quarantined) => sending.report.quarantined += 1,
+                    Some(Produced::End) | None => {
+                        source_done = true;
+                        if !config.linger_for_acks { break false; }
+                    }
+                },
+                sample = link.acks.recv_async() => {
+                    let Ok(sample) = sample else { break false };
+                    sending.on_ack(&link, robot, &sample.payload().to_bytes()).await?;
                 }
-            },
-            sample = link.acks.recv_async() => {
-                let Ok(sample) = sample else { break };
-                sending.on_ack(&link, robot, &sample.payload().to_bytes()).await?;
+                sample = link.map_poses.recv_async() => {
+                    let Ok(sample) = sample else { break false };
+                    sending.on_map_poses(robot, &sample.payload().to_bytes());
+                }
+                sample = link.localizations.recv_async() => {
+                    let Ok(sample) = sample else { break false };
+                    sending.on_localization(robot, &sample.payload().to_bytes());
+                }
+                _ = tick.tick() => {
+                    if sending.on_tick(&link, source_done).await? { break false; }
+                    if sending.link_silent()? { break true; }
+                }
             }
-            sample = link.map_poses.recv_async() => {
-                let Ok(sample) = sample else { break };
-                sending.on_map_poses(robot, &sample.payload().to_bytes());
-            }
-            sample = link.localizations.recv_async() => {
-                let Ok(sample) = sample else { break };
-                sending.on_localization(robot, &sample.payload().to_bytes());
-            }
-            _ = tick.tick() => {
-                if sending.on_tick(&link, source_done).await? { break; }
-            }
+        };
+        if !silent {
+            close_session(link).await?;
+            break;
         }
+        let waiting = sending.outbox.len()?;
+        tracing::warn!(
+            robot,
+            waiting,
+            "no ack for {:?} with nodes waiting: opening a new Zenoh session",
+            sending.reopen_after.unwrap_or_default()
+        );
+        sending.report.link_reopens += 1;
+        // A dead link may not answer a close: it is dropped after the bound either way.
+        let _ = tokio::time::timeout(LINK_RETRY, close_session(link)).await;
+        connected = connect(
+            &config,
+            &mut sending,
+            &mut rx,
+            &mut source_done,
+            shutdown.as_mut(),
+        )
+        .await;
+        // The first tick on the new session re-sends everything unacked (no progress since
+        // long before `resend_after`).
+        sending.last_heard = Instant::now();
     }
     drop(rx);
     producer.abort();
     let mut report = sending.report;
     report.outbox_pending = sending.outbox.len()?;
+    Ok(report)
+}
+
+async fn close_session(link: Link) -> Result<()> {
     link.session
         .close()
         .await
-        .map_err(anyhow::Error::from_boxed)?;
-    Ok(report)
+        .map_err(anyhow::Error::from_boxed)
 }
 
 /// With `[ros2_out]`, how long an edge whose source ended and whose nodes are all acked waits

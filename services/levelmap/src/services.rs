@@ -182,11 +182,13 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         println!(
-            "{}: {} nodes, {} sends ({} re-sends), acked up to {:?}, {} waiting in the outbox",
+            "{}: {} nodes, {} sends ({} re-sends, {} sessions reopened), acked up to {:?}, {} \
+             waiting in the outbox",
             report.robot,
             report.nodes,
             report.node_sends,
             report.node_resends,
+            report.link_reopens,
             report.acked_node_seq,
             report.outbox_pending
         );
