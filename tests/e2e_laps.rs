@@ -1,8 +1,9 @@
 //! Bounded growth (docs/services.md, "Bounded growth"): one robot drives ten laps of the same
 //! loop; where the map has nodes already it passes over them. The network's nodes and the
-//! store after ten laps are within 1.2× of what they were after the first, and the map's ATE
-//! is no worse. A store with passes replays to the same network; clouds beyond a fleet's bound
-//! are dropped oldest first.
+//! store after ten laps are within 1.2× of what they were after the first, and the passes'
+//! GPS fixes make the map as good as keeping every node would (ATE within 1.2× of that run's).
+//! A store with passes replays to the same network, their fixes included; clouds beyond a
+//! fleet's bound are dropped oldest first.
 
 mod common;
 
@@ -11,9 +12,14 @@ use serde_json::Value;
 
 /// `levelmap demo` of one robot driving `laps` laps as fast as it goes, in `dir`: its report.
 fn laps(laps: u32, dir: &std::path::Path) -> Value {
+    laps_with(laps, dir, &[])
+}
+
+fn laps_with(laps: u32, dir: &std::path::Path, extra: &[&str]) -> Value {
     json_report(
         levelmap()
             .args(["demo", "--robots", "1", "--laps", &laps.to_string()])
+            .args(extra)
             .args([
                 "--no-baseline",
                 "--speed",
@@ -32,6 +38,7 @@ fn laps(laps: u32, dir: &std::path::Path) -> Value {
 fn ten_laps_of_one_loop_keep_the_map_the_size_of_one() {
     let dir = temp_dir("laps");
     let r = laps(10, &dir.join("run"));
+    let every = laps_with(10, &dir.join("every"), &["--keep-every-node"]);
     std::fs::remove_dir_all(&dir).ok();
     let first = &r["first_lap"];
     let (nodes, nodes_1) = (
@@ -46,7 +53,14 @@ fn ten_laps_of_one_loop_keep_the_map_the_size_of_one() {
         r["ate_rmse_m"].as_f64().unwrap(),
         first["ate_rmse_m"].as_f64().unwrap(),
     );
-    // Measured: 29 → 30 nodes, 3.2 MB → 3.2 MB, ATE 0.118 → 0.109 m; 261 nodes passed.
+    // Measured (release): 29 → 30 nodes, 3.2 MB → 3.2 MB, ATE 0.109 → 0.041 m with the
+    // passes' fixes (0.109 m without them); keeping every node: 291 nodes, 0.051 m.
+    let ate_every = every["ate_rmse_m"].as_f64().unwrap();
+    assert!(
+        ate <= 1.2 * ate_every,
+        "ATE {ate:.3} m after ten laps passing, {ate_every:.3} m keeping every node"
+    );
+    assert!(r["pass_fixes"].as_u64().unwrap() > 0, "{r}");
     assert!(
         nodes <= 1.2 * nodes_1,
         "nodes {nodes_1} after a lap, {nodes} after ten"
@@ -122,6 +136,12 @@ fn a_store_with_passes_replays_to_the_same_map() {
     let summary = get_json(&mapper.http, "/api/v1/fleets/park/summary").unwrap();
     assert_eq!(summary["nodes"], report["nodes"], "{summary}");
     assert_eq!(summary["edges"], report["edges"], "{summary}");
+    // The passes' fixes, stored with the solves that took them, are given back there.
+    assert_eq!(summary["gps_edges"], report["gps_edges"], "{summary}");
+    assert!(
+        summary["stats"]["pass_fixes"].as_u64().unwrap() > 0,
+        "{summary}"
+    );
     drop(mapper);
     std::fs::remove_dir_all(&dir).ok();
 }

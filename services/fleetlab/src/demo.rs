@@ -94,6 +94,8 @@ struct DemoReport {
     nodes: usize,
     edges: usize,
     gps_edges: usize,
+    /// Of `gps_edges`, the fixes of passes over covered ground, carried to the nodes passed.
+    pass_fixes: usize,
     loop_closures: usize,
     inter_robot_closures: usize,
     /// RMSE of node positions against ground truth (m).
@@ -261,6 +263,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         nodes: view.poses.len(),
         edges: view.edges.len(),
         gps_edges: view.gps.len(),
+        pass_fixes: view.stats.pass_fixes,
         loop_closures: view.stats.loop_closures,
         inter_robot_closures: view.stats.inter_robot_closures,
         ate_rmse_m: ate,

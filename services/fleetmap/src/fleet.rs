@@ -189,6 +189,9 @@ pub struct FleetMap {
     localized: localized::LocalizedChains,
     /// Each chain's last node, for the next one's prediction over covered ground.
     covers: HashMap<(String, u64), coverage::Cover>,
+    /// The passes' GPS fixes that the last solve applied moved into the network, for the
+    /// store to keep with its point ([`FleetMap::take_pass_fixes`]).
+    pass_fixes: Vec<slam::GpsEdge>,
 }
 
 impl FleetMap {
@@ -219,6 +222,7 @@ impl FleetMap {
             solve_points: 0,
             localized: Default::default(),
             covers: HashMap::new(),
+            pass_fixes: Vec::new(),
         }
     }
 
@@ -429,15 +433,12 @@ impl FleetMap {
         })
     }
 
-    /// What the map keeps of a node of robot `robot` (its GPS fixes in the map's frame: the
-    /// first fix sets the datum when none is configured), and its scan as matching uses it.
-    fn read_node(&mut self, node: &Node, robot: usize) -> (NodeRecord, Scan2) {
+    /// A node's GPS fixes in the map's frame, each antenna in the scan's frame (the first fix
+    /// sets the datum when none is configured).
+    fn gps_of(&mut self, node: &Node) -> Vec<GpsObservation> {
         let robot_odometry = Pose2::from_isometry3(&node.odometry.pose);
-        let scan_frame = robot_odometry.compose(&node.scan_origin);
-        let scan = node.matching_scan(self.max_range_m);
         let attitude = node.odometry.pose.rotation;
-        let gps: Vec<GpsObservation> = node
-            .gps
+        node.gps
             .iter()
             .filter(|fix| fix.has_position())
             .filter_map(|fix| {
@@ -446,7 +447,16 @@ impl FleetMap {
                 });
                 fix.observation(&datum, &attitude, robot_odometry.theta, &node.scan_origin)
             })
-            .collect();
+            .collect()
+    }
+
+    /// What the map keeps of a node of robot `robot` (its GPS fixes in the map's frame: the
+    /// first fix sets the datum when none is configured), and its scan as matching uses it.
+    fn read_node(&mut self, node: &Node, robot: usize) -> (NodeRecord, Scan2) {
+        let robot_odometry = Pose2::from_isometry3(&node.odometry.pose);
+        let scan_frame = robot_odometry.compose(&node.scan_origin);
+        let scan = node.matching_scan(self.max_range_m);
+        let gps = self.gps_of(node);
         let record = NodeRecord {
             robot,
             chain_id: node.chain_id,
@@ -489,8 +499,26 @@ impl FleetMap {
 
     /// Gives back a background solve and applies it (the nodes added since move with their
     /// chains); whether it was applied (not while a part of the network is unanchored).
+    /// The passes' GPS fixes waiting then go into the network ([`FleetMap::take_pass_fixes`]).
     pub fn finish_solve(&mut self, done: SolvedInBackground) -> Result<bool, IngestError> {
-        Ok(self.mapper.finish_solve(done)?)
+        let applied = self.mapper.finish_solve(done)?;
+        if applied {
+            let flushed = self.mapper.flush_pass_fixes();
+            self.pass_fixes.extend(flushed);
+        }
+        Ok(applied)
+    }
+
+    /// The passes' GPS fixes that solves applied since the last call moved into the network:
+    /// the store keeps them with the solve's point, and a replay gives them back there
+    /// ([`FleetMap::restore_pass_fixes`]).
+    pub fn take_pass_fixes(&mut self) -> Vec<slam::GpsEdge> {
+        std::mem::take(&mut self.pass_fixes)
+    }
+
+    /// Stored passes' fixes, given back where the solve they came with was applied.
+    pub fn restore_pass_fixes(&mut self, fixes: &[slam::GpsEdge]) {
+        self.mapper.restore_pass_fixes(fixes);
     }
 
     /// The next solve's point: taken after the node of arrival index `taken_after`, applied

@@ -44,6 +44,10 @@ const SOLVES: TableDefinition<(&str, u64), ()> = TableDefinition::new("solves");
 /// last node when it was applied): a replay takes and applies each solve at the same points,
 /// so it finds the same loop closures.
 const SOLVE_POINTS: TableDefinition<(&str, u64), (u64, u64)> = TableDefinition::new("solve_points");
+/// (fleet, solve number, k) → the k-th GPS fix of passes over covered ground (JSON,
+/// `slam::GpsEdge`) that went into the network when that solve was applied: a replay puts it
+/// back there. Stores before it have none.
+const PASS_FIXES: TableDefinition<(&str, u64, u64), &[u8]> = TableDefinition::new("pass_fixes");
 /// (fleet, node index) → the node's encoded cloud (`Node.cloud`, a `SegmentedCloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
 /// fleet → its newest snapshot (`fleetmap::snapshot`): the map after its first nodes,
@@ -111,6 +115,8 @@ pub struct StoredFleet {
     pub legacy_solves: Vec<u64>,
     /// The solves, in order.
     pub solve_points: Vec<SolvePoint>,
+    /// Passes' GPS fixes by the number of the solve that moved them into the network.
+    pub pass_fixes: std::collections::BTreeMap<u64, Vec<slam::GpsEdge>>,
     /// Runs of nodes localized instead of mapped.
     pub localized: Vec<fleetmap::LocalizedSpan>,
 }
@@ -130,6 +136,8 @@ pub struct FleetBatch<'a> {
     pub edges: Vec<Vec<u8>>,
     /// A solve applied with this batch.
     pub solved: Option<SolvePoint>,
+    /// The passes' GPS fixes that solve moved into the network.
+    pub pass_fixes: &'a [slam::GpsEdge],
     /// Runs of localized nodes that this batch started or extended.
     pub localized: Vec<fleetmap::LocalizedSpan>,
 }
@@ -276,6 +284,23 @@ impl Store {
                 applied_after,
             });
         }
+        let pass_fixes = match txn.open_table(PASS_FIXES) {
+            Ok(table) => Some(table),
+            Err(redb::TableError::TableDoesNotExist(_)) => None,
+            Err(e) => return Err(e.into()),
+        };
+        for entry in pass_fixes
+            .iter()
+            .flat_map(|t| t.range((id, 0u64, 0u64)..=(id, u64::MAX, u64::MAX)))
+            .flatten()
+        {
+            let (k, v) = entry?;
+            let (_, seq, k) = k.value();
+            let fix: slam::GpsEdge = serde_json::from_slice(v.value()).map_err(|e| {
+                StoreError::Damaged(format!("fleet {id}: pass fix {k} of solve {seq}: {e}"))
+            })?;
+            stored.pass_fixes.entry(seq).or_default().push(fix);
+        }
         stored.localized = localization::read_spans(&txn, id)?;
         Ok(stored)
     }
@@ -289,6 +314,7 @@ fn with_tables(db: Database) -> Result<Database, StoreError> {
     txn.open_table(EDGES)?;
     txn.open_table(SOLVES)?;
     txn.open_table(SOLVE_POINTS)?;
+    txn.open_table(PASS_FIXES)?;
     txn.open_table(CLOUDS)?;
     txn.open_table(SNAPSHOTS)?;
     versions::open_tables(&txn)?;
@@ -304,6 +330,7 @@ fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
         let mut edges = txn.open_table(EDGES)?;
         let mut solves = txn.open_table(SOLVE_POINTS)?;
         let mut clouds = txn.open_table(CLOUDS)?;
+        let mut pass_fixes = txn.open_table(PASS_FIXES)?;
         for batch in batches {
             for &(arrival, bytes) in &batch.nodes {
                 nodes.insert((batch.fleet, arrival), bytes)?;
@@ -317,6 +344,10 @@ fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
             if let Some(point) = batch.solved {
                 let at = (point.taken_after, point.applied_after);
                 solves.insert((batch.fleet, point.seq), at)?;
+                for (k, fix) in batch.pass_fixes.iter().enumerate() {
+                    let json = serde_json::to_vec(fix).expect("a GPS edge serializes");
+                    pass_fixes.insert((batch.fleet, point.seq, k as u64), json.as_slice())?;
+                }
             }
         }
     }

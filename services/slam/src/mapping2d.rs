@@ -110,6 +110,9 @@ pub struct MapperStats {
     pub first_contacts: usize,
     /// GPS edges added (fixes taken).
     pub gps_edges: usize,
+    /// Of `gps_edges`, the fixes of passes over covered ground, carried to the node passed.
+    #[serde(default)]
+    pub pass_fixes: usize,
     /// Optimizations run.
     pub optimizations: usize,
     /// Optimizations put off because a part of the network was not anchored yet.
@@ -167,6 +170,10 @@ pub struct Mapper2d {
     background: solve::Background,
     /// The nodes filed by their estimates.
     near: near::NodeGrid,
+    /// GPS edges that passes brought, waiting for the next solve applied (not saved: the
+    /// caller's store keeps them with that solve; `coverage.rs`).
+    #[serde(skip)]
+    pass_fixes: Vec<crate::GpsEdge>,
 }
 
 impl Mapper2d {

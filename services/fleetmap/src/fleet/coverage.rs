@@ -10,7 +10,7 @@ use slam::Pose2;
 use wire::Node;
 
 /// Where a chain's last node stood, for the next one's prediction.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub(super) struct Cover {
     /// Its node_seq.
     seq: u64,
@@ -22,6 +22,9 @@ pub(super) struct Cover {
     covered: bool,
     /// Path driven since the chain's last node located or added (m).
     unlocated_m: f64,
+    /// When located: the node it was located against, and its GPS fixes (they become that
+    /// node's once the pass is taken, [`FleetMap::take_pass_evidence`]).
+    evidence: Option<(usize, Vec<slam::GpsObservation>)>,
 }
 
 impl FleetMap {
@@ -58,7 +61,7 @@ impl FleetMap {
         let network_chain = chain.network_chain;
         let path_m = self.mapper.path_at(network_chain, &odometry);
         let covering = self.mapper.covering(&predicted, network_chain, path_m);
-        let p = &self.mapper.params().coverage;
+        let p = self.mapper.params().coverage.clone();
         let covered = covering.len() >= p.max_nodes;
         let passes = covered && was_covered;
         let located = passes
@@ -67,6 +70,7 @@ impl FleetMap {
                 self.mapper.locate_against(covering[0], &predicted, &scan)
             })
             .flatten();
+        let evidence = located.map(|_| (covering[0], self.gps_of(node)));
         // A pass not located goes on by the odometry of the last one located, for a while.
         let unlocated_m = match located {
             Some(_) => 0.0,
@@ -81,8 +85,21 @@ impl FleetMap {
                 located: passed,
                 covered,
                 unlocated_m: if passed.is_some() { unlocated_m } else { 0.0 },
+                evidence,
             },
         );
         passed
+    }
+
+    /// A pass of `node`'s chain taken: the GPS fixes it brought, located against a covering
+    /// node, become that node's (waiting for the next solve applied).
+    pub(super) fn take_pass_evidence(&mut self, node: &Node) {
+        let key = (node.robot.clone(), node.chain_id);
+        let Some(cover) = self.covers.get_mut(&key).filter(|c| c.seq == node.node_seq) else {
+            return;
+        };
+        if let (Some((near, gps)), Some(located)) = (cover.evidence.take(), cover.located) {
+            self.mapper.add_pass_fixes(near, &located, &gps);
+        }
     }
 }

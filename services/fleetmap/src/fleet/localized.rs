@@ -148,7 +148,11 @@ impl FleetMap {
                 },
             });
         }
-        // A pass is counted in its chain's path (the next mapped node's loop closures).
+        // A pass is counted in its chain's path (the next mapped node's loop closures), and
+        // its GPS fixes go to the node it passed.
+        if passed {
+            self.take_pass_evidence(node);
+        }
         let passed = passed
             .then(|| {
                 let network_chain = self.network_chain_of(&node.robot, node.chain_id)?;

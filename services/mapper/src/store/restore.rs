@@ -238,7 +238,13 @@ fn replay_tail(
     let mut out = None;
     if from > 0 {
         // The solves taken after the snapshot's last node, at that node.
-        solve_points_at(map, from as u64 - 1, &mut points, &mut out)?;
+        solve_points_at(
+            map,
+            from as u64 - 1,
+            &mut points,
+            &mut out,
+            &stored.pass_fixes,
+        )?;
     }
     for (arrival, bytes) in stored.nodes.iter().enumerate().skip(from) {
         let arrival = arrival as u64;
@@ -250,7 +256,7 @@ fn replay_tail(
         if legacy.next_if_eq(&&arrival).is_some() {
             map.optimize_now()?;
         }
-        solve_points_at(map, arrival, &mut points, &mut out)?;
+        solve_points_at(map, arrival, &mut points, &mut out, &stored.pass_fixes)?;
     }
     anyhow::ensure!(
         points.peek().is_none(),
@@ -265,6 +271,7 @@ fn solve_points_at<'a>(
     arrival: u64,
     points: &mut std::iter::Peekable<impl Iterator<Item = &'a SolvePoint>>,
     out: &mut Option<slam::BackgroundSolve>,
+    pass_fixes: &std::collections::BTreeMap<u64, Vec<slam::GpsEdge>>,
 ) -> Result<()> {
     while let Some(point) = points.peek() {
         if out.is_none() && point.taken_after == arrival {
@@ -281,6 +288,10 @@ fn solve_points_at<'a>(
         }
         let solved = out.take().expect("taken above").run();
         map.finish_solve(solved)?;
+        map.take_pass_fixes();
+        if let Some(fixes) = pass_fixes.get(&point.seq) {
+            map.restore_pass_fixes(fixes);
+        }
         map.count_solve(point);
         points.next();
     }

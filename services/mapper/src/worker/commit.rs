@@ -16,8 +16,9 @@ const STORE_RETRY: Duration = Duration::from_secs(1);
 pub(super) struct Unstored {
     /// Nodes mapped, and robots to re-ack.
     pub(super) batch: Batch,
-    /// Solves applied whose point is not stored.
-    pub(super) solves: Vec<(String, SolvePoint)>,
+    /// Solves applied whose point is not stored, with the passes' GPS fixes they moved into
+    /// the network.
+    pub(super) solves: Vec<(String, SolvePoint, Vec<slam::GpsEdge>)>,
 }
 
 impl Worker {
@@ -31,7 +32,7 @@ impl Worker {
         self.ack(&work.batch);
         self.publish(&work.batch.accepted, started);
         self.publish_localized(&work.batch.localized);
-        for (fleet, point) in &work.solves {
+        for (fleet, point, _) in &work.solves {
             self.publish_solve(fleet, started, point);
         }
         self.due_solves();
@@ -67,6 +68,7 @@ impl Worker {
                 FleetBatch {
                     fleet,
                     solved: None,
+                    pass_fixes: &[],
                     nodes: of_fleet()
                         .map(|a| (a.arrival, a.payload.as_slice()))
                         .collect(),
@@ -83,9 +85,10 @@ impl Worker {
                 }
             })
             .collect();
-        batches.extend(work.solves.iter().map(|(fleet, point)| FleetBatch {
+        batches.extend(work.solves.iter().map(|(fleet, point, fixes)| FleetBatch {
             fleet,
             solved: Some(*point),
+            pass_fixes: fixes,
             ..Default::default()
         }));
         let result = self.store.commit(&batches);

@@ -219,7 +219,7 @@ impl Worker {
         Metrics::bump(&self.shared.metrics.optimizations);
         let point = map.next_solve_point(taken_after);
         let work = super::Unstored {
-            solves: vec![(fleet.clone(), point)],
+            solves: vec![(fleet.clone(), point, map.take_pass_fixes())],
             ..Default::default()
         };
         if let Err(e) = self.commit(&work) {

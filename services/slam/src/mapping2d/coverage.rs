@@ -10,6 +10,8 @@ use super::Mapper2d;
 use crate::matching::correlative::{SearchWindow, search};
 use crate::matching::{Scan2, accept, idc};
 use crate::se2::{Pose2, wrap_angle};
+use crate::{GpsEdge, GpsObservation};
+use nalgebra::Vector2;
 use serde::{Deserialize, Serialize};
 
 /// When a place counts as covered, and how a pass is located.
@@ -38,6 +40,11 @@ pub struct CoverageParams {
     /// Passes not located go on by odometry from the last one located for at most this
     /// path (m); the next is added (its closures tie the chain again).
     pub max_unlocated_m: f64,
+    /// A located pass's GPS fixes become GPS edges of the node it passed, up to this many
+    /// GPS edges per node: averaging 64 fixes takes a fix's noise down 8×, below what the
+    /// scan matches hold the nodes to, and the network stays bounded however long a fleet
+    /// drives.
+    pub max_fixes_per_node: usize,
 }
 
 impl Default for CoverageParams {
@@ -52,6 +59,7 @@ impl Default for CoverageParams {
             max_turn_rad: 5f64.to_radians(),
             min_score: 0.6,
             max_unlocated_m: 15.0,
+            max_fixes_per_node: 64,
         }
     }
 }
@@ -168,8 +176,115 @@ impl Mapper2d {
         })
     }
 
+    /// A pass located at `located` against node `near` brings its GPS fixes to that node,
+    /// each antenna where the pass had it, in `near`'s frame: they wait for the next solve
+    /// applied ([`Self::flush_pass_fixes`]), and call for one. At most `coverage.max_fixes_per_node` GPS edges
+    /// per node, those waiting included. How many were taken.
+    pub fn add_pass_fixes(
+        &mut self,
+        near: usize,
+        located: &Pose2,
+        gps: &[GpsObservation],
+    ) -> usize {
+        let room = self
+            .params
+            .coverage
+            .max_fixes_per_node
+            .saturating_sub(self.fixes_on(near))
+            .saturating_sub(self.pass_fixes.iter().filter(|f| f.node == near).count());
+        let in_near = self.graph.poses[near].between(located);
+        let edges: Vec<GpsEdge> = gps
+            .iter()
+            .filter_map(|fix| {
+                let [x, y] = in_near.transform_point([fix.lever_arm_m.x, fix.lever_arm_m.y]);
+                let carried = GpsObservation {
+                    lever_arm_m: Vector2::new(x, y),
+                    ..*fix
+                };
+                self.gps_edge(near, &carried)
+            })
+            .take(room)
+            .collect();
+        let taken = edges.len();
+        self.pass_fixes.extend(edges);
+        // A robot that only passes adds no node that would call for one.
+        self.optimization_pending |= taken > 0;
+        taken
+    }
+
+    /// Moves the passes' waiting fixes into the network, to count from the next solve on.
+    /// Call it when a solve was applied, and store what it returns with that solve: a replay
+    /// puts them back there ([`Self::restore_pass_fixes`]), so that it rebuilds the same
+    /// network whatever happened between two solves.
+    pub fn flush_pass_fixes(&mut self) -> Vec<GpsEdge> {
+        let fixes = std::mem::take(&mut self.pass_fixes);
+        self.restore_pass_fixes(&fixes);
+        fixes
+    }
+
+    /// Fixes that [`Self::flush_pass_fixes`] moved, put back where it did (a replay).
+    pub fn restore_pass_fixes(&mut self, fixes: &[GpsEdge]) {
+        if fixes.is_empty() {
+            return;
+        }
+        self.graph.gps.extend_from_slice(fixes);
+        self.stats.gps_edges += fixes.len();
+        self.stats.pass_fixes += fixes.len();
+        self.optimization_pending = true;
+    }
+
     /// The parameters.
     pub fn params(&self) -> &super::Mapper2dParams {
         &self.params
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::scan_at;
+    use super::*;
+    use nalgebra::Matrix2;
+
+    /// A pass 1.5 m ahead of and turned from the node it is located against: its fix ends up
+    /// on that node with the antenna where the pass had it, so the fix holds exactly at the
+    /// node's true pose; the node takes at most `max_fixes_per_node`, and only once a solve
+    /// was applied do they enter the network.
+    #[test]
+    fn a_pass_fix_holds_the_node_passed_where_the_pass_was() {
+        let params = super::super::Mapper2dParams {
+            coverage: CoverageParams {
+                max_fixes_per_node: 3,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let mut mapper = Mapper2d::new(params);
+        let node_pose = Pose2::new(2.0, 1.0, 0.3);
+        mapper.add_scan(node_pose, scan_at(&node_pose, 1)).unwrap();
+        let located = node_pose.compose(&Pose2::new(1.5, -0.4, 0.2));
+        // The antenna 0.5 m behind the pass's scan frame, at its true place.
+        let lever = Vector2::new(-0.5, 0.0);
+        let [ax, ay] = located.transform_point([lever.x, lever.y]);
+        let fix = GpsObservation {
+            position_m: Vector2::new(ax, ay),
+            covariance_m2: Matrix2::identity() * 0.04,
+            lever_arm_m: lever,
+        };
+        assert_eq!(mapper.add_pass_fixes(0, &located, &[fix, fix]), 2);
+        assert_eq!(
+            mapper.add_pass_fixes(0, &located, &[fix, fix]),
+            1,
+            "bounded"
+        );
+        assert!(mapper.graph.gps.is_empty(), "waiting for a solve applied");
+        let flushed = mapper.flush_pass_fixes();
+        assert_eq!((flushed.len(), mapper.graph.gps.len()), (3, 3));
+        assert_eq!(mapper.stats.pass_fixes, 3);
+        for edge in &mapper.graph.gps {
+            let [x, y] = node_pose.transform_point([edge.lever_arm_m.x, edge.lever_arm_m.y]);
+            let residual = (x - ax).hypot(y - ay);
+            assert!(residual < 1e-12, "{residual} m at the node's true pose");
+        }
+        assert_eq!(mapper.add_pass_fixes(0, &located, &[fix]), 0, "full");
     }
 }

@@ -42,30 +42,30 @@ impl Mapper2d {
 
     /// Adds the GPS edge of one fix of `node`; returns whether it was taken.
     fn add_gps_edge(&mut self, node: usize, fix: &GpsObservation) -> bool {
-        // A fix the network would reject (NaN, a covariance not positive definite) is
-        // dropped here rather than failing every later optimization.
-        let Some(information) = fix.covariance_m2.try_inverse() else {
+        let Some(edge) = self.gps_edge(node, fix) else {
             return false;
         };
-        if !(is_information(&information)
-            && fix
-                .position_m
-                .iter()
-                .chain(fix.lever_arm_m.iter())
-                .all(|v| v.is_finite()))
-        {
-            return false;
-        }
-        let edge = GpsEdge {
+        self.graph.gps.push(edge);
+        self.stats.gps_edges += 1;
+        true
+    }
+
+    /// The GPS edge of one fix of `node`. A fix the network would reject (NaN, a covariance
+    /// not positive definite) is dropped here rather than failing every later optimization.
+    pub(super) fn gps_edge(&self, node: usize, fix: &GpsObservation) -> Option<GpsEdge> {
+        let information = fix.covariance_m2.try_inverse()?;
+        let finite = fix
+            .position_m
+            .iter()
+            .chain(fix.lever_arm_m.iter())
+            .all(|v| v.is_finite());
+        (is_information(&information) && finite).then_some(GpsEdge {
             node,
             position_m: fix.position_m,
             information,
             lever_arm_m: fix.lever_arm_m,
             robust: self.params.gps_robust,
-        };
-        self.graph.gps.push(edge);
-        self.stats.gps_edges += 1;
-        true
+        })
     }
 
     /// Matches `node` against earlier nodes near it, its own robot's and the others';

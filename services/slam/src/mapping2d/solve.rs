@@ -87,6 +87,12 @@ impl Mapper2d {
         self.optimize_anchored().map(drop)
     }
 
+    /// The GPS edges of `node` in the network.
+    pub(super) fn fixes_on(&mut self, node: usize) -> usize {
+        self.background.adjacency.sync(&self.graph);
+        self.background.adjacency.fixes_of(node).count()
+    }
+
     /// Re-solves the newest `local_window_nodes` nodes of `node`'s chain, every other node
     /// held. The chain's first node is held too, so the window is always tied to something.
     fn solve_window(&mut self, node: usize) {

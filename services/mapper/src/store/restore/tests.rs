@@ -181,6 +181,7 @@ fn map_as_the_worker(
                     .commit(&[FleetBatch {
                         fleet: "park",
                         solved: Some(point),
+                        pass_fixes: &map.take_pass_fixes(),
                         ..Default::default()
                     }])
                     .unwrap();
@@ -197,6 +198,25 @@ fn map_as_the_worker(
             if out.is_some() {
                 assert!(map.snapshot().is_none(), "no snapshot while a solve is out");
             }
+        }
+    }
+    // At the end, the solve out is applied, then two more: the passes' GPS fixes since the
+    // last one go into the network at the first, and count at the second.
+    let last = arrival as u64 - 1;
+    for _ in 0..3 {
+        let (taken_after, solve) = out
+            .take()
+            .unwrap_or_else(|| (last, map.take_solve_now().unwrap()));
+        if map.finish_solve(solve.run()).unwrap() {
+            let point = map.next_solve_point(taken_after);
+            store
+                .commit(&[FleetBatch {
+                    fleet: "park",
+                    solved: Some(point),
+                    pass_fixes: &map.take_pass_fixes(),
+                    ..Default::default()
+                }])
+                .unwrap();
         }
     }
     map
@@ -275,14 +295,26 @@ fn passes_over_covered_ground_restore_from_a_snapshot_as_in_a_full_replay() {
     let _ = std::fs::remove_dir_all(&scratch);
     let (dir, store) = temp_store("passes");
     let half = (mapped / 2) / 17 * 17 + 9;
-    map_as_the_worker(&store, &config, &nodes, half);
+    let live = map_as_the_worker(&store, &config, &nodes, half);
     let stored = store.load_fleet("park").unwrap();
     assert!(
         stored.localized.len() > 3,
         "{} spans passed",
         stored.localized.len()
     );
+    // Robot 2's passes brought GPS fixes, stored with the solves that took them.
+    let pass_fixes: usize = stored.pass_fixes.values().map(Vec::len).sum();
+    assert!(
+        pass_fixes > 0 && pass_fixes == live.stats().pass_fixes,
+        "{pass_fixes} stored, {:?}",
+        live.stats()
+    );
     let full = replay(&config, &stored).unwrap();
+    assert_eq!(
+        differences(&live, &full),
+        Vec::<String>::new(),
+        "the replay maps as the worker did"
+    );
     let bytes = store.snapshot("park").unwrap().unwrap();
     let (restored, covered) = from_snapshot(&config, &stored, &bytes).unwrap();
     assert_eq!(covered, half + 1);
