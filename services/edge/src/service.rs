@@ -474,16 +474,19 @@ pub async fn run(
     let robot = config.robot.as_str();
     let mut source_done = false;
     tokio::pin!(shutdown);
-    let mut connected = connect(
+    // Each pass is one session: it ends the run, or the link fell silent and a new one opens.
+    while let Some(link) = connect(
         &config,
         &mut sending,
         &mut rx,
         &mut source_done,
         shutdown.as_mut(),
     )
-    .await;
-    // Each pass is one session: it ends the run, or the link fell silent and a new one opens.
-    while let Some(link) = connected.take() {
+    .await
+    {
+        // Silence counts from here; on a new session, the first tick re-sends everything
+        // unacked (no progress since long before `resend_after`).
+        sending.last_heard = Instant::now();
         sending.send_backlog(&link).await?;
         let mut tick = tokio::time::interval(Duration::from_millis(100));
         let silent = loop {
@@ -532,17 +535,6 @@ pub async fn run(
         sending.report.link_reopens += 1;
         // A dead link may not answer a close: it is dropped after the bound either way.
         let _ = tokio::time::timeout(LINK_RETRY, close_session(link)).await;
-        connected = connect(
-            &config,
-            &mut sending,
-            &mut rx,
-            &mut source_done,
-            shutdown.as_mut(),
-        )
-        .await;
-        // The first tick on the new session re-sends everything unacked (no progress since
-        // long before `resend_after`).
-        sending.last_heard = Instant::now();
     }
     drop(rx);
     producer.abort();

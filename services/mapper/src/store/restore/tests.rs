@@ -175,17 +175,7 @@ fn map_as_the_worker(
             && arrival as u64 >= taken_after + 5
         {
             let (taken_after, solve) = out.take().unwrap();
-            if map.finish_solve(solve.run()).unwrap() {
-                let point = map.next_solve_point(taken_after);
-                store
-                    .commit(&[FleetBatch {
-                        fleet: "park",
-                        solved: Some(point),
-                        pass_fixes: &map.take_pass_fixes(),
-                        ..Default::default()
-                    }])
-                    .unwrap();
-            }
+            apply_and_commit(store, &mut map, taken_after, solve);
         }
         if arrival == snapshot_after {
             assert!(out.is_none(), "no solve out at the snapshot");
@@ -207,19 +197,30 @@ fn map_as_the_worker(
         let (taken_after, solve) = out
             .take()
             .unwrap_or_else(|| (last, map.take_solve_now().unwrap()));
-        if map.finish_solve(solve.run()).unwrap() {
-            let point = map.next_solve_point(taken_after);
-            store
-                .commit(&[FleetBatch {
-                    fleet: "park",
-                    solved: Some(point),
-                    pass_fixes: &map.take_pass_fixes(),
-                    ..Default::default()
-                }])
-                .unwrap();
-        }
+        apply_and_commit(store, &mut map, taken_after, solve);
     }
     map
+}
+
+/// Runs a solve taken after arrival `taken_after` and applies it; when applied, commits its
+/// point with the passes' fixes it moved into the network, as the worker does.
+fn apply_and_commit(
+    store: &Store,
+    map: &mut FleetMap,
+    taken_after: u64,
+    solve: slam::BackgroundSolve,
+) {
+    if map.finish_solve(solve.run()).unwrap() {
+        let point = map.next_solve_point(taken_after);
+        store
+            .commit(&[FleetBatch {
+                fleet: "park",
+                solved: Some(point),
+                pass_fixes: &map.take_pass_fixes(),
+                ..Default::default()
+            }])
+            .unwrap();
+    }
 }
 
 fn temp_store(name: &str) -> (std::path::PathBuf, Store) {
