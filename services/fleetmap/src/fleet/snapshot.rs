@@ -11,8 +11,11 @@ use serde::{Deserialize, Serialize};
 use slam::geodesy::GeoDatum;
 use std::sync::Arc;
 
-/// The snapshot format written; others are ignored (the fleet is replayed in full).
-pub const SNAPSHOT_FORMAT: u32 = 1;
+/// The snapshot format written; others are ignored (the fleet is replayed in full). Raise
+/// it whenever what is saved changes shape (a field of `Mapper2d`, its parameters or stats):
+/// postcard has no field names, so an old layout may read as wrong values rather than fail.
+/// 2: the global search's state, `MapperStats` and `CoverageParams` gained fields.
+pub const SNAPSHOT_FORMAT: u32 = 2;
 
 /// Why a snapshot was not used.
 #[derive(Debug, thiserror::Error)]

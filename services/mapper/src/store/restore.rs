@@ -288,6 +288,7 @@ fn solve_points_at<'a>(
         }
         let solved = out.take().expect("taken above").run();
         map.finish_solve(solved)?;
+        // A replay takes passes as spans, so none waits here: the stored fixes are the ones.
         map.take_pass_fixes();
         if let Some(fixes) = pass_fixes.get(&point.seq) {
             map.restore_pass_fixes(fixes);

@@ -177,9 +177,10 @@ impl Mapper2d {
     /// The newest query's most plausible target not yet searched (marked searched). A query
     /// already anchored, or with no target left, is dropped.
     fn next_pair(&mut self, p: &GlobalSearchParams) -> Option<(usize, usize)> {
-        while let Some(query) = self.global.queries.last() {
-            let q = query.submap;
-            let best = (!self.anchored(q))
+        while let Some(q) = self.global.queries.last().map(|query| query.submap) {
+            let held = self.anchored(q);
+            let query = self.global.queries.last().expect("looked at");
+            let best = (!held)
                 .then(|| {
                     (0..q)
                         .filter(|t| !query.searched.contains(t))
@@ -206,37 +207,22 @@ impl Mapper2d {
     /// one of them to a node at least `closure_min_path_m` of path away or another robot's
     /// (the map holds there, and the local searches keep it so). A global search would
     /// only find what is known.
-    fn anchored(&self, q: usize) -> bool {
-        let query = &self.submaps.done[q];
-        let last = query.nodes.last().map_or(query.anchor, |n| n.0);
-        let inside =
-            |n: usize| (query.anchor..=last).contains(&n) && query.nodes.iter().any(|m| m.0 == n);
-        // Fixes are added with their node, in node order.
-        let gps = &self.graph.gps;
-        let from = gps.partition_point(|g| g.node < query.anchor);
-        if gps[from..]
-            .iter()
-            .take_while(|g| g.node <= last)
-            .any(|g| inside(g.node))
-        {
-            return true;
-        }
+    fn anchored(&mut self, q: usize) -> bool {
+        self.background.adjacency.sync(&self.graph);
+        let adjacency = &self.background.adjacency;
         let min_path = self.params.submaps.closure_min_path_m;
         let path = &self.node_path_m;
         let far = |a: usize, b: usize| {
             self.node_robot[a].0 != self.node_robot[b].0 || (path[a] - path[b]).abs() >= min_path
         };
-        // Newest first, back to the sequential edge that made a node older than the anchor:
-        // everything before it was added before the anchor existed.
-        self.graph
-            .edges
-            .iter()
-            .rev()
-            .take_while(|e| {
-                !matches!(e.kind, EdgeKind::Odometry | EdgeKind::ScanMatch) || e.to >= query.anchor
-            })
-            .filter(|e| matches!(e.kind, EdgeKind::LoopClosure | EdgeKind::InterRobot))
-            .any(|e| (inside(e.from) && far(e.from, e.to)) || (inside(e.to) && far(e.to, e.from)))
+        self.submaps.done[q].nodes.iter().any(|&(n, _)| {
+            adjacency.fixes_of(n).next().is_some()
+                || adjacency.edges_of(n).any(|k| {
+                    let e = &self.graph.edges[k];
+                    let other = if e.from == n { e.to } else { e.from };
+                    matches!(e.kind, EdgeKind::LoopClosure | EdgeKind::InterRobot) && far(n, other)
+                })
+        })
     }
 
     /// How far target submap `t` lies from query `q`'s middle node, over the drift allowed

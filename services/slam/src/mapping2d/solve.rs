@@ -13,7 +13,8 @@ use serde::{Deserialize, Serialize};
 /// A deferred mapper's solving state.
 #[derive(Debug, Serialize, Deserialize)]
 pub(super) struct Background {
-    adjacency: Adjacency,
+    /// Each node's edges and fixes, synced with the network where it is read.
+    pub(super) adjacency: Adjacency,
     pub(super) jobs: JobSource,
     /// The global solver; `None` while it is out with a job. Not saved: made again from the
     /// network and `jobs` ([`GlobalSolver::resumed`]).
