@@ -104,7 +104,7 @@ fn gps_for(scan: &FleetScan, robot: &FleetRobot, frame_in_robot: [f64; 2]) -> Ve
 #[test]
 fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
     let world = World::park();
-    let (leveled, fixed) = fleet_inputs(&world, FleetStart::Dock, true);
+    let (leveled, fixed) = fleet_inputs(&world, FleetStart::Dock, true, 7);
     let (stats, ate, _) = map_fleet(leveled, false);
     let (stats_fixed, ate_fixed, _) = map_fleet(fixed, false);
     eprintln!("leveled: ATE {ate:.3} m, {stats:?}");
@@ -117,25 +117,65 @@ fn leveled_scans_map_the_hilly_park_better_than_a_fixed_2d_scanner() {
     );
 }
 
+/// A seed's run: the network's parts (nodes, fitted ATE) and the mapper's stats.
+type SeedRun = (u64, Vec<(usize, f64)>, MapperStats);
+
 /// The robots start at random places along their loops with odometry from the identity,
 /// and without GPS: nothing tells the mapper where they are relative to one another. They
-/// must find one another in their maps (first contact: pairs of submaps searched by the
-/// correlative matcher, a match confirmed by a second). Measured (120 s, seed 7): one part
-/// of 93 nodes, 0.114 m from the truth once fitted. A wrong contact would move a part by
-/// metres. Over seeds 1–9 no contact was wrong; seeds 1, 2, 4, 8 and 9 leave one robot
-/// alone in 120 s (docs/slam.md).
+/// must find one another in their maps (first contact: pairs of submaps searched whole, a
+/// match checked against both robots' longer stretches of path and confirmed by a second
+/// from other submaps). A wrong contact moves a part by metres: every part, fitted alone to
+/// the truth, must stay within 0.2 m. Measured (docs/slam.md): seeds 2, 3, 5, 6, 8, 9 and 10
+/// end in one part (fitted ATE 0.093–0.168 m); seeds 1, 4 and 7 leave one robot alone in
+/// 120 s; no part was wrong.
 #[test]
-fn robots_without_gps_or_a_known_start_meet_in_one_map() {
+fn robots_without_gps_or_a_known_start_meet_without_a_wrong_contact() {
     let world = World::park();
-    let (leveled, _) = fleet_inputs(&world, FleetStart::Scattered, false);
-    let (stats, ate, parts) = map_fleet(leveled, true);
-    eprintln!(
-        "scattered, no GPS: ATE {ate:.3} m (fitted), parts (nodes, fitted ATE) {parts:?}, {stats:?}"
+    let seeds: Vec<u64> = (1..=10).collect();
+    // Two seeds at a time: the machine's two cores.
+    let results: Vec<SeedRun> = seeds
+        .chunks(2)
+        .flat_map(|pair| {
+            std::thread::scope(|scope| {
+                let runs: Vec<_> = pair
+                    .iter()
+                    .map(|&seed| {
+                        let world = &world;
+                        scope.spawn(move || {
+                            let (leveled, _) =
+                                fleet_inputs(world, FleetStart::Scattered, false, seed);
+                            let (stats, _, parts) = map_fleet(leveled, true);
+                            (seed, parts, stats)
+                        })
+                    })
+                    .collect();
+                runs.into_iter()
+                    .map(|run| run.join().expect("seed run"))
+                    .collect::<Vec<_>>()
+            })
+        })
+        .collect();
+    let mut joined = Vec::new();
+    for (seed, parts, stats) in &results {
+        eprintln!(
+            "seed {seed}: parts (nodes, fitted ATE) {parts:?}, first contacts {}, contact searches {}",
+            stats.first_contacts, stats.contact_searches
+        );
+        for &(nodes, ate) in parts {
+            assert!(
+                ate <= 0.2,
+                "seed {seed}: a part of {nodes} nodes is {ate:.3} m from the truth: a wrong contact"
+            );
+        }
+        if parts.len() == 1 {
+            joined.push(*seed);
+        }
+    }
+    eprintln!("one part: seeds {joined:?}");
+    assert!(
+        joined.len() >= 7,
+        "seeds ending in one part: {joined:?} (measured 7 of 10)"
     );
-    // Measured: one part, 0.114 m, 4 inter-robot closures (2 first contacts).
-    assert_eq!(parts.len(), 1, "the three robots meet: {parts:?}");
-    assert!(stats.inter_robot_closures >= 2, "{stats:?}");
-    assert!(ate <= 0.15, "ATE after an SE(2) fit {ate:.3} m");
 }
 
 /// The fleet's nodes, leveled and from the fixed 2D scanner, in time order.
@@ -143,9 +183,10 @@ fn fleet_inputs(
     world: &World,
     start: FleetStart,
     with_gps: bool,
+    seed: u64,
 ) -> (Vec<NodeInput>, Vec<NodeInput>) {
     let mut robots: Vec<FleetRobot> = (0..ROBOTS)
-        .map(|i| FleetRobot::starting(world, i, DURATION_NS, 7, start).expect("park loop"))
+        .map(|i| FleetRobot::starting(world, i, DURATION_NS, seed, start).expect("park loop"))
         .collect();
     let gps_for = |scan: &FleetScan, robot: &FleetRobot, frame: [f64; 2]| {
         if with_gps {

@@ -43,9 +43,9 @@ pub mod optimize;
 pub use init::{Init, InitError, initialize};
 #[cfg(feature = "solver")]
 pub use mapping2d::{
-    BackgroundSolve, ConsistencyParams, CoverageParams, FirstContactParams, Mapper2d,
-    Mapper2dParams, MapperStats, Passed, Placed, RestoreError, SavedMapper, SolvedInBackground,
-    SubmapSearchParams, WrongClosures,
+    BackgroundSolve, ConsistencyParams, ContactCheckParams, CoverageParams, FirstContactParams,
+    Mapper2d, Mapper2dParams, MapperStats, Passed, Placed, RestoreError, SavedMapper,
+    SolvedInBackground, SubmapSearchParams, WrongClosures,
 };
 #[cfg(feature = "solver")]
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

@@ -20,6 +20,7 @@
 
 mod closures;
 pub mod consistency;
+mod contact_check;
 mod coverage;
 mod edges;
 mod first_contact;
@@ -36,6 +37,7 @@ mod submaps;
 mod support;
 mod wrong_closures;
 
+pub use contact_check::ContactCheckParams;
 pub use coverage::{CoverageParams, Passed};
 pub use first_contact::FirstContactParams;
 pub use global_search::GlobalSearchParams;

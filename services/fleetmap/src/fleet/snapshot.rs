@@ -15,7 +15,9 @@ use std::sync::Arc;
 /// it whenever what is saved changes shape (a field of `Mapper2d`, its parameters or stats):
 /// postcard has no field names, so an old layout may read as wrong values rather than fail.
 /// 2: the global search's state, `MapperStats` and `CoverageParams` gained fields.
-pub const SNAPSHOT_FORMAT: u32 = 2;
+/// 3: first contact searches whole submaps (`FirstContactParams` changed, hypotheses keep
+/// their submaps).
+pub const SNAPSHOT_FORMAT: u32 = 3;
 
 /// Why a snapshot was not used.
 #[derive(Debug, thiserror::Error)]

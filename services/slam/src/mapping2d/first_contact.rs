@@ -2,24 +2,27 @@
 //! alone (no GPS anchor, no closure with another robot) cannot be looked for near its
 //! estimate, which is in a frame of its own. Instead, every pair of submaps of two robots
 //! in different parts (one of them floating) is searched once, when the later of the two
-//! is finished, both ways: each node of one, its scan alone, in the other's grid, whole and
-//! at every heading (the correlative matcher needs no guess). Pairs, not a robot's nodes
-//! against whatever submaps exist at the time: two robots that pass the same place minutes
-//! apart, in either order, are compared.
+//! is finished, both ways: one submap's returns (the global search's query) in the other's
+//! grid, whole and at every heading (the correlative matcher needs no guess). Pairs, not a
+//! robot's nodes against whatever submaps exist at the time: two robots that pass the same
+//! place minutes apart, in either order, are compared.
 //!
-//! Two robots on different paths see a place from different sides, so a true match scores
-//! lower than a loop closure of one robot (`min_score`). What keeps wrong matches out is
-//! the rest: a match whose runner-up elsewhere scores nearly as well is ambiguous and
-//! dropped (the park's lamp posts stand in rows), IDC must confirm it, and it is only a
-//! hypothesis (where one part lies in the other) until a second, from four other nodes,
-//! places the two parts the same way (`agree_m` plus `agree_drift` of the path between
-//! them, `agree_rad`). Then both become inter-robot closures and one part is moved onto the
-//! other (`parts.rs`); from then on the ordinary searches find its closures.
+//! Outdoors a place holds few landmarks, and the park's lamp posts stand in rows: a submap's
+//! best pose is often wrong, and its score does not tell (wrong poses of the park scored up
+//! to 0.86, true ones 0.20–0.69). What tells is the robots' longer stretches of path around the
+//! match (`contact_check.rs`): placed by the match, each robot's returns near the other's
+//! path must fall on the other's returns. Even then a match is only a hypothesis (where one
+//! part lies in the other) until a second, from another pair of submaps, places the two parts
+//! the same way (`agree_m` plus `agree_drift` of the path between them, `agree_rad`). Then
+//! both become inter-robot closures and one part is moved onto the other (`parts.rs`); from
+//! then on the ordinary searches find its closures.
 
 use super::Mapper2d;
-use crate::matching::correlative::SearchWindow;
+use super::contact_check::ContactCheckParams;
+use crate::matching::correlative::{CorrelativeParams, search, thin_points};
 use crate::network::{EdgeKind, RelativeEdge};
-use crate::se2::{Pose2, wrap_angle};
+use crate::se2::wrap_angle;
+use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// How parts that share no frame are searched for one another.
@@ -32,8 +35,19 @@ pub struct FirstContactParams {
     pub pairs_per_node: usize,
     /// Translations within the submap's extent plus this margin (m).
     pub margin_m: f64,
-    /// The best pose must score at least this (a whole-map search scores many wrong poses).
+    /// The query keeps one return per square of this side (m): two cells of the submap
+    /// grid (`SubmapSearchParams::grid`, 0.1 m), which a match's error stays within.
+    pub query_spacing_m: f64,
+    /// The query keeps the returns within this range of its middle node (m): the grid's own
+    /// range. Outdoors a submap holds a few dozen landmark returns; 10 m (the global
+    /// search's) left too few to tell places apart.
+    pub query_range_m: f64,
+    /// The best pose must score at least this (mean cell value under the returns). Only a
+    /// floor for the search: between robots, true matches scored 0.20–0.69 in the park, as
+    /// low as many wrong ones; the stretches decide.
     pub min_score: f64,
+    /// How the two robots' stretches of path around a match must agree.
+    pub check: ContactCheckParams,
     /// Two matches confirm each other when they place the parts within this (m)…
     pub agree_m: f64,
     /// …plus this share of the path (m) between the two matches' nodes on each part, over
@@ -41,10 +55,6 @@ pub struct FirstContactParams {
     pub agree_drift: f64,
     /// …and this (rad) of each other.
     pub agree_rad: f64,
-    /// IDC's refinement must pass the quality gate too (else it must only stay near the
-    /// correlative pose: two scans of a place from far apart often fail the gate's overlap
-    /// share, and the second match is the check).
-    pub gated: bool,
 }
 
 impl Default for FirstContactParams {
@@ -53,11 +63,13 @@ impl Default for FirstContactParams {
             enabled: true,
             pairs_per_node: 32,
             margin_m: 5.0,
-            min_score: 0.45,
+            query_spacing_m: 0.2,
+            query_range_m: 20.0,
+            min_score: 0.2,
+            check: ContactCheckParams::default(),
             agree_m: 0.5,
             agree_drift: 0.01,
             agree_rad: 2f64.to_radians(),
-            gated: false,
         }
     }
 }
@@ -75,6 +87,10 @@ pub(super) struct ContactSearch {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 struct Hypothesis {
     edge: RelativeEdge,
+    /// The two submaps searched: a second hypothesis must come from two others (the same
+    /// pair searched the other way sees the same places, and is no second opinion).
+    #[serde(default)]
+    submaps: [usize; 2],
 }
 
 /// Hypotheses kept (the oldest go).
@@ -98,31 +114,23 @@ impl Mapper2d {
             let (a, b) = (&self.submaps.done[later], &self.submaps.done[earlier]);
             if a.robot != b.robot && self.parts.may_meet(a.anchor, b.anchor) {
                 budget -= 1;
-                let joined_now = self.search_pair(later, earlier, &p);
-                joined += joined_now;
+                joined += self.search_pair(later, earlier, &p);
             }
         }
         joined
     }
 
-    /// Each node of one submap in the other's grid, both ways, until two parts join;
-    /// returns how many parts it joined.
+    /// Each submap's returns in the other's grid, until two parts join; returns how many
+    /// parts it joined.
     fn search_pair(&mut self, later: usize, earlier: usize, p: &FirstContactParams) -> usize {
-        for (grid, queries) in [(earlier, later), (later, earlier)] {
-            let nodes: Vec<usize> = self.submaps.done[queries]
-                .nodes
-                .iter()
-                .map(|n| n.0)
-                .collect();
-            for node in nodes {
-                self.stats.contact_searches += 1;
-                let Some(edge) = self.contact_in_submap(grid, node, p) else {
-                    continue;
-                };
-                let joined = self.confirm_contact(edge, p);
-                if joined > 0 {
-                    return joined;
-                }
+        for (target, query) in [(earlier, later), (later, earlier)] {
+            self.stats.contact_searches += 1;
+            let Some(edge) = self.contact_between(target, query, p) else {
+                continue;
+            };
+            let joined = self.confirm_contact(edge, [later, earlier], p);
+            if joined > 0 {
+                return joined;
             }
         }
         0
@@ -131,12 +139,17 @@ impl Mapper2d {
     /// Keeps `edge` as a hypothesis; then, while two hypotheses place two parts the same
     /// way, joins those parts with both (a join can make older hypotheses agree: they are
     /// taken at today's estimates). Returns how many parts it joined.
-    fn confirm_contact(&mut self, edge: RelativeEdge, p: &FirstContactParams) -> usize {
+    fn confirm_contact(
+        &mut self,
+        edge: RelativeEdge,
+        submaps: [usize; 2],
+        p: &FirstContactParams,
+    ) -> usize {
         let hypotheses = &mut self.contact.hypotheses;
         if hypotheses.len() == MAX_HYPOTHESES {
             hypotheses.remove(0);
         }
-        hypotheses.push(Hypothesis { edge });
+        hypotheses.push(Hypothesis { edge, submaps });
         let mut joined = 0;
         self.sync_parts();
         while let Some((i, j)) = self.agreeing_hypotheses(p) {
@@ -161,7 +174,7 @@ impl Mapper2d {
     }
 
     /// Two hypotheses (`i < j`) that place the same two parts the same way, at today's
-    /// estimates, from four distinct nodes.
+    /// estimates, from four distinct nodes and four distinct submaps.
     fn agreeing_hypotheses(&self, p: &FirstContactParams) -> Option<(usize, usize)> {
         let parts = &self.parts;
         let (poses, path) = (&self.graph.poses, &self.node_path_m);
@@ -193,36 +206,62 @@ impl Mapper2d {
         let h = &self.contact.hypotheses;
         (0..h.len()).find_map(|j| {
             (0..j)
-                .find(|&i| agree(&h[i].edge, &h[j].edge))
+                .find(|&i| {
+                    let shared = h[i].submaps.iter().any(|k| h[j].submaps.contains(k));
+                    !shared && agree(&h[i].edge, &h[j].edge)
+                })
                 .map(|i| (i, j))
         })
     }
 
-    /// `node`'s scan searched in the whole of submap `k`, every heading; the inter-robot
-    /// closure, refined by IDC, if it holds.
-    fn contact_in_submap(
+    /// Submap `query`'s returns searched in the whole of submap `target`, every heading;
+    /// the inter-robot closure (refined by IDC where IDC holds) if the two robots'
+    /// stretches of path around the match agree.
+    fn contact_between(
         &self,
-        k: usize,
-        node: usize,
+        target: usize,
+        query: usize,
         p: &FirstContactParams,
     ) -> Option<RelativeEdge> {
-        let submap = &self.submaps.done[k];
-        let (centre, reach) = submap.centre_and_reach();
-        let window = SearchWindow {
-            linear_m: reach + p.margin_m,
-            angular_rad: std::f64::consts::PI,
-        };
-        let initial = Pose2::new(centre[0], centre[1], 0.0);
-        let found = self.unambiguous_match(k, node, initial, &window, p.min_score)?;
-        let refined = self.refine_in_submap(k, node, &found.pose, p.gated);
-        let (near, m) = refined?;
+        let returns = self.submap_returns(query, p.query_range_m);
+        let returns = thin_points(&returns, p.query_spacing_m, p.query_range_m);
+        let submap = &self.submaps.done[target];
+        let (initial, window) = submap.whole_window(p.margin_m);
+        let grids = self.pooled_grids(target);
+        let grid = &self.params.submaps.grid;
+        let found = search(&grids, &returns, initial, &window, p.min_score, grid)?;
+        let anchor = submap.anchor;
+        let nodes = &self.submaps.done[query].nodes;
+        let node = nodes[nodes.len() / 2].0;
+        if !self.stretches_agree(anchor, node, &found.pose, &p.check) {
+            return None;
+        }
+        // Two scans of a place seen from far apart often fail IDC or its gate: the
+        // correlative pose stands then.
+        let (from, measurement, information) =
+            match self.refine_in_submap(target, node, &found.pose, false) {
+                Some((near, m)) => (near, m.pose, self.match_information(&m.covariance)),
+                None => (anchor, found.pose, correlative_information(grid)),
+            };
         Some(RelativeEdge {
-            from: near,
+            from,
             to: node,
-            measurement: m.pose,
-            information: self.match_information(&m.covariance),
+            measurement,
+            information,
             kind: EdgeKind::InterRobot,
             robust: self.params.loop_robust,
         })
     }
+}
+
+/// A correlative pose's information: a cell's error in translation; in rotation the
+/// angular step, which moves a return at the grid's range by one cell.
+fn correlative_information(grid: &CorrelativeParams) -> Matrix3<f64> {
+    let sigma_m = grid.resolution_m;
+    let sigma_rad = grid.resolution_m / grid.max_range_m;
+    Matrix3::from_diagonal(&Vector3::new(
+        sigma_m.powi(-2),
+        sigma_m.powi(-2),
+        sigma_rad.powi(-2),
+    ))
 }

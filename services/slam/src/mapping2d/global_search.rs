@@ -288,12 +288,7 @@ impl Mapper2d {
         p: &GlobalSearchParams,
     ) -> Option<CorrelativeMatch> {
         let grids = self.pooled_coarse_grids(t);
-        let (centre, reach) = self.submaps.done[t].centre_and_reach();
-        let initial = Pose2::new(centre[0], centre[1], 0.0);
-        let window = SearchWindow {
-            linear_m: reach + p.margin_m,
-            angular_rad: std::f64::consts::PI,
-        };
+        let (initial, window) = self.submaps.done[t].whole_window(p.margin_m);
         let (ratio, radius) = (p.max_runner_up_ratio, p.ambiguity_radius_m);
         let min_score = p.coarse_min_score;
         unambiguous_search(

@@ -149,7 +149,7 @@ impl Mapper2d {
     /// scoring at least `min_score`, unless a pose elsewhere (beyond `ambiguity_radius_m`)
     /// scores nearly as well (`max_runner_up_ratio`): a corridor, a row of like doors or
     /// lamp posts fits shifted poses too, and such a best pose is as likely wrong as right.
-    pub(super) fn unambiguous_match(
+    fn unambiguous_match(
         &self,
         k: usize,
         node: usize,

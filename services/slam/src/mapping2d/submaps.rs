@@ -4,7 +4,7 @@
 
 use super::Mapper2d;
 use crate::Pose2;
-use crate::matching::correlative::{PrecomputedGrids, ProbabilityGrid, precompute};
+use crate::matching::correlative::{PrecomputedGrids, ProbabilityGrid, SearchWindow, precompute};
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex};
 
@@ -42,6 +42,17 @@ impl Submap {
         let (lo, hi) = self.bounds;
         let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
         (centre, (hi[0] - lo[0]).max(hi[1] - lo[1]) / 2.0)
+    }
+
+    /// The search over the whole grid and `margin_m` beyond, at every heading: its initial
+    /// pose (the centre) and window.
+    pub fn whole_window(&self, margin_m: f64) -> (Pose2, SearchWindow) {
+        let (centre, reach) = self.centre_and_reach();
+        let window = SearchWindow {
+            linear_m: reach + margin_m,
+            angular_rad: std::f64::consts::PI,
+        };
+        (Pose2::new(centre[0], centre[1], 0.0), window)
     }
 }
 
