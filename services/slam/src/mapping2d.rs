@@ -259,7 +259,7 @@ impl Mapper2d {
             let closed = closed
                 + self.search_submaps(node, closed)
                 + self.search_globally(node)
-                + self.seek_first_contact()
+                + self.seek_first_contact(node)
                 > 0;
             if self.add_gps(node, gps) || closed {
                 self.optimize_when_anchored(node)?;
@@ -318,7 +318,7 @@ impl Mapper2d {
             + closed
             + self.search_submaps(node, closed)
             + self.search_globally(node)
-            + self.seek_first_contact()
+            + self.seek_first_contact(node)
             > 0;
         if self.add_gps(node, gps) || closed {
             self.optimize_when_anchored(node)?;

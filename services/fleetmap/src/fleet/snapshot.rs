@@ -16,7 +16,7 @@ use std::sync::Arc;
 /// postcard has no field names, so an old layout may read as wrong values rather than fail.
 /// 2: the global search's state, `MapperStats` and `CoverageParams` gained fields.
 /// 3: first contact searches whole submaps (`FirstContactParams` changed, hypotheses keep
-/// their submaps).
+/// their submaps, pairs get a second look).
 pub const SNAPSHOT_FORMAT: u32 = 3;
 
 /// Why a snapshot was not used.

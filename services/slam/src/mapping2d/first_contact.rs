@@ -1,11 +1,12 @@
 //! First contact between parts of the network that share no frame: a robot that floats
 //! alone (no GPS anchor, no closure with another robot) cannot be looked for near its
 //! estimate, which is in a frame of its own. Instead, every pair of submaps of two robots
-//! in different parts (one of them floating) is searched once, when the later of the two
-//! is finished, both ways: one submap's returns (the global search's query) in the other's
-//! grid, whole and at every heading (the correlative matcher needs no guess). Pairs, not a
-//! robot's nodes against whatever submaps exist at the time: two robots that pass the same
-//! place minutes apart, in either order, are compared.
+//! in different parts (one of them floating) is searched when the later of the two is
+//! finished, and again once both robots have driven the check's stretch beyond it; both
+//! ways: one submap's returns in the other's grid, whole and at every heading (the
+//! correlative matcher needs no guess). Pairs, not a robot's nodes against whatever
+//! submaps exist at the time: two robots that pass the same place minutes apart, in either
+//! order, are compared.
 //!
 //! Outdoors a place holds few landmarks, and the park's lamp posts stand in rows: a submap's
 //! best pose is often wrong, and its score does not tell (wrong poses of the park scored up
@@ -77,10 +78,42 @@ impl Default for FirstContactParams {
 /// The submaps whose pairs are searched, and the matches that wait for a second.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub(super) struct ContactSearch {
-    /// The next pair to consider: submap `later` with submap `earlier` (< `later`).
+    /// Pairs of finished submaps, searched as soon as the later is finished.
+    finished: PairCursor,
+    /// Finished submaps seen so far.
+    seen: usize,
+    /// Finished submaps whose robot has not yet driven the check's stretch beyond them.
+    waiting: Vec<usize>,
+    /// Submaps whose stretch is complete, in that order…
+    ripe: Vec<usize>,
+    /// …and their pairs, searched a second time then: at the first search the check saw
+    /// only the stretch driven so far.
+    second_look: PairCursor,
+    /// Each robot's path (m) at its newest node.
+    robot_path_m: Vec<f64>,
+    hypotheses: Vec<Hypothesis>,
+}
+
+/// Walks the pairs of a growing list once each: entry `later` with every `earlier` before
+/// it, then the next.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+struct PairCursor {
     later: usize,
     earlier: usize,
-    hypotheses: Vec<Hypothesis>,
+}
+
+impl PairCursor {
+    /// The next pair among the first `len` entries (later, earlier), if any is left.
+    fn next(&mut self, len: usize) -> Option<(usize, usize)> {
+        while self.later < len {
+            if self.earlier < self.later {
+                self.earlier += 1;
+                return Some((self.later, self.earlier - 1));
+            }
+            (self.later, self.earlier) = (self.later + 1, 0);
+        }
+        None
+    }
 }
 
 /// A match between parts: the closure it would be.
@@ -99,25 +132,55 @@ const MAX_HYPOTHESES: usize = 64;
 impl Mapper2d {
     /// Searches the next pairs of submaps, at most `pairs_per_node` of them (the rest wait
     /// for the next node: a lone robot in a big map has many); returns how many parts it
-    /// joined.
-    pub(super) fn seek_first_contact(&mut self) -> usize {
+    /// joined. A pair is searched when the later submap is finished, and again once both
+    /// robots have driven the check's stretch beyond it, so that the check sees the whole
+    /// stretch on both sides whatever order the robots' nodes arrive in.
+    pub(super) fn seek_first_contact(&mut self, node: usize) -> usize {
         let p = self.params.first_contact.clone();
+        if !p.enabled {
+            return 0;
+        }
+        self.ripen_submaps(node, p.check.stretch_m);
         let (mut joined, mut budget) = (0, p.pairs_per_node);
         self.sync_parts();
-        while p.enabled && budget > 0 && self.contact.later < self.submaps.done.len() {
-            let (later, earlier) = (self.contact.later, self.contact.earlier);
-            if earlier >= later {
-                (self.contact.later, self.contact.earlier) = (later + 1, 0);
-                continue;
-            }
-            self.contact.earlier += 1;
-            let (a, b) = (&self.submaps.done[later], &self.submaps.done[earlier]);
+        while budget > 0 {
+            let contact = &mut self.contact;
+            let pair = match contact.finished.next(self.submaps.done.len()) {
+                Some(pair) => pair,
+                None => match contact.second_look.next(contact.ripe.len()) {
+                    Some((later, earlier)) => (contact.ripe[later], contact.ripe[earlier]),
+                    None => break,
+                },
+            };
+            let (a, b) = (&self.submaps.done[pair.0], &self.submaps.done[pair.1]);
             if a.robot != b.robot && self.parts.may_meet(a.anchor, b.anchor) {
                 budget -= 1;
-                joined += self.search_pair(later, earlier, &p);
+                joined += self.search_pair(pair.0, pair.1, &p);
             }
         }
         joined
+    }
+
+    /// Moves the finished submaps whose robot has driven `stretch_m` beyond them (at
+    /// `node`, the newest) to the ripe ones.
+    fn ripen_submaps(&mut self, node: usize, stretch_m: f64) {
+        let robot = self.node_robot[node].0;
+        let contact = &mut self.contact;
+        if contact.robot_path_m.len() <= robot {
+            contact.robot_path_m.resize(robot + 1, 0.0);
+        }
+        contact.robot_path_m[robot] = self.node_path_m[node];
+        contact
+            .waiting
+            .extend(contact.seen..self.submaps.done.len());
+        contact.seen = self.submaps.done.len();
+        let done = &self.submaps.done;
+        let (ripe, waiting): (Vec<usize>, Vec<usize>) = contact.waiting.iter().partition(|&&k| {
+            let driven = contact.robot_path_m.get(done[k].robot).copied();
+            driven.is_some_and(|m| m >= done[k].last_path_m + stretch_m)
+        });
+        contact.ripe.extend(ripe);
+        contact.waiting = waiting;
     }
 
     /// Each submap's returns in the other's grid, until two parts join; returns how many
@@ -264,4 +327,22 @@ fn correlative_information(grid: &CorrelativeParams) -> Matrix3<f64> {
         sigma_m.powi(-2),
         sigma_rad.powi(-2),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PairCursor;
+
+    /// Every pair of a list that grows between calls comes once, the later entry first.
+    #[test]
+    fn a_pair_cursor_walks_each_pair_of_a_growing_list_once() {
+        let mut cursor = PairCursor::default();
+        let mut pairs = Vec::new();
+        for len in [0, 1, 3, 3, 4] {
+            while let Some(pair) = cursor.next(len) {
+                pairs.push(pair);
+            }
+        }
+        assert_eq!(pairs, [(1, 0), (2, 0), (2, 1), (3, 0), (3, 1), (3, 2)]);
+    }
 }
