@@ -132,6 +132,12 @@ impl TfOut {
         let message = tf_message(correction, stamp_ns, &config.map_frame, &config.odom_frame);
         self.tf.put(ros2msg::encode(&message))
     }
+
+    /// Closes the session to the robot's ROS 2 network, after what was published.
+    pub async fn close(self) -> Result<()> {
+        drop(self.tf);
+        self.ros.close().await
+    }
 }
 
 #[cfg(test)]

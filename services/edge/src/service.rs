@@ -538,6 +538,14 @@ pub async fn run(
     }
     drop(rx);
     producer.abort();
+    if let Some(tf_out) = sending.tf_out.take() {
+        // The last transforms go out before the run ends; a dead network gets the bound.
+        match tokio::time::timeout(LINK_RETRY, tf_out.close()).await {
+            Ok(Err(e)) => tracing::warn!("[ros2_out] close: {e:#}"),
+            Err(_) => tracing::warn!("[ros2_out] close took over {LINK_RETRY:?}"),
+            Ok(Ok(())) => {}
+        }
+    }
     let mut report = sending.report;
     report.outbox_pending = sending.outbox.len()?;
     Ok(report)

@@ -196,6 +196,15 @@ impl RosOut {
         &self.config
     }
 
+    /// Closes the session: what was put goes out first (a session dropped instead may lose
+    /// its last samples).
+    pub async fn close(self) -> anyhow::Result<()> {
+        self.session
+            .close()
+            .await
+            .map_err(anyhow::Error::from_boxed)
+    }
+
     /// A publisher of `ros_type` on `topic`: best effort on the Zenoh side (a sample that
     /// cannot go out at once is dropped, never waited for), announced by rmw_zenoh's token.
     pub async fn publisher(
