@@ -11,7 +11,6 @@ use crate::outbox::Outbox;
 use crate::ros_out::{MapCorrection, NodeFrame, TfOut};
 use crate::source::Source;
 use anyhow::{Context, Result};
-use runtime::ros2::RosOutConfig;
 use runtime::session::now_ns;
 use serde::Serialize;
 use std::future::Future;
@@ -83,7 +82,9 @@ pub(super) enum Produced {
 }
 
 mod produce;
+mod tf;
 use produce::produce;
+use tf::{FINAL_CORRECTION_WAIT, close_tf_out, open_tf_out};
 
 /// The robot's side of the bus: its publishers and subscriptions.
 struct Link {
@@ -539,12 +540,7 @@ pub async fn run(
     drop(rx);
     producer.abort();
     if let Some(tf_out) = sending.tf_out.take() {
-        // The last transforms go out before the run ends; a dead network gets the bound.
-        match tokio::time::timeout(LINK_RETRY, tf_out.close()).await {
-            Ok(Err(e)) => tracing::warn!("[ros2_out] close: {e:#}"),
-            Err(_) => tracing::warn!("[ros2_out] close took over {LINK_RETRY:?}"),
-            Ok(Ok(())) => {}
-        }
+        close_tf_out(tf_out, LINK_RETRY).await;
     }
     let mut report = sending.report;
     report.outbox_pending = sending.outbox.len()?;
@@ -556,32 +552,6 @@ async fn close_session(link: Link) -> Result<()> {
         .close()
         .await
         .map_err(anyhow::Error::from_boxed)
-}
-
-/// With `[ros2_out]`, how long an edge whose source ended and whose nodes are all acked waits
-/// for the mapper's pose of its last node, so that its last transform is of the final map.
-const FINAL_CORRECTION_WAIT: Duration = Duration::from_secs(3);
-
-/// How long to wait before trying `[ros2_out]`'s session again.
-const TF_OUT_RETRY: Duration = Duration::from_secs(5);
-
-/// Opens `[ros2_out]` in the background, again every [`TF_OUT_RETRY`] while the robot's ROS 2
-/// network is out of reach (the robot maps meanwhile; only the transform waits).
-fn open_tf_out(config: RosOutConfig) -> oneshot::Receiver<TfOut> {
-    let (tx, rx) = oneshot::channel();
-    tokio::spawn(async move {
-        loop {
-            match TfOut::open(&config).await {
-                Ok(tf_out) => {
-                    let _ = tx.send(tf_out);
-                    return;
-                }
-                Err(e) => tracing::warn!("[ros2_out] not open ({e:#}); retrying"),
-            }
-            tokio::time::sleep(TF_OUT_RETRY).await;
-        }
-    });
-    rx
 }
 
 /// Sends the outbox's nodes from `from` on (at most a window), in order; returns the next
