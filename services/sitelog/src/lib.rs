@@ -16,8 +16,10 @@
 //! stream leader lost: a new one takes 4–9 s), it is retried with a backoff up to a deadline.
 
 mod lease;
+mod placement;
 
 pub use lease::{Lease, Leases};
+pub use placement::host_order;
 
 use async_nats::HeaderMap;
 use async_nats::jetstream::context::{Context, PublishErrorKind};
