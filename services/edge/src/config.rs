@@ -34,6 +34,11 @@ pub struct EdgeConfig {
     pub live_scan_rate_hz: f64,
     /// Re-send every unacked node after this long without ack progress (ms).
     pub resend_after_ms: u64,
+    /// Each re-send that brings no ack progress doubles that wait, up to this (ms): a dead
+    /// link costs one window of re-sends every 8 s rather than every second, and a mapper
+    /// back (a cluster takeover takes 4–9 s) hears from a robot that makes no new node within
+    /// 8 s. Progress or a new session brings the wait back to `resend_after_ms`.
+    pub resend_max_after_ms: u64,
     /// With nodes waiting and no ack for this long (ms), close the Zenoh session and open a
     /// new one: a transport Zenoh keeps but the router no longer routes must not hold nodes
     /// back for good; 0: never. 15 s lets Zenoh mend a dead link first (a put blocked 5 s or
@@ -85,6 +90,7 @@ impl Default for EdgeConfig {
             odometry_rate_hz: 10.0,
             live_scan_rate_hz: 2.0,
             resend_after_ms: 1000,
+            resend_max_after_ms: 8000,
             reopen_link_after_ms: 15_000,
             speed: 1.0,
             linger_for_acks: true,

@@ -81,6 +81,7 @@ pub(super) enum Produced {
     End,
 }
 
+mod backoff;
 mod produce;
 mod tf;
 use produce::produce;
@@ -158,10 +159,11 @@ struct Sending {
     header_seq: u64,
     /// The next node_seq not sent yet.
     next_to_send: u64,
-    /// The newest ack progress or re-send while nodes wait: no progress for `resend_after`
+    /// The newest ack progress or re-send while nodes wait: no progress for the backoff's wait
     /// re-sends (new nodes do not count: a gap must not hide behind fresh sends).
     last_progress: Instant,
-    resend_after: Duration,
+    /// How long without progress before re-sending: doubles while re-sends bring none.
+    resend_backoff: backoff::ResendBackoff,
     /// The newest ack of our chain, or when a node began to wait with none waiting before:
     /// with nodes waiting, silence since then longer than `reopen_after` reopens the link.
     last_heard: Instant,
@@ -273,6 +275,7 @@ impl Sending {
             if self.report.acked_node_seq.is_none_or(|a| seq > a) {
                 self.report.acked_node_seq = Some(seq);
                 self.last_progress = Instant::now();
+                self.resend_backoff.reset();
             }
             self.outbox.ack(seq)?;
             self.next_to_send = self.next_to_send.max(seq + 1);
@@ -367,8 +370,8 @@ impl Sending {
         Ok(self.last_heard.elapsed() >= after && self.outbox.len()? > 0)
     }
 
-    /// Re-sends every unacked node, in order, after `resend_after` without progress;
-    /// whether the run is over (the source ended and everything is acked).
+    /// Re-sends every unacked node, in order, after the backoff's wait without progress (it
+    /// then doubles); whether the run is over (the source ended and everything is acked).
     async fn on_tick(&mut self, link: &Link, source_done: bool) -> Result<bool> {
         let pending = self.outbox.len()?;
         if source_done && pending == 0 {
@@ -379,9 +382,10 @@ impl Sending {
             let settled = *self.settled_at.get_or_insert_with(Instant::now);
             return Ok(settled.elapsed() >= FINAL_CORRECTION_WAIT);
         }
-        if pending > 0 && self.last_progress.elapsed() >= self.resend_after {
+        if pending > 0 && self.last_progress.elapsed() >= self.resend_backoff.wait() {
             let from = self.outbox.acked_below()?;
             self.resend(link, from).await?;
+            self.resend_backoff.resent();
         }
         Ok(false)
     }
@@ -461,7 +465,10 @@ pub async fn run(
         chain_id: outbox.chain_id()?,
         outbox,
         last_progress: Instant::now(),
-        resend_after: Duration::from_millis(config.resend_after_ms),
+        resend_backoff: backoff::ResendBackoff::new(
+            Duration::from_millis(config.resend_after_ms),
+            Duration::from_millis(config.resend_max_after_ms),
+        ),
         last_heard: Instant::now(),
         reopen_after: (config.reopen_link_after_ms > 0)
             .then(|| Duration::from_millis(config.reopen_link_after_ms)),
@@ -486,8 +493,9 @@ pub async fn run(
     .await
     {
         // Silence counts from here; on a new session, the first tick re-sends everything
-        // unacked (no progress since long before `resend_after`).
+        // unacked (no progress since long before the first wait, to which the backoff returns).
         sending.last_heard = Instant::now();
+        sending.resend_backoff.reset();
         sending.send_backlog(&link).await?;
         let mut tick = tokio::time::interval(Duration::from_millis(100));
         let silent = loop {
