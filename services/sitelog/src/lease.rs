@@ -104,6 +104,8 @@ impl Leases {
             .await
         {
             Ok(()) => Ok(()),
+            // The delete's error kind does not tell a moved-on key from a failure; the
+            // server's words do (10071, "wrong last sequence: N").
             Err(e) if e.to_string().contains("wrong last sequence") => Ok(()),
             Err(e) => Err(LogError::JetStream(e.to_string())),
         }
