@@ -247,15 +247,31 @@ impl MapperProcess {
     }
 
     fn spawn(http: String, zenoh: String, config: PathBuf) -> MapperProcess {
-        let child = levelmap()
+        // Its log beside its config (appended to across restarts), read when it fails to start.
+        let log_path = config.with_extension("log");
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&log_path)
+            .expect("mapper log");
+        let mut child = levelmap()
             .args(["mapper", "--config"])
             .arg(&config)
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
+            .stderr(log)
             .spawn()
             .expect("levelmap mapper starts");
         let up = wait_for(Duration::from_secs(30), || http_get(&http, "/healthz"));
-        assert!(up.is_some(), "the mapper's /healthz did not answer");
+        if up.is_none() {
+            let exited = child.try_wait().ok().flatten();
+            let log = std::fs::read_to_string(&log_path).unwrap_or_default();
+            let tail: Vec<&str> = log.lines().rev().take(20).collect();
+            panic!(
+                "the mapper's /healthz ({http}) did not answer in 30 s; exited: {exited:?}; \
+                 its log's last lines, newest first:\n{}",
+                tail.join("\n")
+            );
+        }
         MapperProcess {
             http,
             zenoh,
