@@ -50,6 +50,10 @@ pub struct MapperConfig {
     pub clouds: CloudsConfig,
     /// Snapshots of the fleets' maps in the store (`[store]`).
     pub store: StoreConfig,
+    /// Cluster mode (`[cluster]`, docs/cluster.md): the fleets are sites spread over
+    /// mapper hosts, each site's record in NATS JetStream. Unset: this one process holds
+    /// every fleet (single-machine mode, the default).
+    pub cluster: Option<crate::cluster::ClusterConfig>,
 }
 
 impl Default for MapperConfig {
@@ -71,6 +75,7 @@ impl Default for MapperConfig {
             localization: Default::default(),
             clouds: CloudsConfig::default(),
             store: StoreConfig::default(),
+            cluster: None,
         }
     }
 }

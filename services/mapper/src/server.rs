@@ -33,6 +33,7 @@ pub struct Running {
     worker: Option<std::thread::JoinHandle<()>>,
     work: mpsc::SyncSender<Work>,
     fleets: Vec<String>,
+    cluster: Option<crate::cluster::Cluster>,
 }
 
 impl Running {
@@ -79,6 +80,10 @@ impl Running {
                 .await?
                 .map_err(|_| anyhow::anyhow!("the mapping worker panicked"))?;
         }
+        // Nothing is acked any more: the next hosts may take the sites at once.
+        if let Some(cluster) = self.cluster.take() {
+            cluster.release_all().await;
+        }
         Ok(())
     }
 }
@@ -93,12 +98,21 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     // The worker writes; the HTTP side reads clouds (redb: readers never wait on the writer).
     let store = Arc::new(store);
     let shared = Arc::new(Shared::new(config.token.clone(), now_ns()));
-    let (fleets, snapshots) = crate::store::restore::restore(&config, &store, &shared)?;
+    // In cluster mode a site comes only with its lease, restored from its log.
+    let nats = match &config.cluster {
+        Some(cluster) => Some(crate::cluster::connect(cluster).await?),
+        None => None,
+    };
+    let (fleets, snapshots) = match nats {
+        Some(_) => Default::default(),
+        None => crate::store::restore::restore(&config, &store, &shared)?,
+    };
     let maps = Arc::new(MapCache::new(&config.localization, config.max_range_m));
     let localizing = crate::localization::restore(&store, &maps)?;
 
     let session = config.zenoh.open(runtime::session::Role::Router).await?;
     let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
+    let fenced = crate::worker::Fenced::default();
     let subscriptions = subscribe(&session, &config, &shared, work_tx.clone()).await?;
     let worker = {
         let worker = Worker::new(
@@ -110,6 +124,13 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             Bus::new(session.clone()),
         )
         .with_snapshots(snapshots);
+        let worker = match &nats {
+            Some(_) => worker.with_site_logs(crate::worker::SiteLogs::new(
+                tokio::runtime::Handle::current(),
+                fenced.clone(),
+            )),
+            None => worker,
+        };
         std::thread::Builder::new()
             .name("levelmap-mapping".into())
             .spawn(move || {
@@ -127,6 +148,20 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             config.fleets.clone(),
         );
     }
+    let cluster = match nats {
+        Some(js) => Some(
+            crate::cluster::Cluster::start(
+                &config,
+                js,
+                store.clone(),
+                shared.clone(),
+                work_tx.clone(),
+                fenced,
+            )
+            .await?,
+        ),
+        None => None,
+    };
     let listener = tokio::net::TcpListener::bind(&config.http_listen)
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
@@ -152,6 +187,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         worker: Some(worker),
         work: work_tx,
         fleets: config.fleets.clone(),
+        cluster,
     })
 }
 

@@ -50,6 +50,10 @@ const SOLVE_POINTS: TableDefinition<(&str, u64), (u64, u64)> = TableDefinition::
 const PASS_FIXES: TableDefinition<(&str, u64, u64), &[u8]> = TableDefinition::new("pass_fixes");
 /// (fleet, node index) → the node's encoded cloud (`Node.cloud`, a `SegmentedCloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
+/// fleet → the sequence of the last record of its cluster log (`crate::cluster`) this store
+/// holds: in cluster mode the store is the host's cache of the log, and a takeover reads
+/// the log after it. Written in the transaction of the rows it covers.
+const SITE_LOG: TableDefinition<&str, u64> = TableDefinition::new("site_log");
 /// fleet → its newest snapshot (`fleetmap::snapshot`): the map after its first nodes,
 /// written after they and the solves it holds were committed. Only the newest is kept.
 const SNAPSHOTS: TableDefinition<&str, &[u8]> = TableDefinition::new("snapshots");
@@ -66,6 +70,9 @@ pub enum StoreError {
     /// Rows that do not make a fleet's history (a gap in the indices).
     #[error("store: {0}")]
     Damaged(String),
+    /// Cluster mode: the site's log in JetStream did not take the batch (`crate::cluster`).
+    #[error("site log: {0}")]
+    Log(String),
     /// A store format this build cannot read (`store::STORE_FORMAT`).
     #[error("store: {0}")]
     Format(String),
@@ -128,6 +135,9 @@ pub struct FleetBatch<'a> {
     pub fleet: &'a str,
     /// (arrival index, encoded node without its cloud).
     pub nodes: Vec<(u64, &'a [u8])>,
+    /// Who sent each of `nodes`, in their order: (robot, chain, node_seq). The cluster
+    /// log names its records by them; the store does not keep them (they are in the nodes).
+    pub senders: Vec<(&'a str, u64, u64)>,
     /// (node index, encoded cloud) of the nodes that came with one.
     pub clouds: Vec<(u64, &'a [u8])>,
     /// Index of the first new edge.
@@ -140,6 +150,8 @@ pub struct FleetBatch<'a> {
     pub pass_fixes: &'a [slam::GpsEdge],
     /// Runs of localized nodes that this batch started or extended.
     pub localized: Vec<fleetmap::LocalizedSpan>,
+    /// In cluster mode, the sequence of the batch's last record in the site's log.
+    pub log_sequence: Option<u64>,
 }
 
 /// Edges as the store keeps them: one JSON document each.
@@ -218,6 +230,14 @@ impl Store {
         let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
         let table = txn.open_table(SNAPSHOTS)?;
         Ok(table.get(fleet)?.map(|v| v.value().to_vec()))
+    }
+
+    /// The sequence of the last record of `fleet`'s cluster log this store holds (0: none).
+    pub fn site_log_sequence(&self, fleet: &str) -> Result<u64, StoreError> {
+        let db = self.db.read().expect("store lock");
+        let txn = db.as_ref().ok_or(StoreError::Closed)?.begin_read()?;
+        let table = txn.open_table(SITE_LOG)?;
+        Ok(table.get(fleet)?.map_or(0, |v| v.value()))
     }
 
     /// The fleets that have nodes, sorted.
@@ -317,6 +337,7 @@ fn with_tables(db: Database) -> Result<Database, StoreError> {
     txn.open_table(PASS_FIXES)?;
     txn.open_table(CLOUDS)?;
     txn.open_table(SNAPSHOTS)?;
+    txn.open_table(SITE_LOG)?;
     versions::open_tables(&txn)?;
     localization::open_tables(&txn)?;
     txn.commit()?;
@@ -331,7 +352,11 @@ fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
         let mut solves = txn.open_table(SOLVE_POINTS)?;
         let mut clouds = txn.open_table(CLOUDS)?;
         let mut pass_fixes = txn.open_table(PASS_FIXES)?;
+        let mut site_log = txn.open_table(SITE_LOG)?;
         for batch in batches {
+            if let Some(sequence) = batch.log_sequence {
+                site_log.insert(batch.fleet, sequence)?;
+            }
             for &(arrival, bytes) in &batch.nodes {
                 nodes.insert((batch.fleet, arrival), bytes)?;
             }

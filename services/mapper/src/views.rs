@@ -46,6 +46,12 @@ pub struct Metrics {
     pub optimizations: AtomicU64,
     /// Fleets rebuilt from their nodes at start (mapped by another mapping version).
     pub fleets_rebuilt: AtomicU64,
+    /// Cluster mode: sites this host took over (its lease claimed, its log read).
+    pub sites_adopted: AtomicU64,
+    /// Cluster mode: sites this host dropped (its lease lost, an append fenced).
+    pub sites_dropped: AtomicU64,
+    /// Cluster mode: appends refused because another host appended to the site's log.
+    pub appends_fenced: AtomicU64,
     /// Rejections by (topic, reason).
     pub rejected: Mutex<BTreeMap<(&'static str, &'static str), u64>>,
 }

@@ -25,8 +25,11 @@ use wire::Node;
 
 mod commit;
 mod localizing;
+mod sites;
 mod snapshots;
 mod solving;
+
+pub use sites::{Fenced, SiteLogs};
 
 /// Most messages taken into one batch (one solve, one store commit).
 const MAX_BATCH: usize = 512;
@@ -82,6 +85,27 @@ pub enum Work {
         /// The map of each version the modes name.
         maps: HashMap<u64, Arc<slam::localize::LocalizationMap>>,
         /// Answered once the worker uses them.
+        reply: tokio::sync::oneshot::Sender<()>,
+    },
+    /// Cluster mode: this host holds `site`'s lease and restored its map from the site's
+    /// log: map its nodes from now on.
+    Adopt {
+        /// The site (a fleet).
+        site: String,
+        /// Its map, restored.
+        map: Box<FleetMap>,
+        /// How many of its nodes the snapshot it was restored from covered.
+        covered: usize,
+        /// Its log, read to the end.
+        log: Box<sitelog::SiteLog>,
+        /// Answered once its nodes are taken.
+        reply: tokio::sync::oneshot::Sender<()>,
+    },
+    /// Cluster mode: this host lost `site`'s lease: drop it at once.
+    Drop {
+        /// The site.
+        site: String,
+        /// Answered once nothing of it is acked any more.
         reply: tokio::sync::oneshot::Sender<()>,
     },
 }
@@ -192,6 +216,8 @@ pub struct Worker {
     localizing: HashMap<String, crate::localization::Localizing>,
     /// Per fleet, the nodes its stored snapshot covers.
     snapshots: HashMap<String, usize>,
+    /// Cluster mode: the logs of the sites this host owns (`None`: single-machine mode).
+    sites: Option<SiteLogs>,
 }
 
 impl Worker {
@@ -221,6 +247,7 @@ impl Worker {
             retry_at: Instant::now(),
             localizing,
             snapshots: HashMap::new(),
+            sites: None,
         }
     }
 
@@ -289,6 +316,20 @@ impl Worker {
                     self.set_modes(&fleet, modes, maps);
                     let _ = reply.send(());
                 }
+                Work::Adopt {
+                    site,
+                    map,
+                    covered,
+                    log,
+                    reply,
+                } => {
+                    self.adopt(site, *map, covered, *log);
+                    let _ = reply.send(());
+                }
+                Work::Drop { site, reply } => {
+                    self.drop_site(&site, "its lease was lost", &mut batch);
+                    let _ = reply.send(());
+                }
                 Work::Stop => batch.stop = true,
             }
         }
@@ -305,6 +346,11 @@ impl Worker {
         if !self.config.fleets.iter().any(|f| f == parsed.fleet) {
             let why = format!("fleet {} is not served", parsed.fleet);
             self.reject("unknown_fleet", key, &why);
+            return None;
+        }
+        if !self.owns(parsed.fleet) {
+            // Cluster mode: another host's site (every host hears every node). Counted only.
+            self.shared.metrics.reject("node", "not_owner");
             return None;
         }
         let input = match wire::decode_node(&payload) {

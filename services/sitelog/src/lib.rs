@@ -15,9 +15,13 @@
 //! An append is only reported done once JetStream acked it; while no server answers (a
 //! stream leader lost: a new one takes 4–9 s), it is retried with a backoff up to a deadline.
 
+mod access;
 mod lease;
 mod placement;
 
+pub use access::NatsAccess;
+/// A JetStream client, as [`NatsAccess::jetstream`] opens it.
+pub use async_nats::jetstream::Context as JetStream;
 pub use lease::{Lease, Leases};
 pub use placement::host_order;
 
@@ -241,19 +245,23 @@ impl SiteLog {
         let (first, last) = (info.state.first_sequence, info.state.last_sequence);
         let mut entries = Vec::new();
         for sequence in from.max(first)..=last {
-            let message = self
-                .stream
-                .get_raw_message(sequence)
-                .await
-                .map_err(|e| LogError::JetStream(format!("sequence {sequence}: {e}")))?;
-            let id = message_id(&message.headers).unwrap_or_default();
-            entries.push(Entry {
-                sequence,
-                id,
-                payload: message.payload,
-            });
+            entries.push(self.get(sequence).await?);
         }
         Ok(entries)
+    }
+
+    /// The record at `sequence`.
+    pub async fn get(&self, sequence: u64) -> Result<Entry, LogError> {
+        let message = self
+            .stream
+            .get_raw_message(sequence)
+            .await
+            .map_err(|e| LogError::JetStream(format!("sequence {sequence}: {e}")))?;
+        Ok(Entry {
+            sequence,
+            id: message_id(&message.headers).unwrap_or_default(),
+            payload: message.payload,
+        })
     }
 }
 

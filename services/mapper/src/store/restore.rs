@@ -78,6 +78,37 @@ pub fn restore(config: &MapperConfig, store: &Store, shared: &Shared) -> Result<
     Ok((fleets, covered))
 }
 
+/// One site's map in cluster mode, once its log was read into the store: as a start
+/// restores a fleet (from its snapshot, else replayed, else rebuilt), its mapping version
+/// then recorded; how many nodes the snapshot covered. A site with no rows starts empty.
+pub fn restore_one(
+    config: &MapperConfig,
+    store: &Store,
+    shared: &Shared,
+    id: &str,
+) -> Result<(FleetMap, usize)> {
+    let running = config.mapping_version();
+    // Rows read from the log carry no mapping version: presume the running one. The edges
+    // are checked all the same, and a site whose writer mapped otherwise is rebuilt.
+    if store.mapping_version(id)?.is_none() {
+        store.set_mapping_version(&[id], &running)?;
+    }
+    let stored = store.load_fleet(id)?;
+    let restored = if stored.nodes.is_empty() && stored.localized.is_empty() {
+        (config.new_fleet(id), 0)
+    } else {
+        let (map, covered, rebuilt) = load(config, store, id, &running)?;
+        if rebuilt {
+            Metrics::bump(&shared.metrics.fleets_rebuilt);
+        }
+        (map, covered)
+    };
+    if store.mapping_version(id)?.as_ref() != Some(&running) {
+        store.set_mapping_version(&[id], &running)?;
+    }
+    Ok(restored)
+}
+
 /// Why a fleet must be rebuilt rather than restored, if it must: its recorded mapping
 /// version is not the running one.
 pub fn rebuild_reason(

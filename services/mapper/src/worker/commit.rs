@@ -24,11 +24,15 @@ pub(super) struct Unstored {
 impl Worker {
     /// Commits what the maps took, then acks it, shows it and runs the solves that are due.
     /// On a failure it is kept for [`Self::retry_store`]: nothing of it is acked or shown.
-    pub(super) fn store_and_ack(&mut self, work: Unstored, started: Instant) {
-        if self.commit(&work).is_err() {
-            self.store_failed(work);
-            return;
-        }
+    pub(super) fn store_and_ack(&mut self, mut work: Unstored, started: Instant) {
+        let fenced = match self.commit(&work) {
+            Ok(fenced) => fenced,
+            Err(_) => {
+                self.store_failed(work);
+                return;
+            }
+        };
+        self.drop_fenced(&fenced, &mut work);
         self.ack(&work.batch);
         self.publish(&work.batch.accepted, started);
         self.publish_localized(&work.batch.localized);
@@ -49,8 +53,9 @@ impl Worker {
     }
 
     /// Commits the nodes' rows, their clouds, the new edges of their fleets and the solve
-    /// points in one transaction.
-    pub(super) fn commit(&mut self, work: &Unstored) -> Result<(), StoreError> {
+    /// points in one transaction; in cluster mode each site's part is first appended to its
+    /// log. The sites whose append was fenced (not committed: the caller drops them).
+    pub(super) fn commit(&mut self, work: &Unstored) -> Result<Vec<String>, StoreError> {
         let accepted = &work.batch.accepted;
         let localized = &work.batch.localized;
         let mut touched = fleets_of(accepted);
@@ -58,7 +63,7 @@ impl Worker {
         touched.sort_unstable();
         touched.dedup();
         if touched.is_empty() && work.solves.is_empty() {
-            return Ok(());
+            return Ok(Vec::new());
         }
         let mut batches: Vec<FleetBatch> = touched
             .iter()
@@ -72,6 +77,9 @@ impl Worker {
                     nodes: of_fleet()
                         .map(|a| (a.arrival, a.payload.as_slice()))
                         .collect(),
+                    senders: of_fleet()
+                        .map(|a| (a.robot.as_str(), a.chain_id, a.node_seq))
+                        .collect(),
                     clouds: of_fleet()
                         .filter_map(|a| Some((a.node as u64, a.cloud.as_deref()?)))
                         .collect(),
@@ -82,6 +90,7 @@ impl Worker {
                         .filter(|l| l.fleet == fleet)
                         .map(|l| l.span.clone())
                         .collect(),
+                    log_sequence: None,
                 }
             })
             .collect();
@@ -91,6 +100,14 @@ impl Worker {
             pass_fixes: fixes,
             ..Default::default()
         }));
+        let fenced = match self.append_to_logs(&mut batches) {
+            Ok(fenced) => fenced,
+            Err(e) => {
+                let result = Err(e);
+                self.note_store(&result, accepted.len() + localized.len());
+                return result.map(|()| Vec::new());
+            }
+        };
         let result = self.store.commit(&batches);
         if result.is_ok() {
             for b in &batches {
@@ -99,7 +116,7 @@ impl Worker {
         }
         drop(batches);
         self.note_store(&result, accepted.len() + localized.len());
-        result
+        result.map(|()| fenced)
     }
 
     /// A commit's outcome as `/healthz` shows it; logged when it changes, not every retry.

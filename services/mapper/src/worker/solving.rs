@@ -53,6 +53,9 @@ pub(super) struct Solving {
     last_taken: HashMap<String, Instant>,
     /// A recording's feed: solves taken and run, waiting for their applying point.
     held: HashMap<String, Done>,
+    /// Per fleet, solves still on the solver thread for a map dropped since (cluster mode):
+    /// they come back first, in order, and are thrown away.
+    stale: HashMap<String, usize>,
 }
 
 impl Solving {
@@ -84,6 +87,27 @@ impl Solving {
             out: HashMap::new(),
             last_taken: HashMap::new(),
             held: HashMap::new(),
+            stale: HashMap::new(),
+        }
+    }
+
+    /// Forgets a dropped fleet's solves: the one out will be thrown away when it is done.
+    pub(super) fn forget(&mut self, fleet: &str) {
+        if self.out.remove(fleet).is_some() {
+            *self.stale.entry(fleet.to_owned()).or_default() += 1;
+        }
+        self.held.remove(fleet);
+        self.last_taken.remove(fleet);
+    }
+
+    /// Whether `done` is a solve of a map dropped since (counted off).
+    fn is_stale(&mut self, done: &Done) -> bool {
+        match self.stale.get_mut(&done.fleet) {
+            Some(n) if *n > 0 => {
+                *n -= 1;
+                true
+            }
+            _ => false,
         }
     }
 
@@ -198,6 +222,9 @@ impl Worker {
     /// poses. Whether it was applied (not while a part of the network is unanchored); an
     /// error when its point could not be committed (it is kept to be committed again).
     fn apply_solve(&mut self, done: Done) -> Result<bool, StoreError> {
+        if self.solving.is_stale(&done) {
+            return Ok(false);
+        }
         let Done {
             fleet,
             taken_after,
@@ -222,9 +249,17 @@ impl Worker {
             solves: vec![(fleet.clone(), point, map.take_pass_fixes())],
             ..Default::default()
         };
-        if let Err(e) = self.commit(&work) {
-            self.store_failed(work);
-            return Err(e);
+        match self.commit(&work) {
+            Err(e) => {
+                self.store_failed(work);
+                return Err(e);
+            }
+            Ok(fenced) if !fenced.is_empty() => {
+                let mut work = work;
+                self.drop_fenced(&fenced, &mut work);
+                return Ok(false);
+            }
+            Ok(_) => {}
         }
         self.publish_solve(&fleet, started, &point);
         Ok(true)

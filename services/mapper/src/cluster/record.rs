@@ -1,0 +1,279 @@
+//! A site's records in its cluster log: what one worker turn commits for a site (a
+//! [`FleetBatch`]), split into records small enough for JetStream (1 MiB a message by
+//! default), each named for deduplication by its first node's robot/chain/seq.
+//!
+//! A record is one format byte, then the record in postcard. Postcard is not
+//! self-describing: a change of [`SiteRecord`]'s fields is a new format number, and every
+//! later release reads every format it ever wrote (a log outlives the release that wrote it).
+
+use crate::store::{FleetBatch, SolvePoint};
+use serde::{Deserialize, Serialize};
+use sitelog::RecordId;
+
+/// The record format this build writes.
+pub const RECORD_FORMAT: u8 = 1;
+
+/// Most node bytes in one record: well under JetStream's 1 MiB message limit, with room for
+/// the batch's edges, which ride in its last record.
+pub const MAX_RECORD_NODE_BYTES: usize = 256 * 1024;
+
+/// One record of a site's log: a batch, or a part of one.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SiteRecord {
+    /// (arrival index, the node as received without its cloud).
+    pub nodes: Vec<(u64, Vec<u8>)>,
+    /// Index of the first of `edges` in the site's network.
+    pub first_edge: u64,
+    /// The batch's new edges, as the store keeps them (JSON).
+    pub edges: Vec<Vec<u8>>,
+    /// A solve applied with the batch: (number, taken after, applied after).
+    pub solved: Option<(u64, u64, u64)>,
+    /// The passes' GPS fixes that solve moved into the network (JSON `slam::GpsEdge`).
+    pub pass_fixes: Vec<Vec<u8>>,
+    /// Runs of localized or passed nodes the batch started or extended.
+    pub localized: Vec<RecordSpan>,
+}
+
+/// A [`fleetmap::LocalizedSpan`] in the record.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RecordSpan {
+    robot: String,
+    chain_id: u64,
+    first_seq: u64,
+    last_seq: u64,
+    /// A pass's counts; `None`: localized on a version.
+    passed: Option<RecordPassed>,
+}
+
+/// A pass ([`slam::Passed`]): (nodes, path m, the last one's odometry x, y, theta).
+type RecordPassed = (u64, f64, Option<(f64, f64, f64)>);
+
+impl From<&fleetmap::LocalizedSpan> for RecordSpan {
+    fn from(s: &fleetmap::LocalizedSpan) -> Self {
+        RecordSpan {
+            robot: s.robot.clone(),
+            chain_id: s.chain_id,
+            first_seq: s.first_seq,
+            last_seq: s.last_seq,
+            passed: s.passed.map(|p| {
+                let odometry = p.odometry.map(|o| (o.x, o.y, o.theta));
+                (p.nodes as u64, p.path_m, odometry)
+            }),
+        }
+    }
+}
+
+impl From<&RecordSpan> for fleetmap::LocalizedSpan {
+    fn from(s: &RecordSpan) -> Self {
+        fleetmap::LocalizedSpan {
+            robot: s.robot.clone(),
+            chain_id: s.chain_id,
+            first_seq: s.first_seq,
+            last_seq: s.last_seq,
+            passed: s.passed.map(|(nodes, path_m, odometry)| slam::Passed {
+                nodes: nodes as usize,
+                path_m,
+                odometry: odometry.map(|(x, y, theta)| slam::Pose2::new(x, y, theta)),
+            }),
+        }
+    }
+}
+
+/// Why a record could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// Written by a later release.
+    #[error("record format {0}: this build reads formats up to {RECORD_FORMAT}")]
+    Format(u8),
+    /// Bytes that are no record.
+    #[error("record: {0}")]
+    Damaged(String),
+}
+
+impl SiteRecord {
+    /// The record's bytes in the log.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut bytes = vec![RECORD_FORMAT];
+        bytes.extend(postcard::to_stdvec(self).expect("a record serializes"));
+        bytes
+    }
+
+    /// A record read back from the log.
+    pub fn decode(bytes: &[u8]) -> Result<SiteRecord, RecordError> {
+        match bytes.split_first() {
+            Some((&RECORD_FORMAT, rest)) => {
+                postcard::from_bytes(rest).map_err(|e| RecordError::Damaged(e.to_string()))
+            }
+            Some((&other, _)) => Err(RecordError::Format(other)),
+            None => Err(RecordError::Damaged("empty".into())),
+        }
+    }
+
+    /// The record as a batch of the store (`fleet`'s, `sequence` in its log), without its
+    /// passes' GPS fixes ([`Self::pass_fixes`], which the caller decodes and lends).
+    pub fn as_batch<'a>(&'a self, fleet: &'a str, sequence: u64) -> FleetBatch<'a> {
+        FleetBatch {
+            fleet,
+            nodes: self.nodes.iter().map(|(a, b)| (*a, b.as_slice())).collect(),
+            senders: Vec::new(),
+            clouds: Vec::new(),
+            first_edge: self.first_edge,
+            edges: self.edges.clone(),
+            solved: self
+                .solved
+                .map(|(seq, taken_after, applied_after)| SolvePoint {
+                    seq,
+                    taken_after,
+                    applied_after,
+                }),
+            pass_fixes: &[],
+            localized: self.localized.iter().map(Into::into).collect(),
+            log_sequence: Some(sequence),
+        }
+    }
+
+    /// The passes' GPS fixes of the record's solve.
+    pub fn pass_fixes(&self) -> Result<Vec<slam::GpsEdge>, RecordError> {
+        self.pass_fixes
+            .iter()
+            .map(|f| serde_json::from_slice(f).map_err(|e| RecordError::Damaged(e.to_string())))
+            .collect()
+    }
+}
+
+/// A batch as the records of its site's log, each with its id: nodes in runs of at most
+/// [`MAX_RECORD_NODE_BYTES`], the edges, solve and spans in the last.
+pub fn records_of(batch: &FleetBatch<'_>) -> Vec<(RecordId, SiteRecord)> {
+    let mut records: Vec<(RecordId, SiteRecord)> = Vec::new();
+    let mut bytes = 0;
+    for (k, &(arrival, node)) in batch.nodes.iter().enumerate() {
+        let full = bytes + node.len() > MAX_RECORD_NODE_BYTES;
+        if records.is_empty() || full {
+            let (robot, chain, seq) = batch.senders[k];
+            records.push((RecordId::node(robot, chain, seq), SiteRecord::default()));
+            bytes = 0;
+        }
+        bytes += node.len();
+        let record = &mut records.last_mut().expect("pushed above").1;
+        record.nodes.push((arrival, node.to_vec()));
+    }
+    if records.is_empty() {
+        records.push((id_without_nodes(batch), SiteRecord::default()));
+    }
+    let last = &mut records.last_mut().expect("one at least").1;
+    last.first_edge = batch.first_edge;
+    last.edges = batch.edges.clone();
+    last.solved = batch
+        .solved
+        .map(|p| (p.seq, p.taken_after, p.applied_after));
+    last.pass_fixes = batch
+        .pass_fixes
+        .iter()
+        .map(|f| serde_json::to_vec(f).expect("a GPS edge serializes"))
+        .collect();
+    last.localized = batch.localized.iter().map(Into::into).collect();
+    records
+}
+
+/// The id of a record without nodes: its solve's number, else its last span's extent, else
+/// its edges' first index.
+fn id_without_nodes(batch: &FleetBatch<'_>) -> RecordId {
+    if let Some(point) = batch.solved {
+        return RecordId::named(format!("solve/{}", point.seq));
+    }
+    if let Some(s) = batch.localized.last() {
+        let (robot, chain, first, last) = (&s.robot, s.chain_id, s.first_seq, s.last_seq);
+        return RecordId::named(format!("span/{robot}/{chain}/{first}/{last}"));
+    }
+    RecordId::named(format!("edges/{}/{}", batch.first_edge, batch.edges.len()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn batch<'a>(nodes: &'a [Vec<u8>], senders: Vec<(&'a str, u64, u64)>) -> FleetBatch<'a> {
+        FleetBatch {
+            fleet: "park",
+            nodes: nodes
+                .iter()
+                .enumerate()
+                .map(|(k, n)| (10 + k as u64, n.as_slice()))
+                .collect(),
+            senders,
+            first_edge: 7,
+            edges: vec![b"{}".to_vec(), b"[]".to_vec()],
+            solved: Some(SolvePoint {
+                seq: 3,
+                taken_after: 9,
+                applied_after: 11,
+            }),
+            localized: vec![fleetmap::LocalizedSpan {
+                robot: "r1".into(),
+                chain_id: 2,
+                first_seq: 4,
+                last_seq: 6,
+                passed: Some(slam::Passed {
+                    nodes: 3,
+                    path_m: 2.5,
+                    odometry: Some(slam::Pose2::new(1.0, 2.0, 0.5)),
+                }),
+            }],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_big_batch_splits_into_records_named_by_their_first_node_and_reads_back_whole() {
+        let nodes: Vec<Vec<u8>> = (0..5).map(|k| vec![k as u8; 100 * 1024]).collect();
+        let senders = (0..5).map(|k| ("r1", 2, 20 + k)).collect();
+        let batch = batch(&nodes, senders);
+        let records = records_of(&batch);
+        // 100 KiB nodes, at most 256 KiB a record: 2 + 2 + 1.
+        let ids: Vec<&str> = records.iter().map(|(id, _)| id.as_str()).collect();
+        assert_eq!(ids, ["node/r1/2/20", "node/r1/2/22", "node/r1/2/24"]);
+        let read: Vec<SiteRecord> = records
+            .iter()
+            .map(|(_, r)| SiteRecord::decode(&r.encode()).expect("decodes"))
+            .collect();
+        assert_eq!(
+            read,
+            records.iter().map(|(_, r)| r.clone()).collect::<Vec<_>>()
+        );
+        let arrivals: Vec<u64> = read
+            .iter()
+            .flat_map(|r| r.nodes.iter().map(|n| n.0))
+            .collect();
+        assert_eq!(arrivals, [10, 11, 12, 13, 14]);
+        // The batch's edges, solve and spans come with its last record only.
+        assert!(
+            read[..2]
+                .iter()
+                .all(|r| r.edges.is_empty() && r.solved.is_none())
+        );
+        let back = read[2].as_batch("park", 42);
+        assert_eq!((back.first_edge, back.edges.len()), (7, 2));
+        assert_eq!(back.solved, batch.solved);
+        assert_eq!(back.localized, batch.localized);
+        assert_eq!(back.log_sequence, Some(42));
+    }
+
+    #[test]
+    fn a_batch_without_nodes_is_named_by_its_solve() {
+        let records = records_of(&batch(&[], Vec::new()));
+        assert_eq!(records.len(), 1);
+        assert_eq!(records[0].0.as_str(), "solve/3");
+    }
+
+    #[test]
+    fn a_record_of_a_later_format_or_no_record_is_refused() {
+        let mut bytes = SiteRecord::default().encode();
+        bytes[0] = RECORD_FORMAT + 1;
+        assert!(matches!(
+            SiteRecord::decode(&bytes),
+            Err(RecordError::Format(_))
+        ));
+        assert!(SiteRecord::decode(&[]).is_err());
+        assert!(SiteRecord::decode(&[RECORD_FORMAT, 0xff, 0xff]).is_err());
+    }
+}

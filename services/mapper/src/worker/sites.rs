@@ -1,0 +1,169 @@
+//! The worker in cluster mode (`crate::cluster`): it maps only the sites this host owns,
+//! and appends each site's batch to the site's log in JetStream before the store's commit,
+//! so a node is acked only once JetStream acked its record. A site comes with its lease
+//! ([`Work::Adopt`](super::Work::Adopt): its map restored from the log) and goes when the
+//! lease is lost ([`Work::Drop`](super::Work::Drop)) or an append is fenced: it is dropped
+//! at once, with whatever of it was mapped and not acked.
+
+use super::{Batch, Worker, commit::Unstored};
+use crate::store::{FleetBatch, StoreError};
+use crate::views::Metrics;
+use fleetmap::FleetMap;
+use sitelog::{Appended, LogError, SiteLog};
+use std::collections::HashMap;
+
+/// The logs of the sites this host owns, and how to reach them from the worker's thread.
+pub struct SiteLogs {
+    runtime: tokio::runtime::Handle,
+    logs: HashMap<String, SiteLog>,
+    /// Sites dropped by the worker itself (a fenced append): their keepers stop renewing.
+    fenced: Fenced,
+}
+
+/// Sites whose append was fenced, from the worker to their keepers (`crate::cluster`).
+pub type Fenced = std::sync::Arc<std::sync::Mutex<std::collections::HashSet<String>>>;
+
+impl SiteLogs {
+    /// No site yet; appends run on `runtime`; fenced sites are told on `fenced`.
+    pub fn new(runtime: tokio::runtime::Handle, fenced: Fenced) -> SiteLogs {
+        SiteLogs {
+            runtime,
+            logs: HashMap::new(),
+            fenced,
+        }
+    }
+
+    /// Appends each batch to its site's log, setting its `log_sequence`; the sites whose
+    /// append was fenced (their batches are left without a sequence). An append JetStream
+    /// did not ack fails the whole commit: it is tried again, and the records already
+    /// stored come back as duplicates.
+    fn append(
+        &mut self,
+        batches: &mut [FleetBatch<'_>],
+        metrics: &Metrics,
+    ) -> Result<Vec<String>, StoreError> {
+        let mut fenced = Vec::new();
+        for batch in batches.iter_mut() {
+            let Some(log) = self.logs.get_mut(batch.fleet) else {
+                return Err(StoreError::Log(format!("site {}: no log", batch.fleet)));
+            };
+            match self.runtime.block_on(append_batch(log, batch)) {
+                Ok(sequence) => batch.log_sequence = Some(sequence),
+                Err(LogError::Fenced { expected, detail }) => {
+                    tracing::warn!(site = batch.fleet, expected, "append fenced: {detail}");
+                    Metrics::bump(&metrics.appends_fenced);
+                    fenced.push(batch.fleet.to_owned());
+                }
+                Err(e) => return Err(StoreError::Log(format!("site {}: {e}", batch.fleet))),
+            }
+        }
+        Ok(fenced)
+    }
+}
+
+/// Appends a batch's records; the sequence of its last. A record found stored already under
+/// its id must be this very record (a retry after a lost ack); anything else under its id
+/// was written by another owner this host did not see: a fence.
+async fn append_batch(log: &mut SiteLog, batch: &FleetBatch<'_>) -> Result<u64, LogError> {
+    let mut last = log.last_sequence();
+    for (id, record) in crate::cluster::record::records_of(batch) {
+        let bytes = bytes::Bytes::from(record.encode());
+        last = match log.append(&id, bytes.clone()).await? {
+            Appended::New(sequence) => sequence,
+            Appended::Duplicate(sequence) => {
+                if log.get(sequence).await?.payload != bytes {
+                    return Err(LogError::Fenced {
+                        expected: log.last_sequence(),
+                        detail: format!("record {id} at {sequence} was written by another owner"),
+                    });
+                }
+                sequence
+            }
+        };
+    }
+    Ok(last)
+}
+
+impl Worker {
+    /// In cluster mode, this host's site logs.
+    pub fn with_site_logs(mut self, logs: SiteLogs) -> Worker {
+        self.sites = Some(logs);
+        self
+    }
+
+    /// Whether nodes of `fleet` are this host's to map: always in single-machine mode, in
+    /// cluster mode while it owns the site.
+    pub(super) fn owns(&self, fleet: &str) -> bool {
+        self.sites.is_none() || self.fleets.contains_key(fleet)
+    }
+
+    /// In cluster mode, appends each batch to its site's log before the store commits it;
+    /// the sites fenced, their batches removed.
+    pub(super) fn append_to_logs(
+        &mut self,
+        batches: &mut Vec<FleetBatch<'_>>,
+    ) -> Result<Vec<String>, StoreError> {
+        let Some(sites) = &mut self.sites else {
+            return Ok(Vec::new());
+        };
+        let fenced = sites.append(batches, &self.shared.metrics)?;
+        batches.retain(|b| !fenced.iter().any(|f| f == b.fleet));
+        let mut told = sites.fenced.lock().expect("fenced lock");
+        told.extend(fenced.iter().cloned());
+        drop(told);
+        Ok(fenced)
+    }
+
+    /// Takes over `site`: its map (restored from its log), how many nodes its snapshot
+    /// covered, its log.
+    pub(super) fn adopt(&mut self, site: String, map: FleetMap, covered: usize, log: SiteLog) {
+        tracing::info!(site, nodes = map.nodes().len(), "site taken over");
+        Metrics::bump(&self.shared.metrics.sites_adopted);
+        self.shared.publish_map(&map, 0.0);
+        self.edges_stored
+            .insert(site.clone(), map.graph().edges.len());
+        self.snapshots.insert(site.clone(), covered);
+        self.fleets.insert(site.clone(), map);
+        if let Some(sites) = &mut self.sites {
+            sites.logs.insert(site, log);
+        }
+    }
+
+    /// Drops `site` at once: its map, its log, its solve out, what of it was mapped and not
+    /// stored (in `batch`, and kept from a failed commit). Nothing of it is acked after this.
+    pub(super) fn drop_site(&mut self, site: &str, why: &str, batch: &mut Batch) {
+        if self.fleets.remove(site).is_none() {
+            return;
+        }
+        tracing::warn!(site, "site dropped: {why}");
+        Metrics::bump(&self.shared.metrics.sites_dropped);
+        self.edges_stored.remove(site);
+        self.snapshots.remove(site);
+        self.localizing.remove(site);
+        if let Some(sites) = &mut self.sites {
+            sites.logs.remove(site);
+        }
+        self.solving.forget(site);
+        without_site(batch, site);
+        if let Some(unstored) = &mut self.unstored {
+            without_site(&mut unstored.batch, site);
+            unstored.solves.retain(|(fleet, ..)| fleet != site);
+        }
+        self.shared.fleets.write().expect("views lock").remove(site);
+    }
+
+    /// Drops the sites whose appends were fenced from what a commit held.
+    pub(super) fn drop_fenced(&mut self, fenced: &[String], work: &mut Unstored) {
+        for site in fenced {
+            work.solves.retain(|(fleet, ..)| fleet != site);
+            self.drop_site(site, "another host appended to its log", &mut work.batch);
+        }
+    }
+}
+
+/// `batch` without the entries of `site`.
+fn without_site(batch: &mut Batch, site: &str) {
+    batch.accepted.retain(|a| a.fleet != site);
+    batch.reacks.retain(|r| r.fleet != site);
+    batch.localized.retain(|l| l.fleet != site);
+}

@@ -1,0 +1,204 @@
+//! Cluster mode drills: two mapper hosts (h1, h2) on a three-node NATS JetStream cluster,
+//! their Zenoh routers meshed, two robots on h2's router; h1 owns the site.
+//! - h1 killed (SIGKILL) while the robots publish: h2 claims the site's lease once it
+//!   lapses, reads the site's log into its own store and maps on;
+//! - h1 frozen (SIGSTOP) past its lease, then let go: h2 takes the site; h1, awake, finds
+//!   its lease lost or its append fenced and drops the site.
+//!
+//! In both, every node h1 had acked is in h2's map, and every node the robots made reaches
+//! it exactly once. Checked through HTTP only.
+
+mod common;
+#[path = "../services/sitelog/tests/common/servers.rs"]
+mod nats;
+
+use common::*;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+const ROBOTS: usize = 2;
+
+/// A mapper host's config: site `park`, hosts h1 and h2, the NATS servers on `ports`.
+fn host_config(
+    dir: &Path,
+    host: &str,
+    zenoh: &str,
+    connect: Option<&str>,
+    ports: &[u16],
+) -> String {
+    let servers: Vec<String> = ports
+        .iter()
+        .map(|p| format!("nats://127.0.0.1:{p}"))
+        .collect();
+    let connect = connect.map_or(String::new(), |c| format!("connect = [{c:?}]\n"));
+    format!(
+        "store_path = {store:?}\nfleets = [\"park\"]\n\
+         [mapping.coverage]\nenabled = false\n\n\
+         [zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\n{connect}\n\
+         [cluster]\nhost = {host:?}\nhosts = [\"h1\", \"h2\"]\nlease_ttl_ms = 3000\n\n\
+         [cluster.nats]\nservers = {servers:?}\n",
+        store = dir.join("mapper.redb"),
+    )
+}
+
+fn summary_nodes(http: &str) -> Option<u64> {
+    get_json(http, "/api/v1/fleets/park/summary")?["nodes"].as_u64()
+}
+
+/// The servers, h1 owning the site, h2 beside it, h2's Zenoh endpoint, the robots' folder.
+struct TwoHosts {
+    _servers: nats::Cluster,
+    /// `None` once killed.
+    h1: Option<MapperProcess>,
+    h2: MapperProcess,
+    z2: String,
+    dir: std::path::PathBuf,
+}
+
+impl TwoHosts {
+    fn start(name: &str) -> TwoHosts {
+        let dir = temp_dir(name);
+        let servers = nats::Cluster::start(name, None);
+        let (h1_dir, h2_dir) = (dir.join("h1"), dir.join("h2"));
+        std::fs::create_dir_all(&h1_dir).expect("h1 dir");
+        std::fs::create_dir_all(&h2_dir).expect("h2 dir");
+        let (z1, z2) = (
+            format!("tcp/127.0.0.1:{}", free_port()),
+            format!("tcp/127.0.0.1:{}", free_port()),
+        );
+        // h1 alone first: it owns the site.
+        let h1 = MapperProcess::start_config(
+            &h1_dir,
+            z1.clone(),
+            &host_config(&h1_dir, "h1", &z1, None, servers.ports()),
+        );
+        wait_for(Duration::from_secs(60), || summary_nodes(&h1.http))
+            .expect("h1 takes the site over");
+        let h2 = MapperProcess::start_config(
+            &h2_dir,
+            z2.clone(),
+            &host_config(&h2_dir, "h2", &z2, Some(&z1), servers.ports()),
+        );
+        assert!(
+            summary_nodes(&h2.http).is_none(),
+            "h2 must not serve a site h1 owns"
+        );
+        TwoHosts {
+            _servers: servers,
+            h1: Some(h1),
+            h2,
+            z2,
+            dir,
+        }
+    }
+
+    /// The robots, on h2's router (h1's acks reach them through the mesh), once each has
+    /// nodes in h1's map; those nodes.
+    fn h1_http(&self) -> &str {
+        &self.h1.as_ref().expect("h1 runs").http
+    }
+
+    fn robots_on_h1(&self) -> (Vec<std::process::Child>, Vec<Vec<u64>>) {
+        let edges: Vec<_> = (0..ROBOTS)
+            .map(|r| spawn_edge(&self.dir, r, &self.z2, 60.0, 4.0))
+            .collect();
+        let before = wait_for(Duration::from_secs(90), || {
+            let seqs: Vec<Vec<u64>> = (0..ROBOTS)
+                .map(|r| node_seqs(self.h1_http(), "park", &format!("robot{r}")))
+                .collect();
+            seqs.iter().all(|s| s.len() >= 3).then_some(seqs)
+        })
+        .expect("both robots' nodes reach h1's map");
+        (edges, before)
+    }
+
+    /// Waits for h2 to serve the site; how long after `since`.
+    fn h2_takes_over(&self, since: Instant) -> Duration {
+        wait_for(Duration::from_secs(60), || {
+            let n = summary_nodes(&self.h2.http)?;
+            (n > 0).then_some(since.elapsed())
+        })
+        .expect("h2 takes the site over")
+    }
+
+    /// Every node each robot made is in h2's map once, in order.
+    fn every_node_once_on_h2(&self, edges: Vec<std::process::Child>) {
+        for (r, edge) in edges.into_iter().enumerate() {
+            let report = edge_report(edge, Duration::from_secs(180));
+            let made = report["nodes"].as_u64().expect("nodes");
+            assert_eq!(report["outbox_pending"], 0, "robot{r}: {report}");
+            let seqs = node_seqs(&self.h2.http, "park", &format!("robot{r}"));
+            assert_eq!(
+                seqs,
+                (0..made).collect::<Vec<_>>(),
+                "robot{r}: every node made, once, in order"
+            );
+        }
+    }
+}
+
+impl Drop for TwoHosts {
+    fn drop(&mut self) {
+        std::fs::remove_dir_all(&self.dir).ok();
+    }
+}
+
+#[test]
+fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
+    let mut hosts = TwoHosts::start("cluster-host-kill");
+    let (edges, before) = hosts.robots_on_h1();
+    let killed = Instant::now();
+    hosts.h1.take().expect("h1 runs").kill();
+    let taken = hosts.h2_takes_over(killed);
+    eprintln!(
+        "kill: site park served by h2 {:.1} s after h1's kill",
+        taken.as_secs_f64()
+    );
+    assert_restored(&hosts.h2.http, &before);
+    hosts.every_node_once_on_h2(edges);
+    let metrics = http_get(&hosts.h2.http, "/metrics").expect("metrics").1;
+    assert_eq!(metric(&metrics, "levelmap_sites_adopted_total"), 1);
+    assert_eq!(metric(&metrics, "levelmap_sites_dropped_total"), 0);
+}
+
+/// `kill -SIG pid`.
+fn signal(sig: &str, pid: u32) {
+    let ok = std::process::Command::new("kill")
+        .args([format!("-{sig}"), pid.to_string()])
+        .status()
+        .expect("kill runs")
+        .success();
+    assert!(ok, "kill -{sig} {pid}");
+}
+
+#[test]
+fn a_host_frozen_past_its_lease_drops_its_site_on_waking_and_loses_nothing() {
+    let hosts = TwoHosts::start("cluster-host-freeze");
+    let (edges, before) = hosts.robots_on_h1();
+    let pid = hosts.h1.as_ref().expect("h1 runs").pid();
+    let frozen = Instant::now();
+    signal("STOP", pid);
+    let taken = hosts.h2_takes_over(frozen);
+    eprintln!(
+        "freeze: site park served by h2 {:.1} s after h1 froze",
+        taken.as_secs_f64()
+    );
+    assert_restored(&hosts.h2.http, &before);
+    // h2 maps the robots' nodes a while, then h1 wakes with its old lease and its queue.
+    std::thread::sleep(Duration::from_secs(5));
+    signal("CONT", pid);
+    let dropped = wait_for(Duration::from_secs(30), || {
+        let metrics = http_get(hosts.h1_http(), "/metrics")?.1;
+        (metric(&metrics, "levelmap_sites_dropped_total") == 1).then_some(metrics)
+    })
+    .expect("h1 drops the site on waking");
+    eprintln!(
+        "freeze: h1's appends fenced after waking: {}",
+        metric(&dropped, "levelmap_log_appends_fenced_total")
+    );
+    assert!(
+        summary_nodes(hosts.h1_http()).is_none(),
+        "h1 no longer serves the site"
+    );
+    hosts.every_node_once_on_h2(edges);
+}
