@@ -350,6 +350,27 @@ mod tests {
         assert_eq!(MapperConfig::default(), file);
     }
 
+    #[test]
+    fn the_cluster_host_file_is_a_whole_valid_host() {
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/cluster/mapper-host.toml");
+        let file: MapperConfig = runtime::session::load_toml_with(Some(&path), []).unwrap();
+        let cluster = file.cluster.expect("[cluster]");
+        cluster.check().unwrap();
+        assert_eq!(cluster.nats.servers.len(), 3);
+        assert_eq!(file.mapping, MapperConfig::default().mapping);
+        let lone = crate::cluster::ClusterConfig {
+            host: "h9".into(),
+            ..cluster
+        };
+        assert!(
+            lone.check()
+                .unwrap_err()
+                .to_string()
+                .contains("must list this host")
+        );
+    }
+
     fn env(pairs: &[(&str, &str)]) -> Vec<(std::ffi::OsString, std::ffi::OsString)> {
         pairs.iter().map(|(k, v)| (k.into(), v.into())).collect()
     }
