@@ -2,9 +2,9 @@
 //! each site's record in a JetStream stream of its own (`sitelog`), one host owning a site
 //! at a time through a lease.
 //!
-//! Each site has a keeper task on every host ([`keeper`]): while the site's lease is free it
-//! claims it (the hosts in the site's rendezvous order, each waiting its rank's stagger),
-//! then takes the site over: the log after what this host's store holds is read into the
+//! Each site has a keeper task on every host (`cluster/keeper.rs`): while the site's lease
+//! is free it claims it (the hosts in the site's rendezvous order, each waiting its rank's
+//! stagger), then takes the site over: the log after what this host's store holds is read into the
 //! store (the store is the host's cache of the logs), the map restored from it as a start
 //! restores a fleet, and handed to the worker ([`Work::Adopt`]), which from then on appends
 //! each of the site's batches to the log before its commit and ack. The keeper renews the
