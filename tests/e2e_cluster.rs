@@ -159,6 +159,14 @@ fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
     let metrics = http_get(&hosts.h2.http, "/metrics").expect("metrics").1;
     assert_eq!(metric(&metrics, "levelmap_sites_adopted_total"), 1);
     assert_eq!(metric(&metrics, "levelmap_sites_dropped_total"), 0);
+    assert_eq!(metric(&metrics, "levelmap_sites_owned"), 1);
+    assert_eq!(metric(&metrics, "levelmap_site_takeover_seconds_count"), 1);
+    let appends = metric(&metrics, "levelmap_log_append_seconds_count");
+    let acked = metric(&metrics, "levelmap_node_ack_seconds_count");
+    assert!(
+        appends > 0 && acked > 0,
+        "appends {appends}, acked nodes {acked}"
+    );
 }
 
 /// `kill -SIG pid`.

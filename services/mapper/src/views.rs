@@ -46,12 +46,6 @@ pub struct Metrics {
     pub optimizations: AtomicU64,
     /// Fleets rebuilt from their nodes at start (mapped by another mapping version).
     pub fleets_rebuilt: AtomicU64,
-    /// Cluster mode: sites this host took over (its lease claimed, its log read).
-    pub sites_adopted: AtomicU64,
-    /// Cluster mode: sites this host dropped (its lease lost, an append fenced).
-    pub sites_dropped: AtomicU64,
-    /// Cluster mode: appends refused because another host appended to the site's log.
-    pub appends_fenced: AtomicU64,
     /// Rejections by (topic, reason).
     pub rejected: Mutex<BTreeMap<(&'static str, &'static str), u64>>,
 }
@@ -94,6 +88,8 @@ pub struct Shared {
     pub live_feeds: crate::views::live::LiveFeeds,
     /// The counters of `/metrics`.
     pub metrics: Metrics,
+    /// The histograms and the cluster's figures (`prometheus-client`).
+    pub instruments: instruments::Instruments,
     /// Events as JSON text (see `docs/api.md`).
     pub events: broadcast::Sender<String>,
     /// The bearer token of the write routes (empty: they are off).
@@ -123,6 +119,7 @@ impl Shared {
             live: Mutex::default(),
             live_feeds: crate::views::live::LiveFeeds::default(),
             metrics: Metrics::default(),
+            instruments: Default::default(),
             events: broadcast::channel(1024).0,
             token,
             started_ns,
@@ -174,4 +171,5 @@ impl Shared {
     }
 }
 
+pub mod instruments;
 pub mod live;

@@ -12,6 +12,7 @@
 use crate::bus::Bus;
 use crate::config::MapperConfig;
 use crate::store::Store;
+use crate::views::instruments::Instruments;
 use crate::views::{Metrics, Shared};
 use commit::Unstored;
 use fleetmap::{FleetMap, IngestError, Sequence};
@@ -50,6 +51,8 @@ pub enum Work {
         key: String,
         /// Its bytes.
         payload: Vec<u8>,
+        /// When it reached the mapper.
+        received: Instant,
     },
     /// Finish this turn, then stop (the HTTP side may still hold senders).
     Stop,
@@ -134,6 +137,7 @@ impl Work {
         Work::Node {
             key: key.to_owned(),
             payload,
+            received: Instant::now(),
         }
     }
 
@@ -174,6 +178,8 @@ struct Accepted {
     arrival: u64,
     payload: Vec<u8>,
     cloud: Option<Vec<u8>>,
+    /// When it reached the mapper.
+    received: Instant,
 }
 
 /// A robot's chain to re-ack (a duplicate or a gap): its highest node taken, and where to
@@ -293,9 +299,13 @@ impl Worker {
                 Work::Node { key, .. } if self.quarantined(&key) => {
                     self.shared.metrics.reject("node", "quarantined")
                 }
-                Work::Node { key, payload } => {
+                Work::Node {
+                    key,
+                    payload,
+                    received,
+                } => {
                     if let Some(checked) = self.check(&key, payload) {
-                        self.map(&key, checked, &mut batch);
+                        self.map(&key, checked, received, &mut batch);
                     }
                 }
                 Work::Optimize { fleet, reply } => {
@@ -377,7 +387,7 @@ impl Worker {
     /// Maps a checked node if it is the next of its robot (or localizes it, if its robot
     /// localizes); a duplicate or a node after a gap is not mapped, and its robot is
     /// re-acked (the ack says where to re-send from).
-    fn map(&mut self, key: &str, checked: Checked, batch: &mut Batch) {
+    fn map(&mut self, key: &str, checked: Checked, received: Instant, batch: &mut Batch) {
         let reacks = &mut batch.reacks;
         let Checked {
             input,
@@ -438,6 +448,7 @@ impl Worker {
                     arrival,
                     payload,
                     cloud,
+                    received,
                 })
             }
             Err(IngestError::Graph(e)) => {
@@ -473,6 +484,7 @@ impl Worker {
         }
         for a in &batch.accepted {
             Metrics::bump(&self.shared.metrics.nodes_accepted);
+            Instruments::time(&self.shared.instruments.node_ack, a.received.elapsed());
             resend.entry((&a.fleet, &a.robot, a.chain_id)).or_default();
         }
         for l in &batch.localized {

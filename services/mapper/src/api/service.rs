@@ -110,21 +110,6 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
             &m.fleets_rebuilt,
         ),
         (
-            "levelmap_sites_adopted_total",
-            "Cluster mode: sites this host took over (lease claimed, log read).",
-            &m.sites_adopted,
-        ),
-        (
-            "levelmap_sites_dropped_total",
-            "Cluster mode: sites this host dropped (lease lost, append fenced).",
-            &m.sites_dropped,
-        ),
-        (
-            "levelmap_log_appends_fenced_total",
-            "Cluster mode: appends refused because another host appended to the site's log.",
-            &m.appends_fenced,
-        ),
-        (
             "levelmap_optimizations_total",
             "Network optimizations run.",
             &m.optimizations,
@@ -160,6 +145,7 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
         );
     }
     http_metrics(&api, &mut out);
+    api.shared.instruments.encode(&mut out);
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response()
 }
 

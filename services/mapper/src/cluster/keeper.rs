@@ -88,12 +88,18 @@ async fn own(
             done = async { takeover.as_mut().expect("guarded").await }, if takeover.is_some() => {
                 takeover = None;
                 match done {
-                    Ok(Ok(records)) => tracing::info!(
-                        site,
-                        records,
-                        "cluster: site taken over {:.0} ms after its lease was claimed",
-                        claimed.elapsed().as_secs_f64() * 1e3
-                    ),
+                    Ok(Ok(records)) => {
+                        crate::views::instruments::Instruments::time(
+                            &host.shared.instruments.takeover,
+                            claimed.elapsed(),
+                        );
+                        tracing::info!(
+                            site,
+                            records,
+                            "cluster: site taken over {:.0} ms after its lease was claimed",
+                            claimed.elapsed().as_secs_f64() * 1e3
+                        );
+                    }
                     Ok(Err(e)) => tracing::error!(site, "cluster: takeover failed: {e:#}"),
                     Err(e) => tracing::error!(site, "cluster: takeover failed: {e}"),
                 }

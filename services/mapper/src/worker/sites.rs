@@ -7,7 +7,7 @@
 
 use super::{Batch, Worker, commit::Unstored};
 use crate::store::{FleetBatch, StoreError};
-use crate::views::Metrics;
+use crate::views::instruments::Instruments;
 use fleetmap::FleetMap;
 use sitelog::{Appended, LogError, SiteLog};
 use std::collections::HashMap;
@@ -40,18 +40,22 @@ impl SiteLogs {
     fn append(
         &mut self,
         batches: &mut [FleetBatch<'_>],
-        metrics: &Metrics,
+        instruments: &Instruments,
     ) -> Result<Vec<String>, StoreError> {
         let mut fenced = Vec::new();
         for batch in batches.iter_mut() {
             let Some(log) = self.logs.get_mut(batch.fleet) else {
                 return Err(StoreError::Log(format!("site {}: no log", batch.fleet)));
             };
+            let started = std::time::Instant::now();
             match self.runtime.block_on(append_batch(log, batch)) {
-                Ok(sequence) => batch.log_sequence = Some(sequence),
+                Ok(sequence) => {
+                    Instruments::time(&instruments.log_append, started.elapsed());
+                    batch.log_sequence = Some(sequence);
+                }
                 Err(LogError::Fenced { expected, detail }) => {
                     tracing::warn!(site = batch.fleet, expected, "append fenced: {detail}");
-                    Metrics::bump(&metrics.appends_fenced);
+                    instruments.appends_fenced.inc();
                     fenced.push(batch.fleet.to_owned());
                 }
                 Err(e) => return Err(StoreError::Log(format!("site {}: {e}", batch.fleet))),
@@ -106,7 +110,7 @@ impl Worker {
         let Some(sites) = &mut self.sites else {
             return Ok(Vec::new());
         };
-        let fenced = sites.append(batches, &self.shared.metrics)?;
+        let fenced = sites.append(batches, &self.shared.instruments)?;
         batches.retain(|b| !fenced.iter().any(|f| f == b.fleet));
         let mut told = sites.fenced.lock().expect("fenced lock");
         told.extend(fenced.iter().cloned());
@@ -118,7 +122,7 @@ impl Worker {
     /// covered, its log.
     pub(super) fn adopt(&mut self, site: String, map: FleetMap, covered: usize, log: SiteLog) {
         tracing::info!(site, nodes = map.nodes().len(), "site taken over");
-        Metrics::bump(&self.shared.metrics.sites_adopted);
+        self.shared.instruments.sites_adopted.inc();
         self.shared.publish_map(&map, 0.0);
         self.edges_stored
             .insert(site.clone(), map.graph().edges.len());
@@ -127,6 +131,10 @@ impl Worker {
         if let Some(sites) = &mut self.sites {
             sites.logs.insert(site, log);
         }
+        self.shared
+            .instruments
+            .sites_owned
+            .set(self.fleets.len() as i64);
     }
 
     /// Drops `site` at once: its map, its log, its solve out, what of it was mapped and not
@@ -136,7 +144,7 @@ impl Worker {
             return;
         }
         tracing::warn!(site, "site dropped: {why}");
-        Metrics::bump(&self.shared.metrics.sites_dropped);
+        self.shared.instruments.sites_dropped.inc();
         self.edges_stored.remove(site);
         self.snapshots.remove(site);
         self.localizing.remove(site);
@@ -150,6 +158,10 @@ impl Worker {
             unstored.solves.retain(|(fleet, ..)| fleet != site);
         }
         self.shared.fleets.write().expect("views lock").remove(site);
+        self.shared
+            .instruments
+            .sites_owned
+            .set(self.fleets.len() as i64);
     }
 
     /// Drops the sites whose appends were fenced from what a commit held.

@@ -1,0 +1,146 @@
+//! The metrics kept with `prometheus-client` (the Prometheus project's Rust client): the
+//! latencies as histograms, and the cluster mode's lease and log figures. `/metrics` shows
+//! them after the counters of [`super::Metrics`].
+
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
+use prometheus_client::registry::{Registry, Unit};
+use std::time::Duration;
+
+/// The instruments, registered once.
+#[derive(Debug)]
+pub struct Instruments {
+    /// From a node's arrival at the mapper to its ack.
+    pub node_ack: Histogram,
+    /// Cluster mode: one batch's append to its site's log, until JetStream acked it.
+    pub log_append: Histogram,
+    /// Cluster mode: from a site's lease claimed to its map taken by the worker.
+    pub takeover: Histogram,
+    /// Cluster mode: sites this host owns now.
+    pub sites_owned: Gauge,
+    /// Cluster mode: sites this host took over.
+    pub sites_adopted: Counter,
+    /// Cluster mode: sites this host dropped (lease lost, append fenced).
+    pub sites_dropped: Counter,
+    /// Cluster mode: appends refused because another writer appended to the site's log.
+    pub appends_fenced: Counter,
+    registry: Registry,
+}
+
+impl Default for Instruments {
+    fn default() -> Self {
+        // 0.5 ms to 8 s in doublings: an fsynced append (~1 ms) up to a leader's election.
+        let seconds = || Histogram::new(exponential_buckets(0.0005, 2.0, 15));
+        let instruments = Instruments {
+            node_ack: seconds(),
+            log_append: seconds(),
+            // 50 ms to 100 s: a takeover reads a site's whole log when it has no snapshot.
+            takeover: Histogram::new(exponential_buckets(0.05, 2.0, 12)),
+            sites_owned: Gauge::default(),
+            sites_adopted: Counter::default(),
+            sites_dropped: Counter::default(),
+            appends_fenced: Counter::default(),
+            registry: Registry::default(),
+        };
+        let mut registry = Registry::default();
+        let i = &instruments;
+        let timed = [
+            (
+                "levelmap_node_ack",
+                "From a node's arrival to its ack.",
+                &i.node_ack,
+            ),
+            (
+                "levelmap_log_append",
+                "Cluster mode: a batch's append to its site's log, until JetStream acked it.",
+                &i.log_append,
+            ),
+            (
+                "levelmap_site_takeover",
+                "Cluster mode: from a site's lease claimed to its map taken.",
+                &i.takeover,
+            ),
+        ];
+        for (name, help, histogram) in timed {
+            registry.register_with_unit(name, help, Unit::Seconds, histogram.clone());
+        }
+        registry.register(
+            "levelmap_sites_owned",
+            "Cluster mode: sites this host owns.",
+            i.sites_owned.clone(),
+        );
+        let counted = [
+            (
+                "levelmap_sites_adopted",
+                "Cluster mode: sites this host took over.",
+                &i.sites_adopted,
+            ),
+            (
+                "levelmap_sites_dropped",
+                "Cluster mode: sites this host dropped (lease lost, append fenced).",
+                &i.sites_dropped,
+            ),
+            (
+                "levelmap_log_appends_fenced",
+                "Cluster mode: appends refused because another writer appended to the site's log.",
+                &i.appends_fenced,
+            ),
+        ];
+        for (name, help, counter) in counted {
+            registry.register(name, help, counter.clone());
+        }
+        Instruments {
+            registry,
+            ..instruments
+        }
+    }
+}
+
+impl Instruments {
+    /// Observes `elapsed` on `histogram`, in seconds.
+    pub fn time(histogram: &Histogram, elapsed: Duration) {
+        histogram.observe(elapsed.as_secs_f64());
+    }
+
+    /// The instruments in the text format, appended to `out`.
+    pub fn encode(&self, out: &mut String) {
+        prometheus_client::encoding::text::encode_registry(out, &self.registry)
+            .expect("writing to a String");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_text_names_each_instrument_with_its_unit_and_buckets() {
+        let i = Instruments::default();
+        Instruments::time(&i.log_append, Duration::from_micros(1_500));
+        i.sites_adopted.inc();
+        i.sites_owned.set(2);
+        let mut text = String::new();
+        i.encode(&mut text);
+        let line = |prefix: &str| {
+            text.lines()
+                .find(|l| l.starts_with(prefix))
+                .unwrap_or_else(|| panic!("{prefix} in\n{text}"))
+                .to_owned()
+        };
+        // 1.5 ms: above the 1 ms bucket, within the 2 ms one.
+        assert!(line("levelmap_log_append_seconds_bucket{le=\"0.001\"}").ends_with(" 0"));
+        assert!(line("levelmap_log_append_seconds_bucket{le=\"0.002\"}").ends_with(" 1"));
+        assert!(line("levelmap_log_append_seconds_count").ends_with(" 1"));
+        assert!(line("levelmap_node_ack_seconds_count").ends_with(" 0"));
+        assert_eq!(
+            line("levelmap_sites_adopted_total"),
+            "levelmap_sites_adopted_total 1"
+        );
+        assert_eq!(line("levelmap_sites_owned"), "levelmap_sites_owned 2");
+        assert!(
+            !text.contains("# EOF"),
+            "appended to the other metrics: no EOF"
+        );
+    }
+}
