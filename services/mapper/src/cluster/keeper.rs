@@ -177,7 +177,12 @@ async fn drop_site(host: &Host, site: &str) {
 /// Takes `site` over: its log after what this host's store holds read into the store, its
 /// map restored, handed to the worker. The records read.
 async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
-    let retry = RetryPolicy::default();
+    // An append that outlasts the lease is no use: the site is another host's by then. The
+    // worker, which appends for every site of this host, waits no longer than that.
+    let retry = RetryPolicy {
+        deadline: host.leases.ttl(),
+        ..RetryPolicy::default()
+    };
     let mut log = SiteLog::open(host.js.clone(), &site, host.cluster.replicas, retry).await?;
     let store = host.store.clone();
     let name = site.clone();
