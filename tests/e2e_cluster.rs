@@ -9,6 +9,8 @@
 //! it exactly once. Checked through HTTP only.
 
 mod common;
+
+use common::netns::Netns;
 #[path = "../services/sitelog/tests/common/servers.rs"]
 mod nats;
 
@@ -18,18 +20,15 @@ use std::time::{Duration, Instant};
 
 const ROBOTS: usize = 2;
 
-/// A mapper host's config: site `park`, hosts h1 and h2, the NATS servers on `ports`.
+/// A mapper host's config: site `park`, hosts h1 and h2, its Zenoh listening and connecting,
+/// the NATS servers at address `nats` on `ports`.
 fn host_config(
     dir: &Path,
     host: &str,
-    zenoh: &str,
-    connect: Option<&str>,
-    ports: &[u16],
+    (zenoh, connect): (&str, Option<&str>),
+    (nats, ports): (&str, &[u16]),
 ) -> String {
-    let servers: Vec<String> = ports
-        .iter()
-        .map(|p| format!("nats://127.0.0.1:{p}"))
-        .collect();
+    let servers: Vec<String> = ports.iter().map(|p| format!("nats://{nats}:{p}")).collect();
     let connect = connect.map_or(String::new(), |c| format!("connect = [{c:?}]\n"));
     format!(
         "store_path = {store:?}\nfleets = [\"park\"]\n\
@@ -57,6 +56,11 @@ struct TwoHosts {
 
 impl TwoHosts {
     fn start(name: &str) -> TwoHosts {
+        Self::start_with(name, None)
+    }
+
+    /// With h1 inside `h1_net` when given: its routes to NATS can then be cut alone.
+    fn start_with(name: &str, h1_net: Option<&Netns>) -> TwoHosts {
         let dir = temp_dir(name);
         let servers = nats::Cluster::start(name, None);
         let (h1_dir, h2_dir) = (dir.join("h1"), dir.join("h2"));
@@ -67,17 +71,40 @@ impl TwoHosts {
             format!("tcp/127.0.0.1:{}", free_port()),
         );
         // h1 alone first: it owns the site.
-        let h1 = MapperProcess::start_config(
-            &h1_dir,
-            z1.clone(),
-            &host_config(&h1_dir, "h1", &z1, None, servers.ports()),
-        );
+        let ports = servers.ports();
+        let (h1, z1) = match h1_net {
+            None => {
+                let config = host_config(&h1_dir, "h1", (&z1, None), ("127.0.0.1", ports));
+                (
+                    MapperProcess::start_config(&h1_dir, z1.clone(), &config),
+                    z1,
+                )
+            }
+            Some(net) => {
+                // Listening inside its namespace, reached at the namespace's address.
+                let (http_port, zenoh_port) = (free_port(), free_port());
+                let listen = format!("tcp/0.0.0.0:{zenoh_port}");
+                let config = h1_dir.join("mapper.toml");
+                let toml = host_config(&h1_dir, "h1", (&listen, None), (&net.host_ip, ports));
+                std::fs::write(
+                    &config,
+                    format!("http_listen = \"0.0.0.0:{http_port}\"\n{toml}"),
+                )
+                .expect("h1's config");
+                let http = format!("{}:{http_port}", net.ns_ip);
+                let z1 = format!("tcp/{}:{zenoh_port}", net.ns_ip);
+                (
+                    MapperProcess::spawn_in(Some(net), http, z1.clone(), config),
+                    z1,
+                )
+            }
+        };
         wait_for(Duration::from_secs(60), || summary_nodes(&h1.http))
             .expect("h1 takes the site over");
         let h2 = MapperProcess::start_config(
             &h2_dir,
             z2.clone(),
-            &host_config(&h2_dir, "h2", &z2, Some(&z1), servers.ports()),
+            &host_config(&h2_dir, "h2", (&z2, Some(&z1)), ("127.0.0.1", ports)),
         );
         assert!(
             summary_nodes(&h2.http).is_none(),
@@ -209,4 +236,95 @@ fn a_host_frozen_past_its_lease_drops_its_site_on_waking_and_loses_nothing() {
         "h1 no longer serves the site"
     );
     hosts.every_node_once_on_h2(edges);
+}
+
+#[test]
+fn a_host_cut_from_nats_stops_acking_within_its_lease_and_its_site_moves() {
+    let net = Netns::create("cluster");
+    let hosts = TwoHosts::start_with("cluster-host-cut", Some(&net));
+    let (edges, before) = hosts.robots_on_h1();
+    let acks = |http: &str| {
+        metric(
+            &http_get(http, "/metrics").expect("metrics").1,
+            "levelmap_acks_sent_total",
+        )
+    };
+    // h1 loses NATS only: its Zenoh link to h2 (and so to the robots) stays up.
+    let ports: Vec<String> = hosts._servers.ports().iter().map(u16::to_string).collect();
+    let ports = ports.join(",");
+    let cut = [
+        ["OUTPUT", "-d", net.host_ip.as_str(), "--dports"],
+        ["INPUT", "-s", net.host_ip.as_str(), "--sports"],
+    ];
+    let acks_at_cut = acks(hosts.h1_http());
+    let cut_at = Instant::now();
+    for [chain, flag, address, ports_match] in cut {
+        net.iptables(&[
+            "-A",
+            chain,
+            "-p",
+            "tcp",
+            flag,
+            address,
+            "-m",
+            "multiport",
+            ports_match,
+            &ports,
+            "-j",
+            "DROP",
+        ]);
+    }
+    let dropped = wait_for(Duration::from_secs(20), || {
+        let text = http_get(hosts.h1_http(), "/metrics")?.1;
+        (metric(&text, "levelmap_sites_dropped_total") == 1).then_some(cut_at.elapsed())
+    })
+    .expect("h1 drops the site once cut from NATS");
+    let taken = hosts.h2_takes_over(cut_at);
+    let acks_at_takeover = acks(hosts.h1_http());
+    std::thread::sleep(Duration::from_secs(5));
+    let acks_later = acks(hosts.h1_http());
+    eprintln!(
+        "cut: h1 dropped the site {:.1} s after the cut, h2 served it {:.1} s after; h1's acks: \
+         {acks_at_cut} at the cut, {acks_at_takeover} when h2 took over, {acks_later} 5 s later",
+        dropped.as_secs_f64(),
+        taken.as_secs_f64()
+    );
+    // Never two owners acking: none from h1 once h2 has the site.
+    assert_eq!(
+        acks_at_takeover, acks_later,
+        "h1 acked after h2 took the site"
+    );
+    // Its appends cannot reach NATS, and time out with the lease: dropped within two.
+    assert!(
+        dropped < Duration::from_secs(6),
+        "h1 must drop the site within two 3 s leases, took {dropped:?}"
+    );
+    assert_restored(&hosts.h2.http, &before);
+    // The cut heals: h1 appends nothing more (h2 holds the lease) and every node is on h2.
+    for [chain, flag, address, ports_match] in cut {
+        net.iptables(&[
+            "-D",
+            chain,
+            "-p",
+            "tcp",
+            flag,
+            address,
+            "-m",
+            "multiport",
+            ports_match,
+            &ports,
+            "-j",
+            "DROP",
+        ]);
+    }
+    hosts.every_node_once_on_h2(edges);
+    assert!(
+        summary_nodes(hosts.h1_http()).is_none(),
+        "h1 does not serve the site"
+    );
+    let fenced = metric(
+        &http_get(hosts.h1_http(), "/metrics").expect("metrics").1,
+        "levelmap_log_appends_fenced_total",
+    );
+    eprintln!("cut: h1's appends fenced after the cut healed: {fenced}");
 }

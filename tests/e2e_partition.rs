@@ -10,6 +10,7 @@
 
 mod common;
 
+use common::netns::{Netns, require_root_and_tools, run};
 use common::*;
 use serde_json::json;
 use std::path::Path;
@@ -32,117 +33,33 @@ const SETTLE: Duration = Duration::from_secs(3);
 const SIM_DURATION_S: f64 = 640.0;
 const SPEED: f64 = 4.0;
 
-const REQUIREMENT: &str = "the partition drill needs root, `ip` (iproute2) and `iptables` \
-                           (Debian: apt-get install iproute2 iptables); see tests/README.md";
-
-/// Runs a command; its stdout, or a panic naming it and its stderr.
-fn run(program: &str, args: &[&str]) -> String {
-    let out = Command::new(program)
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("`{program} {}`: {e} ({REQUIREMENT})", args.join(" ")));
-    assert!(
-        out.status.success(),
-        "`{program} {}` failed ({}): {}",
-        args.join(" "),
-        out.status,
-        String::from_utf8_lossy(&out.stderr).trim()
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-/// Fails loudly unless the drill can run: root, `ip` and `iptables`.
-fn require_root_and_tools() {
-    let status = std::fs::read_to_string("/proc/self/status").expect("/proc/self/status");
-    let euid = status
-        .lines()
-        .find_map(|l| l.strip_prefix("Uid:"))
-        .and_then(|ids| ids.split_whitespace().nth(1))
-        .expect("an effective uid");
-    assert!(euid == "0", "{REQUIREMENT}: running as uid {euid}");
-    for tool in ["ip", "iptables"] {
-        let ran = Command::new(tool)
-            .arg("-V")
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status();
-        assert!(
-            ran.is_ok_and(|s| s.success()),
-            "{REQUIREMENT}: `{tool} -V` did not run"
-        );
-    }
-}
-
 /// The robots' network: a namespace and a veth pair to the root namespace, with the iptables
 /// rules of each phase. Dropping it removes the root namespace's rules and the namespace
 /// (with the veth pair), also when the test fails.
 struct Partition {
-    ns: String,
-    host_if: String,
-    host_ip: String,
+    net: Netns,
     /// Root-namespace rules in place (chain and match), deleted on drop.
     host_rules: Vec<Vec<String>>,
 }
 
 impl Partition {
     fn create() -> Partition {
-        let pid = std::process::id();
-        // A /30 no interface of this machine uses (another run of the drill included).
-        let used = run("ip", &["-o", "-4", "addr", "show"]);
-        let x = (0..250)
-            .map(|i| (pid + i) % 250 + 1)
-            .find(|x| !used.contains(&format!(" 10.231.{x}.")))
-            .expect("a free 10.231.X.0/30");
-        let partition = Partition {
-            ns: format!("levelmap-partition-{pid}"),
-            host_if: format!("lmp{pid}h"),
-            host_ip: format!("10.231.{x}.1"),
+        Partition {
+            net: Netns::create("partition"),
             host_rules: Vec::new(),
-        };
-        // Made before the first command: a setup failing halfway is torn down too.
-        let (ns, host_if) = (partition.ns.as_str(), partition.host_if.as_str());
-        let robot_if = format!("lmp{pid}r");
-        run("ip", &["netns", "add", ns]);
-        run(
-            "ip",
-            &[
-                "link", "add", host_if, "type", "veth", "peer", "name", &robot_if,
-            ],
-        );
-        run("ip", &["link", "set", &robot_if, "netns", ns]);
-        run(
-            "ip",
-            &[
-                "addr",
-                "add",
-                &format!("{}/30", partition.host_ip),
-                "dev",
-                host_if,
-            ],
-        );
-        run("ip", &["link", "set", host_if, "up"]);
-        let robot_ip = format!("10.231.{x}.2/30");
-        run(
-            "ip",
-            &["-n", ns, "addr", "add", &robot_ip, "dev", &robot_if],
-        );
-        run("ip", &["-n", ns, "link", "set", &robot_if, "up"]);
-        run("ip", &["-n", ns, "link", "set", "lo", "up"]);
-        partition
+        }
     }
 
     /// `iptables` inside the robots' namespace.
     fn robot_side(&self, args: &[&str]) {
-        let mut all = vec!["netns", "exec", &self.ns, "iptables"];
-        all.extend_from_slice(args);
-        run("ip", &all);
+        self.net.iptables(args);
     }
 
     /// The mapper's side stops answering: everything from and to the robots' veth is dropped
     /// in the root namespace, silently (no reset, no unreachable).
     fn drop_on_mapper_side(&mut self) {
         for (chain, direction) in [("INPUT", "-i"), ("OUTPUT", "-o")] {
-            let rule: Vec<String> = [chain, direction, &self.host_if, "-j", "DROP"]
+            let rule: Vec<String> = [chain, direction, &self.net.host_if, "-j", "DROP"]
                 .map(String::from)
                 .into();
             let mut args = vec!["-I"];
@@ -167,7 +84,15 @@ impl Partition {
             run(
                 "ip",
                 &[
-                    "netns", "exec", &self.ns, "iptables", "-L", chain, "-v", "-n", "-x",
+                    "netns",
+                    "exec",
+                    &self.net.ns,
+                    "iptables",
+                    "-L",
+                    chain,
+                    "-v",
+                    "-n",
+                    "-x",
                 ],
             )
         } else {
@@ -178,7 +103,7 @@ impl Partition {
             .lines()
             .skip(2)
             .map(|l| l.split_whitespace().collect::<Vec<_>>())
-            .filter(|f| f.get(2) == Some(&"DROP") && (ns || f.contains(&self.host_if.as_str())))
+            .filter(|f| f.get(2) == Some(&"DROP") && (ns || f.contains(&self.net.host_if.as_str())))
             .map(|f| f[0].parse::<u64>().expect("a packet count"))
             .sum()
     }
@@ -190,13 +115,13 @@ impl Partition {
             &[
                 "netns",
                 "exec",
-                &self.ns,
+                &self.net.ns,
                 "ss",
                 "-Htn",
                 "state",
                 "established",
                 "dst",
-                &self.host_ip,
+                &self.net.host_ip,
             ],
         )
         .lines()
@@ -209,10 +134,9 @@ impl Partition {
         let source = format!("[source.sim]\nloop_index = {robot}\nduration_s = {SIM_DURATION_S}\n");
         let edge = edge_command(dir, robot, connect, SPEED, &source);
         let log = std::fs::File::create(dir.join(format!("robot{robot}.log"))).expect("log");
-        let child = Command::new("ip")
-            .args(["netns", "exec", &self.ns])
-            .arg(edge.get_program())
-            .args(edge.get_args())
+        let child = self
+            .net
+            .wrap(&edge)
             .stdout(Stdio::piped())
             .stderr(log)
             .spawn()
@@ -226,11 +150,7 @@ impl Drop for Partition {
         for rule in self.host_rules.drain(..) {
             let _ = Command::new("iptables").arg("-D").args(&rule).output();
         }
-        // Takes the veth pair with it (once no process is left inside: see `Edge`).
-        let _ = Command::new("ip").args(["netns", "del", &self.ns]).output();
-        let _ = Command::new("ip")
-            .args(["link", "del", &self.host_if])
-            .output();
+        // `net` goes next, with the veth pair (once no process is left inside: see `Edge`).
     }
 }
 
@@ -295,12 +215,12 @@ fn robots_ride_out_loss_a_cut_and_a_half_open_link_by_themselves() {
     require_root_and_tools();
     let dir = temp_dir("partition");
     let mut net = Partition::create();
-    let zenoh = format!("tcp/{}:{}", net.host_ip, free_port());
+    let zenoh = format!("tcp/{}:{}", net.net.host_ip, free_port());
     let mapper = MapperProcess::start_on(&dir, zenoh.clone());
     let http = mapper.http.clone();
     eprintln!(
         "partition drill: namespace {}, mapper on {zenoh}, logs in {}",
-        net.ns,
+        net.net.ns,
         dir.display()
     );
     let started = Instant::now();

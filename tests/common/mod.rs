@@ -4,6 +4,7 @@
 
 #![allow(dead_code)]
 
+pub mod netns;
 pub mod openapi;
 
 use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
@@ -247,6 +248,17 @@ impl MapperProcess {
     }
 
     fn spawn(http: String, zenoh: String, config: PathBuf) -> MapperProcess {
+        Self::spawn_in(None, http, zenoh, config)
+    }
+
+    /// A mapper with its config file `config` written already, inside `net` if given; `http`
+    /// is where the test reaches its HTTP API.
+    pub fn spawn_in(
+        net: Option<&netns::Netns>,
+        http: String,
+        zenoh: String,
+        config: PathBuf,
+    ) -> MapperProcess {
         // Its log beside its config (appended to across restarts), read when it fails to start.
         let log_path = config.with_extension("log");
         let log = std::fs::OpenOptions::new()
@@ -254,9 +266,12 @@ impl MapperProcess {
             .append(true)
             .open(&log_path)
             .expect("mapper log");
-        let mut child = levelmap()
-            .args(["mapper", "--config"])
-            .arg(&config)
+        let mut command = levelmap();
+        command.args(["mapper", "--config"]).arg(&config);
+        if let Some(net) = net {
+            command = net.wrap(&command);
+        }
+        let mut child = command
             .stdout(Stdio::null())
             .stderr(log)
             .spawn()

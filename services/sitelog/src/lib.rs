@@ -201,22 +201,30 @@ impl SiteLog {
                 .payload(payload.clone())
                 .message_id(id.as_str())
                 .expected_last_sequence(self.last_sequence);
-            let failure = match self.js.send_publish(self.subject.clone(), publish).await {
-                Ok(ack) => match ack.await {
-                    Ok(ack) => {
-                        if ack.duplicate {
-                            self.last_sequence = self.last_sequence.max(ack.sequence);
-                            return Ok(Appended::Duplicate(ack.sequence));
-                        }
-                        self.last_sequence = ack.sequence;
-                        return Ok(Appended::New(ack.sequence));
-                    }
-                    Err(e) => e,
-                },
-                Err(e) => e,
+            let attempt = async {
+                match self.js.send_publish(self.subject.clone(), publish).await {
+                    Ok(ack) => ack.await,
+                    Err(e) => Err(e),
+                }
             };
-            let detail = failure.to_string();
-            match classify(failure.kind(), &detail) {
+            // No try outlasts the deadline, however long the client would wait for an ack.
+            let left = self.retry.deadline.saturating_sub(started.elapsed());
+            let (kind, detail) = match tokio::time::timeout(left, attempt).await {
+                Ok(Ok(ack)) => {
+                    if ack.duplicate {
+                        self.last_sequence = self.last_sequence.max(ack.sequence);
+                        return Ok(Appended::Duplicate(ack.sequence));
+                    }
+                    self.last_sequence = ack.sequence;
+                    return Ok(Appended::New(ack.sequence));
+                }
+                Ok(Err(e)) => (e.kind(), e.to_string()),
+                Err(_) => (
+                    PublishErrorKind::TimedOut,
+                    "no ack before the deadline".to_owned(),
+                ),
+            };
+            match classify(kind, &detail) {
                 Failure::Fenced => {
                     return Err(LogError::Fenced {
                         expected: self.last_sequence,

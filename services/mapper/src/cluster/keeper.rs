@@ -111,7 +111,16 @@ async fn own(
         let Some(mut lease) = host.held.lock().expect("leases lock").get(&site).cloned() else {
             return false;
         };
-        let lost = match host.leases.renew(&mut lease).await {
+        // A renewal that does not answer within a third of the lease counts as failed: a
+        // host cut off from NATS must notice before its lease lapses.
+        let renewal = tokio::time::timeout(ttl / 3, host.leases.renew(&mut lease)).await;
+        let renewal = renewal.unwrap_or_else(|_| {
+            Err(sitelog::LogError::Unavailable(
+                ttl / 3,
+                "renewal timed out".into(),
+            ))
+        });
+        let lost = match renewal {
             Ok(true) => {
                 renewed = Instant::now();
                 host.held

@@ -1,6 +1,7 @@
-//! Three real nats-servers on loopback, optionally secured as
-//! `deploy/cluster/make-nats-certs.sh` makes them: the processes only, no client, so that
-//! the mapper's end-to-end tests (`tests/e2e_cluster.rs`) include this file too.
+//! Three real nats-servers, optionally secured as `deploy/cluster/make-nats-certs.sh` makes
+//! them: their routes on loopback, their clients on every interface (a mapper host in a
+//! network namespace reaches them over its veth pair). The processes only, no client, so
+//! that the mapper's end-to-end tests (`tests/e2e_cluster.rs`) include this file too.
 
 #![allow(dead_code)]
 
@@ -58,7 +59,7 @@ impl Cluster {
                 std::fs::write(
                     &config,
                     format!(
-                        "server_name: {name}\nlisten: 127.0.0.1:{client}\n\
+                        "server_name: {name}\nlisten: 0.0.0.0:{client}\n\
                          jetstream {{ store_dir: \"{store}\", sync_interval: always }}\n\
                          cluster {{ name: levelmap, listen: 127.0.0.1:{route}, routes: [{routes}]{route_tls} }}\n\
                          {client_tls}",
