@@ -126,8 +126,19 @@ impl TwoHosts {
     }
 
     fn robots_on_h1(&self) -> (Vec<std::process::Child>, Vec<Vec<u64>>) {
+        self.robots_on_h1_via(&[&self.z2])
+    }
+
+    /// The robots connecting to `routers`, in turn.
+    fn robots_on_h1_via(&self, routers: &[&str]) -> (Vec<std::process::Child>, Vec<Vec<u64>>) {
+        let source = "[source.sim]\nduration_s = 60.0\n";
         let edges: Vec<_> = (0..ROBOTS)
-            .map(|r| spawn_edge(&self.dir, r, &self.z2, 60.0, 4.0))
+            .map(|r| {
+                let source = format!("{source}loop_index = {r}\n");
+                edge_command_to(&self.dir, r, routers, 4.0, &source)
+                    .spawn()
+                    .expect("levelmap edge starts")
+            })
             .collect();
         let before = wait_for(Duration::from_secs(90), || {
             let seqs: Vec<Vec<u64>> = (0..ROBOTS)
@@ -194,6 +205,40 @@ fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
         appends > 0 && acked > 0,
         "appends {appends}, acked nodes {acked}"
     );
+}
+
+#[test]
+fn robots_on_the_router_of_a_killed_host_move_to_another_and_lose_nothing() {
+    let mut hosts = TwoHosts::start("cluster-router-kill");
+    let z1 = hosts.h1.as_ref().expect("h1 runs").zenoh.clone();
+    // The robots list both routers, h1's first: they connect to it, the owner's.
+    let (edges, before) = hosts.robots_on_h1_via(&[&z1, &hosts.z2]);
+    let port = z1.rsplit(':').next().expect("a port");
+    let links = common::netns::run(
+        "ss",
+        &[
+            "-Htn",
+            "state",
+            "established",
+            "dport",
+            "=",
+            &format!(":{port}"),
+        ],
+    );
+    // h2's link to h1 and each robot's.
+    assert!(
+        links.lines().count() > ROBOTS,
+        "the robots must be on h1's router: connections to it\n{links}"
+    );
+    let killed = Instant::now();
+    hosts.h1.take().expect("h1 runs").kill();
+    let taken = hosts.h2_takes_over(killed);
+    eprintln!(
+        "router: site park served by h2 {:.1} s after the kill of h1 and its router",
+        taken.as_secs_f64()
+    );
+    assert_restored(&hosts.h2.http, &before);
+    hosts.every_node_once_on_h2(edges);
 }
 
 /// `kill -SIG pid`.

@@ -384,12 +384,23 @@ pub fn spawn_edge_env(
 /// The command of an edge service with its config file written (the partition drill runs its
 /// program and arguments inside a network namespace).
 pub fn edge_command(dir: &Path, robot: usize, connect: &str, speed: f64, source: &str) -> Command {
+    edge_command_to(dir, robot, &[connect], speed, source)
+}
+
+/// [`edge_command`] with several routers to connect to (Zenoh tries them in turn).
+pub fn edge_command_to(
+    dir: &Path,
+    robot: usize,
+    connect: &[&str],
+    speed: f64,
+    source: &str,
+) -> Command {
     let config = dir.join(format!("robot{robot}.toml"));
     std::fs::write(
         &config,
         format!(
             "robot = \"robot{robot}\"\noutbox_path = {:?}\nspeed = {speed}\nresend_after_ms = 500\n\
-             [zenoh]\nconnect = [{connect:?}]\n{source}",
+             [zenoh]\nconnect = {connect:?}\n{source}",
             dir.join(format!("robot{robot}-outbox.redb"))
         ),
     )
