@@ -160,7 +160,7 @@ impl SiteLog {
         }
         let subject = format!("levelmap.site.{site}.log");
         let config = Config {
-            name: format!("LEVELMAP_SITE_{site}"),
+            name: stream_name(site),
             subjects: vec![subject.clone()],
             storage: StorageType::File,
             num_replicas: replicas,
@@ -245,6 +245,12 @@ impl SiteLog {
 
     /// Every record from sequence `from` (1: the whole log) to the last, in order.
     pub async fn read_from(&mut self, from: u64) -> Result<Vec<Entry>, LogError> {
+        self.read_some(from, usize::MAX).await
+    }
+
+    /// The records from sequence `from` on, in order, at most `max` of them: fewer than
+    /// `max` when the log ends.
+    pub async fn read_some(&mut self, from: u64, max: usize) -> Result<Vec<Entry>, LogError> {
         let info = self
             .stream
             .info()
@@ -252,10 +258,20 @@ impl SiteLog {
             .map_err(|e| LogError::JetStream(e.to_string()))?;
         let (first, last) = (info.state.first_sequence, info.state.last_sequence);
         let mut entries = Vec::new();
-        for sequence in from.max(first)..=last {
+        for sequence in (from.max(first)..=last).take(max) {
             entries.push(self.get(sequence).await?);
         }
         Ok(entries)
+    }
+
+    /// The last sequence in the stream, as the server says now.
+    pub async fn stream_last_sequence(&mut self) -> Result<u64, LogError> {
+        let info = self
+            .stream
+            .info()
+            .await
+            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        Ok(info.state.last_sequence)
     }
 
     /// The record at `sequence`.
@@ -270,6 +286,28 @@ impl SiteLog {
             id: message_id(&message.headers).unwrap_or_default(),
             payload: message.payload,
         })
+    }
+}
+
+/// The stream of site `site`'s log.
+fn stream_name(site: &str) -> String {
+    format!("LEVELMAP_SITE_{site}")
+}
+
+/// Whether site `site` has a log (a site some host ever took); reads, creates nothing.
+pub async fn log_exists(js: &Context, site: &str) -> Result<bool, LogError> {
+    use async_nats::jetstream::ErrorCode;
+    use async_nats::jetstream::context::GetStreamErrorKind;
+    match js.get_stream(stream_name(site)).await {
+        Ok(_) => Ok(true),
+        Err(e) => match e.kind() {
+            GetStreamErrorKind::JetStream(error)
+                if error.error_code() == ErrorCode::STREAM_NOT_FOUND =>
+            {
+                Ok(false)
+            }
+            _ => Err(LogError::JetStream(e.to_string())),
+        },
     }
 }
 

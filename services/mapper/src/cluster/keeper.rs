@@ -4,6 +4,7 @@
 
 use super::Host;
 use super::record::SiteRecord;
+use crate::store::Store;
 use crate::worker::Work;
 use anyhow::{Context, Result, bail};
 use sitelog::{Lease, RetryPolicy, SiteLog};
@@ -15,6 +16,18 @@ const POLL: Duration = Duration::from_millis(250);
 
 /// Records read into the store per transaction while catching up.
 const CATCH_UP_BATCH: usize = 256;
+
+/// How often a site's standby reads what was appended to the site's log since.
+const FOLLOW_EVERY: Duration = Duration::from_secs(1);
+
+/// Records a standby reads in one round at most: a long log is read over several rounds, and
+/// the keeper looks at the lease between them.
+const FOLLOW_MAX: usize = 4 * CATCH_UP_BATCH;
+
+/// The pause before a failed takeover is tried again; doubled after each failure up to
+/// `MAX_TAKEOVER_RETRY`.
+const FIRST_TAKEOVER_RETRY: Duration = Duration::from_millis(250);
+const MAX_TAKEOVER_RETRY: Duration = Duration::from_secs(5);
 
 /// Keeps `site` on this host while it may, until the mapper stops.
 pub(super) async fn keep(host: Arc<Host>, site: String) {
@@ -28,6 +41,10 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
     let mut stopping = host.shared.stopping.subscribe();
     let mut free_since: Option<Instant> = None;
     let mut complained = false;
+    // While another host owns the site and this one is next in its order: its log, as read.
+    let mut follower: Option<SiteLog> = None;
+    let mut next_follow = Instant::now();
+    let mut follow_failed = false;
     loop {
         if *stopping.borrow() {
             return;
@@ -43,15 +60,32 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
                                 return;
                             }
                         }
-                        Ok(None) => {}
-                        Err(e) => tracing::warn!(site, "cluster: claiming the lease: {e}"),
+                        Ok(None) => complained = false,
+                        Err(e) if !complained => {
+                            tracing::warn!(site, "cluster: claiming the lease: {e}");
+                            complained = true;
+                        }
+                        Err(_) => {}
                     }
                 }
-                complained = false;
             }
-            Ok(Some(_)) => {
+            Ok(Some(holder)) => {
                 free_since = None;
                 complained = false;
+                let standby = order.iter().find(|h| **h != holder);
+                if standby == Some(&host.cluster.host.as_str()) && Instant::now() >= next_follow {
+                    next_follow = Instant::now() + FOLLOW_EVERY;
+                    match follow(&host, &site, &mut follower).await {
+                        Ok(()) => follow_failed = false,
+                        Err(e) => {
+                            if !follow_failed {
+                                tracing::warn!(site, "cluster: following the site's log: {e:#}");
+                            }
+                            follow_failed = true;
+                            follower = None;
+                        }
+                    }
+                }
             }
             Err(e) if !complained => {
                 tracing::warn!(site, "cluster: the lease cannot be read: {e}");
@@ -83,6 +117,7 @@ async fn own(
     let mut takeover = Some(tokio::spawn(take_over(host.clone(), site.clone())));
     let ttl = host.leases.ttl();
     let mut renewed = Instant::now();
+    let mut retry = FIRST_TAKEOVER_RETRY;
     loop {
         tokio::select! {
             done = async { takeover.as_mut().expect("guarded").await }, if takeover.is_some() => {
@@ -100,7 +135,20 @@ async fn own(
                             claimed.elapsed().as_secs_f64() * 1e3
                         );
                     }
-                    Ok(Err(e)) => tracing::error!(site, "cluster: takeover failed: {e:#}"),
+                    Ok(Err(e)) => {
+                        // Its stream may have no leader yet (an election takes 4–9 s): the
+                        // site is ours and nobody else serves it, so try again.
+                        tracing::warn!(
+                            site,
+                            "cluster: takeover failed, trying again in {retry:?}: {e:#}"
+                        );
+                        takeover = Some(tokio::spawn(take_over_after(
+                            retry,
+                            host.clone(),
+                            site.clone(),
+                        )));
+                        retry = (retry * 2).min(MAX_TAKEOVER_RETRY);
+                    }
                     Err(e) => tracing::error!(site, "cluster: takeover failed: {e}"),
                 }
             }
@@ -183,6 +231,73 @@ async fn drop_site(host: &Host, site: &str) {
     }
 }
 
+/// [`take_over`] after `pause`.
+async fn take_over_after(pause: Duration, host: Arc<Host>, site: String) -> Result<usize> {
+    tokio::time::sleep(pause).await;
+    take_over(host, site).await
+}
+
+/// As the site's standby (the next host in its order): reads what was appended to its log
+/// since into this host's store, so that a takeover reads a short tail only.
+async fn follow(host: &Arc<Host>, site: &str, follower: &mut Option<SiteLog>) -> Result<()> {
+    if follower.is_none() {
+        let retry = RetryPolicy::default();
+        *follower = Some(SiteLog::open(host.js.clone(), site, host.cluster.replicas, retry).await?);
+    }
+    let log = follower.as_mut().expect("opened above");
+    let read = catch_up(host, site, log, FOLLOW_MAX).await?;
+    host.shared.instruments.records_followed.inc_by(read as u64);
+    Ok(())
+}
+
+/// Reads `site`'s log after what this host's store holds into the store, at most `max`
+/// records, in transactions of [`CATCH_UP_BATCH`]; how many it read.
+async fn catch_up(host: &Arc<Host>, site: &str, log: &mut SiteLog, max: usize) -> Result<usize> {
+    let store = host.store.clone();
+    let name = site.to_owned();
+    let have = tokio::task::spawn_blocking(move || store.site_log_sequence(&name)).await??;
+    let last = log.stream_last_sequence().await?;
+    if last < have {
+        bail!(
+            "its log ends at {last} but this host's store holds records up to {have}: the log \
+             was replaced; move this host's store aside and start it again"
+        );
+    }
+    let (mut next, mut read) = (have + 1, 0);
+    while read < max {
+        let entries = log.read_some(next, CATCH_UP_BATCH.min(max - read)).await?;
+        let Some(newest) = entries.last() else { break };
+        next = newest.sequence + 1;
+        read += entries.len();
+        let (store, name) = (host.store.clone(), site.to_owned());
+        tokio::task::spawn_blocking(move || commit_records(&store, &name, &entries)).await??;
+    }
+    Ok(read)
+}
+
+/// Stores the log's `entries` of `site` as the worker would have committed them.
+fn commit_records(store: &Store, site: &str, entries: &[sitelog::Entry]) -> Result<()> {
+    let records: Vec<(u64, SiteRecord, Vec<slam::GpsEdge>)> = entries
+        .iter()
+        .map(|e| {
+            let record = SiteRecord::decode(&e.payload)
+                .with_context(|| format!("record {} ({})", e.sequence, e.id))?;
+            let fixes = record.pass_fixes()?;
+            Ok((e.sequence, record, fixes))
+        })
+        .collect::<Result<_>>()?;
+    let batches: Vec<_> = records
+        .iter()
+        .map(|(sequence, record, fixes)| {
+            let mut batch = record.as_batch(site, *sequence);
+            batch.pass_fixes = fixes;
+            batch
+        })
+        .collect();
+    store.commit(&batches)?;
+    Ok(())
+}
+
 /// Takes `site` over: its log after what this host's store holds read into the store, its
 /// map restored, handed to the worker. The records read.
 async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
@@ -193,41 +308,14 @@ async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
         ..RetryPolicy::default()
     };
     let mut log = SiteLog::open(host.js.clone(), &site, host.cluster.replicas, retry).await?;
-    let store = host.store.clone();
-    let name = site.clone();
-    let have = tokio::task::spawn_blocking(move || store.site_log_sequence(&name)).await??;
-    if log.last_sequence() < have {
-        bail!(
-            "its log ends at {} but this host's store holds records up to {have}: the log \
-             was replaced; move this host's store aside and start it again",
-            log.last_sequence()
-        );
-    }
-    let entries = log.read_from(have + 1).await?;
-    let records = entries.len();
+    let records = catch_up(&host, &site, &mut log, usize::MAX).await?;
+    host.shared
+        .instruments
+        .records_taken_over
+        .inc_by(records as u64);
     let (store, shared, config) = (host.store.clone(), host.shared.clone(), host.config.clone());
     let name = site.clone();
-    let (map, covered) = tokio::task::spawn_blocking(move || -> Result<_> {
-        for chunk in entries.chunks(CATCH_UP_BATCH) {
-            let records: Vec<(u64, SiteRecord, Vec<slam::GpsEdge>)> = chunk
-                .iter()
-                .map(|e| {
-                    let record = SiteRecord::decode(&e.payload)
-                        .with_context(|| format!("record {} ({})", e.sequence, e.id))?;
-                    let fixes = record.pass_fixes()?;
-                    Ok((e.sequence, record, fixes))
-                })
-                .collect::<Result<_>>()?;
-            let batches: Vec<_> = records
-                .iter()
-                .map(|(sequence, record, fixes)| {
-                    let mut batch = record.as_batch(&name, *sequence);
-                    batch.pass_fixes = fixes;
-                    batch
-                })
-                .collect();
-            store.commit(&batches)?;
-        }
+    let (map, covered) = tokio::task::spawn_blocking(move || {
         crate::store::restore::restore_one(&config, &store, &shared, &name).inspect_err(|e| {
             shared
                 .quarantined

@@ -25,6 +25,11 @@ pub struct Instruments {
     pub sites_dropped: Counter,
     /// Cluster mode: appends refused because another writer appended to the site's log.
     pub appends_fenced: Counter,
+    /// Cluster mode: records of sites another host owns, read into this host's store as
+    /// their standby.
+    pub records_followed: Counter,
+    /// Cluster mode: records read at a takeover (what the standby had not read yet).
+    pub records_taken_over: Counter,
     registry: Registry,
 }
 
@@ -41,6 +46,8 @@ impl Default for Instruments {
             sites_adopted: Counter::default(),
             sites_dropped: Counter::default(),
             appends_fenced: Counter::default(),
+            records_followed: Counter::default(),
+            records_taken_over: Counter::default(),
             registry: Registry::default(),
         };
         let mut registry = Registry::default();
@@ -85,6 +92,16 @@ impl Default for Instruments {
                 "levelmap_log_appends_fenced",
                 "Cluster mode: appends refused because another writer appended to the site's log.",
                 &i.appends_fenced,
+            ),
+            (
+                "levelmap_log_records_followed",
+                "Cluster mode: records of sites another host owns, read into this host's store as their standby.",
+                &i.records_followed,
+            ),
+            (
+                "levelmap_log_records_taken_over",
+                "Cluster mode: records read at a takeover (what the standby had not read yet).",
+                &i.records_taken_over,
             ),
         ];
         for (name, help, counter) in counted {

@@ -36,6 +36,7 @@ fn free_port() -> u16 {
 pub struct Cluster {
     names: Vec<String>,
     client_ports: Vec<u16>,
+    monitor_ports: Vec<u16>,
     servers: Vec<Option<Child>>,
     _dir: TempDir,
 }
@@ -47,6 +48,7 @@ impl Cluster {
         let dir = TempDir::new(&format!("sitelog-{name}"));
         let client_ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
         let route_ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
+        let monitor_ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
         let routes: Vec<String> = route_ports
             .iter()
             .map(|p| format!("nats-route://127.0.0.1:{p}"))
@@ -59,12 +61,13 @@ impl Cluster {
                 std::fs::write(
                     &config,
                     format!(
-                        "server_name: {name}\nlisten: 0.0.0.0:{client}\n\
+                        "server_name: {name}\nlisten: 0.0.0.0:{client}\nhttp: 127.0.0.1:{monitor}\n\
                          jetstream {{ store_dir: \"{store}\", sync_interval: always }}\n\
                          cluster {{ name: levelmap, listen: 127.0.0.1:{route}, routes: [{routes}]{route_tls} }}\n\
                          {client_tls}",
                         name = names[i],
                         client = client_ports[i],
+                        monitor = monitor_ports[i],
                         store = store.display(),
                         route = route_ports[i],
                         routes = routes.join(", "),
@@ -99,6 +102,7 @@ impl Cluster {
         Cluster {
             names,
             client_ports,
+            monitor_ports,
             servers,
             _dir: dir,
         }
@@ -107,6 +111,16 @@ impl Cluster {
     /// The client port of every server.
     pub fn ports(&self) -> &[u16] {
         &self.client_ports
+    }
+
+    /// The monitoring port (HTTP: `/jsz`, `/varz`) of every server.
+    pub fn monitor_ports(&self) -> &[u16] {
+        &self.monitor_ports
+    }
+
+    /// The names of the servers, in the order of their ports.
+    pub fn names(&self) -> &[String] {
+        &self.names
     }
 
     /// SIGKILL the server named `name`.
