@@ -2,11 +2,20 @@
 //! their Zenoh routers meshed, two robots on h2's router; h1 owns the site.
 //! - h1 killed (SIGKILL) while the robots publish: h2 claims the site's lease once it
 //!   lapses, reads the site's log into its own store and maps on;
+//! - the robots on h1's router when h1 is killed: they move to h2's;
 //! - h1 frozen (SIGSTOP) past its lease, then let go: h2 takes the site; h1, awake, finds
-//!   its lease lost or its append fenced and drops the site.
+//!   its lease lost or its append fenced and drops the site;
+//! - h1 cut from NATS by iptables (h1 in its own network namespace): it stops acking within
+//!   its lease and h2 takes the site;
+//! - the NATS server leading the site's log killed (SIGKILL): the site maps on once a new
+//!   leader is elected;
+//! - a rolling restart: h1 stopped and started again (the site moves to h2), then h2 (it
+//!   moves back);
+//! - a gateway in front: it answers for the owner, 503 while the site has none, then for
+//!   h2; killed, another answers at once.
 //!
-//! In both, every node h1 had acked is in h2's map, and every node the robots made reaches
-//! it exactly once. Checked through HTTP only.
+//! In every one, every node acked before the fault is in the map afterwards, and every node
+//! the robots made reaches it exactly once. Checked through HTTP only.
 
 mod common;
 
@@ -46,10 +55,11 @@ fn summary_nodes(http: &str) -> Option<u64> {
 
 /// The servers, h1 owning the site, h2 beside it, h2's Zenoh endpoint, the robots' folder.
 struct TwoHosts {
-    _servers: nats::Cluster,
+    servers: nats::Cluster,
     /// `None` once killed.
     h1: Option<MapperProcess>,
-    h2: MapperProcess,
+    /// `None` while restarted.
+    h2: Option<MapperProcess>,
     z2: String,
     dir: std::path::PathBuf,
 }
@@ -111,9 +121,9 @@ impl TwoHosts {
             "h2 must not serve a site h1 owns"
         );
         TwoHosts {
-            _servers: servers,
+            servers,
             h1: Some(h1),
-            h2,
+            h2: Some(h2),
             z2,
             dir,
         }
@@ -126,12 +136,16 @@ impl TwoHosts {
     }
 
     fn robots_on_h1(&self) -> (Vec<std::process::Child>, Vec<Vec<u64>>) {
-        self.robots_on_h1_via(&[&self.z2])
+        self.robots_on_h1_via(&[&self.z2], 60.0)
     }
 
-    /// The robots connecting to `routers`, in turn.
-    fn robots_on_h1_via(&self, routers: &[&str]) -> (Vec<std::process::Child>, Vec<Vec<u64>>) {
-        let source = "[source.sim]\nduration_s = 60.0\n";
+    /// The robots connecting to `routers`, in turn, driving `duration_s` (at 4× speed).
+    fn robots_on_h1_via(
+        &self,
+        routers: &[&str],
+        duration_s: f64,
+    ) -> (Vec<std::process::Child>, Vec<Vec<u64>>) {
+        let source = format!("[source.sim]\nduration_s = {duration_s:.1}\n");
         let edges: Vec<_> = (0..ROBOTS)
             .map(|r| {
                 let source = format!("{source}loop_index = {r}\n");
@@ -150,10 +164,50 @@ impl TwoHosts {
         (edges, before)
     }
 
+    fn h2(&self) -> &MapperProcess {
+        self.h2.as_ref().expect("h2 runs")
+    }
+
+    /// The host serving the site (its HTTP address) and how many nodes its map holds.
+    fn serving(&self) -> Option<(String, u64)> {
+        [&self.h1, &self.h2]
+            .into_iter()
+            .flatten()
+            .find_map(|h| Some((h.http.clone(), summary_nodes(&h.http)?)))
+    }
+
+    /// Waits for the site's map to hold more than `nodes`, on whichever host serves it; how
+    /// long after `since`.
+    fn grows_past(&self, nodes: u64, since: Instant) -> Duration {
+        wait_for(Duration::from_secs(60), || {
+            let (_, now) = self.serving()?;
+            (now > nodes).then(|| since.elapsed())
+        })
+        .expect("the site maps again within 60 s")
+    }
+
+    /// Watches the site's map for `window` from `since`: the longest time it did not grow
+    /// (the robots publishing all along), on whichever host served it.
+    fn longest_pause(&self, since: Instant, window: Duration) -> Duration {
+        let (mut last_growth, mut longest) = (since, Duration::ZERO);
+        let mut nodes = self.serving().map_or(0, |(_, n)| n);
+        while since.elapsed() < window {
+            if let Some((_, now)) = self.serving()
+                && now > nodes
+            {
+                nodes = now;
+                longest = longest.max(last_growth.elapsed());
+                last_growth = Instant::now();
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        longest.max(last_growth.elapsed())
+    }
+
     /// Waits for h2 to serve the site; how long after `since`.
     fn h2_takes_over(&self, since: Instant) -> Duration {
         wait_for(Duration::from_secs(60), || {
-            let n = summary_nodes(&self.h2.http)?;
+            let n = summary_nodes(&self.h2().http)?;
             (n > 0).then_some(since.elapsed())
         })
         .expect("h2 takes the site over")
@@ -161,11 +215,21 @@ impl TwoHosts {
 
     /// Every node each robot made is in h2's map once, in order.
     fn every_node_once_on_h2(&self, edges: Vec<std::process::Child>) {
-        for (r, edge) in edges.into_iter().enumerate() {
-            let report = edge_report(edge, Duration::from_secs(180));
+        self.every_node_once(edges, || self.h2().http.clone());
+    }
+
+    /// Every node each robot made is in the map of the host `serving` names once the robots
+    /// are done, once, in order.
+    fn every_node_once(&self, edges: Vec<std::process::Child>, serving: impl Fn() -> String) {
+        let reports: Vec<_> = edges
+            .into_iter()
+            .map(|edge| edge_report(edge, Duration::from_secs(180)))
+            .collect();
+        let http = serving();
+        for (r, report) in reports.into_iter().enumerate() {
             let made = report["nodes"].as_u64().expect("nodes");
             assert_eq!(report["outbox_pending"], 0, "robot{r}: {report}");
-            let seqs = node_seqs(&self.h2.http, "park", &format!("robot{r}"));
+            let seqs = node_seqs(&http, "park", &format!("robot{r}"));
             assert_eq!(
                 seqs,
                 (0..made).collect::<Vec<_>>(),
@@ -192,13 +256,20 @@ fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
         "kill: site park served by h2 {:.1} s after h1's kill",
         taken.as_secs_f64()
     );
-    assert_restored(&hosts.h2.http, &before);
+    assert_restored(&hosts.h2().http, &before);
     hosts.every_node_once_on_h2(edges);
-    let metrics = http_get(&hosts.h2.http, "/metrics").expect("metrics").1;
+    let metrics = http_get(&hosts.h2().http, "/metrics").expect("metrics").1;
     assert_eq!(metric(&metrics, "levelmap_sites_adopted_total"), 1);
     assert_eq!(metric(&metrics, "levelmap_sites_dropped_total"), 0);
     assert_eq!(metric(&metrics, "levelmap_sites_owned"), 1);
     assert_eq!(metric(&metrics, "levelmap_site_takeover_seconds_count"), 1);
+    // h2, next in the site's order, followed its log: the takeover read only a tail.
+    let followed = metric(&metrics, "levelmap_log_records_followed_total");
+    let tail = metric(&metrics, "levelmap_log_records_taken_over_total");
+    eprintln!(
+        "kill: h2 followed {followed} records of the log as standby; its takeover read {tail}"
+    );
+    assert!(followed > 0, "h2, the site's standby, follows its log");
     let appends = metric(&metrics, "levelmap_log_append_seconds_count");
     let acked = metric(&metrics, "levelmap_node_ack_seconds_count");
     assert!(
@@ -212,7 +283,7 @@ fn robots_on_the_router_of_a_killed_host_move_to_another_and_lose_nothing() {
     let mut hosts = TwoHosts::start("cluster-router-kill");
     let z1 = hosts.h1.as_ref().expect("h1 runs").zenoh.clone();
     // The robots list both routers, h1's first: they connect to it, the owner's.
-    let (edges, before) = hosts.robots_on_h1_via(&[&z1, &hosts.z2]);
+    let (edges, before) = hosts.robots_on_h1_via(&[&z1, &hosts.z2], 60.0);
     let port = z1.rsplit(':').next().expect("a port");
     let links = common::netns::run(
         "ss",
@@ -237,8 +308,228 @@ fn robots_on_the_router_of_a_killed_host_move_to_another_and_lose_nothing() {
         "router: site park served by h2 {:.1} s after the kill of h1 and its router",
         taken.as_secs_f64()
     );
-    assert_restored(&hosts.h2.http, &before);
+    assert_restored(&hosts.h2().http, &before);
     hosts.every_node_once_on_h2(edges);
+}
+
+/// The server leading `stream`, as the servers' monitoring (`/jsz`) says.
+fn stream_leader(servers: &nats::Cluster, stream: &str) -> Option<String> {
+    servers.monitor_ports().iter().find_map(|port| {
+        let jsz = get_json(
+            &format!("127.0.0.1:{port}"),
+            "/jsz?accounts=true&streams=true",
+        )?;
+        jsz["account_details"]
+            .as_array()?
+            .iter()
+            .flat_map(|a| a["stream_detail"].as_array().into_iter().flatten())
+            .find(|s| s["name"] == stream)
+            .and_then(|s| s["cluster"]["leader"].as_str().map(str::to_owned))
+    })
+}
+
+#[test]
+fn the_nats_server_leading_the_sites_log_killed_under_load_loses_nothing() {
+    nats_leader_killed("cluster-nats-kill", "LEVELMAP_SITE_park");
+}
+
+/// The leases bucket's leader lost: no renewal is answered until a new one is elected, which
+/// takes longer than the lease (docs/cluster.md).
+#[test]
+fn the_nats_server_leading_the_leases_killed_under_load_loses_nothing() {
+    nats_leader_killed("cluster-nats-leases-kill", "KV_levelmap_site_leases");
+}
+
+/// SIGKILLs the NATS server leading `stream` while the robots publish; the site maps again
+/// and every node is in its map once.
+fn nats_leader_killed(name: &str, stream: &str) {
+    let mut hosts = TwoHosts::start(name);
+    // On the road through the whole window watched.
+    let (edges, _) = hosts.robots_on_h1_via(&[&hosts.z2], 160.0);
+    let leader = |stream| {
+        wait_for(Duration::from_secs(10), || {
+            stream_leader(&hosts.servers, stream)
+        })
+        .expect("the stream has a leader")
+    };
+    let (killed_leader, site, leases) = (
+        leader(stream),
+        leader("LEVELMAP_SITE_park"),
+        leader("KV_levelmap_site_leases"),
+    );
+    let (_, nodes_at_kill) = hosts.serving().expect("a host serves the site");
+    let killed = Instant::now();
+    hosts.servers.kill(&killed_leader);
+    let resumed = hosts.grows_past(nodes_at_kill, killed);
+    let pause = hosts.longest_pause(killed, Duration::from_secs(20));
+    eprintln!(
+        "nats: {killed_leader}, leading {stream}, killed (the site's log led by {site}, the \
+         leases by {leases}); the map grew again {:.1} s after; its longest pause in the 20 s \
+         after the kill {:.1} s",
+        resumed.as_secs_f64(),
+        pause.as_secs_f64()
+    );
+    hosts.every_node_once(edges, || hosts.serving().expect("a host serves the site").0);
+    for (name, host) in [("h1", &hosts.h1), ("h2", &hosts.h2)] {
+        let config = &host.as_ref().expect("runs").config;
+        let log = std::fs::read_to_string(config.with_extension("log")).unwrap_or_default();
+        for line in log
+            .lines()
+            .filter(|l| l.contains("cluster:") || l.contains("site "))
+        {
+            eprintln!("nats: {name}: {}", without_colours(line));
+        }
+    }
+}
+
+#[test]
+fn every_host_restarted_one_at_a_time_loses_nothing() {
+    let mut hosts = TwoHosts::start("cluster-rolling");
+    let z1 = hosts.h1.as_ref().expect("h1 runs").zenoh.clone();
+    let z2 = hosts.z2.clone();
+    // Robots long enough on the road for two restarts, on h2's router first, then h1's.
+    let (edges, _) = hosts.robots_on_h1_via(&[&z2, &z1], 240.0);
+    let mut pauses = Vec::new();
+    for host in ["h1", "h2"] {
+        let (_, nodes) = hosts.serving().expect("a host serves the site");
+        let stopped = Instant::now();
+        let slot = if host == "h1" {
+            &mut hosts.h1
+        } else {
+            &mut hosts.h2
+        };
+        let old = slot.take().expect("runs").stop();
+        let pause = hosts.grows_past(nodes, stopped);
+        pauses.push(format!("{host} {:.1} s", pause.as_secs_f64()));
+        let started = MapperProcess::restart(old);
+        assert!(
+            summary_nodes(&started.http).is_none(),
+            "{host}, started again, must not serve the site the other host took"
+        );
+        let slot = if host == "h1" {
+            &mut hosts.h1
+        } else {
+            &mut hosts.h2
+        };
+        *slot = Some(started);
+    }
+    eprintln!(
+        "rolling: the site mapped again after the stop of {}",
+        pauses.join(", after the stop of ")
+    );
+    // h1 serves it again: the site moved there and back.
+    hosts.every_node_once(edges, || hosts.h1_http().to_owned());
+}
+
+/// A `levelmap gateway` in front of the running hosts.
+struct GatewayProcess {
+    http: String,
+    child: std::process::Child,
+}
+
+impl GatewayProcess {
+    /// Listing each mapper host's HTTP address: `hosts` (name, address).
+    fn start(cluster: &TwoHosts, name: &str, hosts: &[(&str, String)]) -> GatewayProcess {
+        let http = format!("127.0.0.1:{}", free_port());
+        let servers: Vec<String> = cluster
+            .servers
+            .ports()
+            .iter()
+            .map(|p| format!("nats://127.0.0.1:{p}"))
+            .collect();
+        let hosts: String = hosts
+            .iter()
+            .map(|(host, address)| format!("{host} = {address:?}\n"))
+            .collect();
+        let config = cluster.dir.join(format!("{name}.toml"));
+        std::fs::write(
+            &config,
+            format!("http_listen = {http:?}\n[hosts]\n{hosts}[nats]\nservers = {servers:?}\n"),
+        )
+        .expect("gateway config");
+        let log = std::fs::File::create(config.with_extension("log")).expect("gateway log");
+        let child = levelmap()
+            .args(["gateway", "--config"])
+            .arg(&config)
+            .stdout(std::process::Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("levelmap gateway starts");
+        wait_for(Duration::from_secs(30), || http_get(&http, "/healthz")).expect("gateway up");
+        GatewayProcess { http, child }
+    }
+}
+
+impl Drop for GatewayProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn a_gateway_answers_for_the_sites_owner_and_follows_it_to_another_host() {
+    let mut hosts = TwoHosts::start("cluster-gateway");
+    let addresses = [
+        ("h1", hosts.h1_http().to_owned()),
+        ("h2", hosts.h2().http.clone()),
+    ];
+    let gateway = GatewayProcess::start(&hosts, "g1", &addresses);
+    let (edges, before) = hosts.robots_on_h1();
+    let summary = get_json(&gateway.http, "/api/v1/fleets/park/summary").expect("summary");
+    assert!(summary["nodes"].as_u64() > Some(0), "{summary}");
+    let list = get_json(&gateway.http, "/api/v1/fleets").expect("fleet list");
+    assert_eq!(list["fleets"], serde_json::json!(["park"]), "{list}");
+    let status = |path: &str| http_get(&gateway.http, path).map(|(status, _)| status);
+    assert_eq!(status("/api/v1/fleets/nowhere/summary"), Some(404));
+    assert_eq!(status("/api/v1/openapi.json"), Some(200));
+    assert_eq!(status("/metrics"), Some(404), "a gateway keeps no metrics");
+    // h1 killed: 503 with Retry-After while its lease runs out, then h2's answers.
+    let killed = Instant::now();
+    hosts.h1.take().expect("h1 runs").kill();
+    let mut unavailable = 0;
+    let served = wait_for(Duration::from_secs(60), || {
+        let answer = http_call(&gateway.http, "GET", "/api/v1/fleets/park/summary", &[])?;
+        if answer.status == 503 {
+            assert!(answer.header("retry-after").is_some(), "{}", answer.body);
+            unavailable += 1;
+        }
+        (answer.status == 200).then(|| killed.elapsed())
+    })
+    .expect("the gateway answers for the site again");
+    eprintln!(
+        "gateway: the site answered 200 through the gateway {:.1} s after h1's kill ({unavailable} \
+         answers 503 with Retry-After before)",
+        served.as_secs_f64()
+    );
+    assert!(unavailable > 0, "503 while nobody serves the site");
+    // The gateway killed and another started: it keeps nothing, and answers at once.
+    drop(gateway);
+    let gateway = GatewayProcess::start(&hosts, "g2", &addresses);
+    assert_restored(&gateway.http, &before);
+    hosts.every_node_once_on_h2(edges);
+    for r in 0..ROBOTS {
+        let robot = format!("robot{r}");
+        assert_eq!(
+            node_seqs(&gateway.http, "park", &robot),
+            node_seqs(&hosts.h2().http, "park", &robot),
+            "{robot}: the gateway answers as the owner"
+        );
+    }
+}
+
+/// `line` without its ANSI colour codes (`ESC [ … m`).
+fn without_colours(line: &str) -> String {
+    let mut out = String::with_capacity(line.len());
+    let mut chars = line.chars();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            chars.by_ref().find(|&c| c == 'm');
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 /// `kill -SIG pid`.
@@ -263,7 +554,7 @@ fn a_host_frozen_past_its_lease_drops_its_site_on_waking_and_loses_nothing() {
         "freeze: site park served by h2 {:.1} s after h1 froze",
         taken.as_secs_f64()
     );
-    assert_restored(&hosts.h2.http, &before);
+    assert_restored(&hosts.h2().http, &before);
     // h2 maps the robots' nodes a while, then h1 wakes with its old lease and its queue.
     std::thread::sleep(Duration::from_secs(5));
     signal("CONT", pid);
@@ -295,7 +586,7 @@ fn a_host_cut_from_nats_stops_acking_within_its_lease_and_its_site_moves() {
         )
     };
     // h1 loses NATS only: its Zenoh link to h2 (and so to the robots) stays up.
-    let ports: Vec<String> = hosts._servers.ports().iter().map(u16::to_string).collect();
+    let ports: Vec<String> = hosts.servers.ports().iter().map(u16::to_string).collect();
     let ports = ports.join(",");
     let cut = [
         ["OUTPUT", "-d", net.host_ip.as_str(), "--dports"],
@@ -344,7 +635,7 @@ fn a_host_cut_from_nats_stops_acking_within_its_lease_and_its_site_moves() {
         dropped < Duration::from_secs(6),
         "h1 must drop the site within two 3 s leases, took {dropped:?}"
     );
-    assert_restored(&hosts.h2.http, &before);
+    assert_restored(&hosts.h2().http, &before);
     // The cut heals: h1 appends nothing more (h2 holds the lease) and every node is on h2.
     for [chain, flag, address, ports_match] in cut {
         net.iptables(&[

@@ -47,6 +47,8 @@ enum Command {
     DemoLocalize(fleetlab::LocalizeDemoArgs),
     #[cfg(feature = "edge")]
     Edge(services::EdgeArgs),
+    #[cfg(feature = "mapper")]
+    Gateway(services::GatewayArgs),
     Level(level::LevelArgs),
     #[cfg(feature = "mapper")]
     Map(map_versions::MapArgs),
@@ -80,6 +82,8 @@ fn main() -> ExitCode {
         Command::DemoLocalize(args) => fleetlab::localize_demo::run(&args),
         #[cfg(feature = "edge")]
         Command::Edge(args) => services::run_edge(&args),
+        #[cfg(feature = "mapper")]
+        Command::Gateway(args) => services::run_gateway(&args),
         #[cfg(feature = "mapper")]
         Command::Map(args) => map_versions::run(&args),
         #[cfg(feature = "mapper")]

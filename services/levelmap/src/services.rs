@@ -1,4 +1,4 @@
-//! `levelmap mapper` and `levelmap edge`: the two services, run until Ctrl-C.
+//! `levelmap mapper`, `levelmap gateway` and `levelmap edge`: the services, run until Ctrl-C.
 
 use anyhow::Result;
 use clap::Args;
@@ -30,6 +30,17 @@ pub struct MapperArgs {
     /// With --verify-store: print the report as JSON.
     #[arg(long, requires = "verify_store")]
     pub json: bool,
+}
+
+/// Run a cluster's stateless HTTP gateway: each site's requests to the mapper host that
+/// owns it, as the leases in NATS say (docs/cluster.md).
+#[cfg(feature = "mapper")]
+#[derive(Args, Debug)]
+pub struct GatewayArgs {
+    /// TOML configuration (see deploy/cluster/gateway.toml). Environment variables set keys
+    /// too: LEVELMAP_HTTP_LISTEN, LEVELMAP_NATS__SERVERS (nested: __).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
 }
 
 /// Run a robot's edge service: its source's scans leveled and published as nodes.
@@ -103,6 +114,23 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
                 return fed.map(|_| ());
             }
         }
+        runtime::session::shutdown_signal().await;
+        tracing::info!("stopping");
+        running.stop().await
+    })
+}
+
+#[cfg(feature = "mapper")]
+pub fn run_gateway(args: &GatewayArgs) -> Result<()> {
+    init_logging();
+    let config = mapper::gateway::GatewayConfig::load(args.config.as_deref())?;
+    runtime()?.block_on(async {
+        let running = mapper::gateway::start(config.clone()).await?;
+        tracing::info!(
+            "gateway: HTTP http://{}/api/v1 for hosts {:?}",
+            running.http_addr,
+            config.hosts.keys().collect::<Vec<_>>()
+        );
         runtime::session::shutdown_signal().await;
         tracing::info!("stopping");
         running.stop().await

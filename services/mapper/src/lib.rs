@@ -13,13 +13,15 @@
 //!   robot's live feed);
 //! - [`api`]: the HTTP API; [`localization`] (robots localizing on a map version) and
 //!   [`versions`] (frozen maps) serve both the worker and the API;
-//! - [`cluster`]: cluster mode, the sites spread over hosts on NATS JetStream;
+//! - [`cluster`]: cluster mode, the sites spread over hosts on NATS JetStream; [`gateway`]
+//!   its stateless HTTP front;
 //! - [`server`] wires them; [`config`] is the configuration.
 
 pub mod api;
 pub mod bus;
 pub mod cluster;
 pub mod config;
+pub mod gateway;
 pub mod localization;
 pub mod server;
 pub mod store;

@@ -53,6 +53,23 @@ impl Leases {
         Ok(Leases { store, ttl })
     }
 
+    /// Opens the leases bucket `bucket` as the mapper hosts made it, to read who holds
+    /// what (a gateway): it is not created here, and the leases' time is the bucket's.
+    pub async fn existing(js: &Context, bucket: &str) -> Result<Leases, LogError> {
+        let store = js
+            .get_key_value(bucket)
+            .await
+            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        let status = store
+            .status()
+            .await
+            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        Ok(Leases {
+            ttl: status.max_age(),
+            store,
+        })
+    }
+
     /// How long a lease lasts without renewal.
     pub fn ttl(&self) -> Duration {
         self.ttl

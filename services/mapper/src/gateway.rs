@@ -1,0 +1,321 @@
+//! `levelmap gateway`: a stateless HTTP front of a cluster (docs/cluster.md). It holds no
+//! map: a request for a site (`/api/v1/fleets/{site}/…`) goes to the mapper host that holds
+//! the site's lease, as the leases bucket says at that moment; the fleet list is the union
+//! of every host's; anything else (the dashboard, the OpenAPI document) comes from any host
+//! that answers. A site without an owner, or whose owner does not answer, is 503 with
+//! `Retry-After`. Any number of gateways may run, and any one may be killed.
+
+use crate::cluster::LEASES_BUCKET;
+use anyhow::{Context, Result};
+use axum::body::Body;
+use axum::extract::{Request, State};
+use axum::http::{HeaderValue, Method, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use hyper_util::client::legacy::{Client, connect::HttpConnector};
+use hyper_util::rt::TokioExecutor;
+use serde::{Deserialize, Serialize};
+use sitelog::{Leases, NatsAccess};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::OnceCell;
+
+/// The largest request body the gateway buffers to try it on several hosts.
+const MAX_BUFFERED_BODY: usize = 1 << 20;
+
+/// A gateway's configuration (deploy/cluster/gateway.toml).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GatewayConfig {
+    /// Where the gateway's HTTP listens.
+    pub http_listen: String,
+    /// Each mapper host's name (its `[cluster] host`) and the address of its HTTP API
+    /// (`host:port`).
+    pub hosts: BTreeMap<String, String>,
+    /// The NATS servers and the gateway's credentials (`[nats]`): it reads the leases.
+    pub nats: NatsAccess,
+    /// How long a mapper host may take to answer (ms) before the gateway answers 504.
+    pub request_timeout_ms: u64,
+    /// `Retry-After` (s) of a 503 for a site without an owner: about a lease's time.
+    pub retry_after_s: u64,
+}
+
+impl Default for GatewayConfig {
+    fn default() -> Self {
+        GatewayConfig {
+            http_listen: "127.0.0.1:8090".into(),
+            hosts: BTreeMap::new(),
+            nats: NatsAccess::default(),
+            request_timeout_ms: 10_000,
+            retry_after_s: 3,
+        }
+    }
+}
+
+impl GatewayConfig {
+    /// Reads a TOML file, then the `LEVELMAP_…` environment variables; unknown keys are
+    /// errors.
+    pub fn load(path: Option<&std::path::Path>) -> Result<GatewayConfig> {
+        runtime::session::load_toml(path)
+    }
+
+    fn check(&self) -> Result<()> {
+        anyhow::ensure!(
+            !self.hosts.is_empty(),
+            "[hosts]: name each mapper host and its HTTP address (h1 = \"10.0.0.1:8080\")"
+        );
+        anyhow::ensure!(
+            !self.nats.servers.is_empty(),
+            "[nats] servers: list the NATS servers' URLs"
+        );
+        Ok(())
+    }
+}
+
+/// What the gateway's requests share.
+struct Gateway {
+    config: GatewayConfig,
+    js: sitelog::JetStream,
+    /// Opened on first use: the gateway serves (503) before NATS answers.
+    leases: OnceCell<Leases>,
+    client: Client<HttpConnector, Body>,
+}
+
+/// A running gateway.
+pub struct RunningGateway {
+    /// Where its HTTP listens.
+    pub http_addr: std::net::SocketAddr,
+    stop: tokio::sync::watch::Sender<bool>,
+    http: tokio::task::JoinHandle<()>,
+}
+
+impl RunningGateway {
+    /// Stops accepting and lets open requests finish.
+    pub async fn stop(self) -> Result<()> {
+        let _ = self.stop.send(true);
+        self.http.await?;
+        Ok(())
+    }
+}
+
+/// Starts a gateway: connects to NATS (retried in the background) and listens.
+pub async fn start(config: GatewayConfig) -> Result<RunningGateway> {
+    config.check()?;
+    let js = config.nats.jetstream("levelmap-gateway").await?;
+    let mut connector = HttpConnector::new();
+    connector.set_connect_timeout(Some(Duration::from_millis(config.request_timeout_ms)));
+    let client = Client::builder(TokioExecutor::new()).build(connector);
+    let listener = tokio::net::TcpListener::bind(&config.http_listen)
+        .await
+        .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
+    let http_addr = listener.local_addr()?;
+    let gateway = Arc::new(Gateway {
+        config,
+        js,
+        leases: OnceCell::new(),
+        client,
+    });
+    let app = axum::Router::new().fallback(route).with_state(gateway);
+    let (stop, mut stopping) = tokio::sync::watch::channel(false);
+    let http = tokio::spawn(async move {
+        let stopped = async move {
+            let _ = stopping.wait_for(|s| *s).await;
+        };
+        if let Err(e) = axum::serve(listener, app)
+            .with_graceful_shutdown(stopped)
+            .await
+        {
+            tracing::error!("HTTP server: {e}");
+        }
+    });
+    Ok(RunningGateway {
+        http_addr,
+        stop,
+        http,
+    })
+}
+
+/// Every request: to the site's owner, the union of the fleet lists, or any host.
+async fn route(State(gateway): State<Arc<Gateway>>, request: Request) -> Response {
+    let path = request.uri().path().to_owned();
+    if path == "/healthz" {
+        return "ok\n".into_response();
+    }
+    if path == "/metrics" {
+        return answer(
+            StatusCode::NOT_FOUND,
+            "each mapper host serves its own /metrics; the gateway keeps none",
+        );
+    }
+    if request.headers().contains_key(header::UPGRADE) {
+        return answer(
+            StatusCode::NOT_IMPLEMENTED,
+            "live feeds (WebSocket) are not passed through the gateway yet: open them on the \
+             site's owner",
+        );
+    }
+    if path == "/api/v1/fleets" && request.method() == Method::GET {
+        return gateway.fleet_list(request).await;
+    }
+    match path
+        .strip_prefix("/api/v1/fleets/")
+        .map(|rest| rest.split('/').next())
+    {
+        Some(Some(site)) if !site.is_empty() => {
+            let site = site.to_owned();
+            gateway.to_owner(&site, request).await
+        }
+        _ => gateway.to_any(request).await,
+    }
+}
+
+impl Gateway {
+    fn retry_after(&self, why: &str) -> Response {
+        let mut response = answer(StatusCode::SERVICE_UNAVAILABLE, why);
+        response.headers_mut().insert(
+            header::RETRY_AFTER,
+            HeaderValue::from(self.config.retry_after_s),
+        );
+        response
+    }
+
+    async fn leases(&self) -> Result<&Leases, sitelog::LogError> {
+        self.leases
+            .get_or_try_init(|| Leases::existing(&self.js, LEASES_BUCKET))
+            .await
+    }
+
+    /// The request, answered by the host that holds `site`'s lease.
+    async fn to_owner(&self, site: &str, request: Request) -> Response {
+        let holder = match self.leases().await {
+            Ok(leases) => leases.holder(site).await,
+            Err(e) => Err(e),
+        };
+        let host = match holder {
+            Ok(Some(host)) => host,
+            Ok(None) => {
+                return match sitelog::log_exists(&self.js, site).await {
+                    Ok(false) => answer(StatusCode::NOT_FOUND, &format!("no site {site}")),
+                    _ => self.retry_after(&format!(
+                        "site {site} has no owner now: another host takes it over"
+                    )),
+                };
+            }
+            Err(e) => return self.retry_after(&format!("the sites' leases cannot be read: {e}")),
+        };
+        let Some(address) = self.config.hosts.get(&host) else {
+            return answer(
+                StatusCode::BAD_GATEWAY,
+                &format!("site {site} is held by host {host}, which [hosts] does not list"),
+            );
+        };
+        match self.forward(address, request).await {
+            Ok(response) => response,
+            // A dead owner holds its lease until it lapses; then another host takes over.
+            Err(e) => self.retry_after(&format!("site {site}'s owner {host}: {e}")),
+        }
+    }
+
+    /// The request, answered by the first host that answers.
+    async fn to_any(&self, request: Request) -> Response {
+        let (parts, body) = request.into_parts();
+        let Ok(body) = axum::body::to_bytes(body, MAX_BUFFERED_BODY).await else {
+            return answer(StatusCode::PAYLOAD_TOO_LARGE, "request body over 1 MiB");
+        };
+        let mut errors = Vec::new();
+        for (host, address) in &self.config.hosts {
+            let request = Request::from_parts(parts.clone(), Body::from(body.clone()));
+            match self.forward(address, request).await {
+                Ok(response) => return response,
+                Err(e) => errors.push(format!("{host}: {e}")),
+            }
+        }
+        self.retry_after(&format!("no mapper host answers ({})", errors.join("; ")))
+    }
+
+    /// `/api/v1/fleets`: every host's fleets (the sites it owns) and quarantined fleets.
+    async fn fleet_list(&self, request: Request) -> Response {
+        let (parts, _) = request.into_parts();
+        let (mut fleets, mut quarantined, mut answered) = (Vec::new(), Vec::new(), 0);
+        for address in self.config.hosts.values() {
+            let request = Request::from_parts(parts.clone(), Body::empty());
+            let Ok(response) = self.forward(address, request).await else {
+                continue;
+            };
+            if response.status() != StatusCode::OK {
+                return response;
+            }
+            let Ok(bytes) = axum::body::to_bytes(response.into_body(), MAX_BUFFERED_BODY).await
+            else {
+                continue;
+            };
+            let Ok(list) = serde_json::from_slice::<serde_json::Value>(&bytes) else {
+                continue;
+            };
+            answered += 1;
+            fleets.extend(list["fleets"].as_array().into_iter().flatten().cloned());
+            quarantined.extend(
+                list["quarantined"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .cloned(),
+            );
+        }
+        if answered == 0 {
+            return self.retry_after("no mapper host answers");
+        }
+        let key = |v: &serde_json::Value| v.to_string();
+        fleets.sort_by_key(key);
+        fleets.dedup();
+        quarantined.sort_by_key(key);
+        quarantined.dedup();
+        axum::Json(serde_json::json!({ "fleets": fleets, "quarantined": quarantined }))
+            .into_response()
+    }
+
+    /// Sends `request` to the mapper host at `address`; its answer, or why there is none.
+    async fn forward(&self, address: &str, request: Request) -> Result<Response, String> {
+        let (mut parts, body) = request.into_parts();
+        let path = parts
+            .uri
+            .path_and_query()
+            .map_or("/", |p| p.as_str())
+            .to_owned();
+        parts.uri = format!("http://{address}{path}")
+            .parse()
+            .map_err(|e| format!("{address}: {e}"))?;
+        // The client names the host it connects to.
+        parts.headers.remove(header::HOST);
+        let timeout = Duration::from_millis(self.config.request_timeout_ms);
+        let sent = self.client.request(Request::from_parts(parts, body));
+        match tokio::time::timeout(timeout, sent).await {
+            Ok(Ok(response)) => Ok(response.map(Body::new)),
+            Ok(Err(e)) => Err(format!("{address}: {e}")),
+            Err(_) => Err(format!("{address}: no answer within {timeout:?}")),
+        }
+    }
+}
+
+/// A plain-text answer.
+fn answer(status: StatusCode, text: &str) -> Response {
+    (status, format!("{text}\n")).into_response()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_gateway_without_hosts_or_servers_is_refused_saying_what_to_set() {
+        let config = GatewayConfig::default();
+        let e = config.check().unwrap_err().to_string();
+        assert!(e.contains("[hosts]"), "{e}");
+        let config = GatewayConfig {
+            hosts: [("h1".to_owned(), "127.0.0.1:8080".to_owned())].into(),
+            ..GatewayConfig::default()
+        };
+        let e = config.check().unwrap_err().to_string();
+        assert!(e.contains("[nats] servers"), "{e}");
+    }
+}
