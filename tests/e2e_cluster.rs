@@ -484,6 +484,31 @@ fn a_gateway_answers_for_the_sites_owner_and_follows_it_to_another_host() {
     assert_eq!(status("/api/v1/fleets/nowhere/summary"), Some(404));
     assert_eq!(status("/api/v1/openapi.json"), Some(200));
     assert_eq!(status("/metrics"), Some(404), "a gateway keeps no metrics");
+    // The event stream, every host's merged: the robots' nodes come on it.
+    let mut events = common::sse::Sse::open(&gateway.http, "/api/v1/events");
+    let node = wait_for(Duration::from_secs(10), || {
+        let event = events.next();
+        (event["type"] == "node").then_some(event)
+    })
+    .expect("a node event through the gateway");
+    assert_eq!(node["fleet"], "park", "{node}");
+    drop(events);
+    // A robot's live feed, a WebSocket, through the gateway to the owner.
+    let url = format!(
+        "ws://{}/api/v1/fleets/park/robots/robot0/live",
+        gateway.http
+    );
+    let (mut socket, _) = tungstenite::connect(url).expect("the WebSocket opens");
+    let sample = loop {
+        match socket.read().expect("a message") {
+            tungstenite::Message::Text(text) => break text,
+            tungstenite::Message::Ping(_) | tungstenite::Message::Pong(_) => {}
+            other => panic!("{other:?}"),
+        }
+    };
+    let sample: serde_json::Value = serde_json::from_str(&sample).expect("JSON");
+    assert!(sample.is_object(), "{sample}");
+    socket.close(None).ok();
     // h1 killed: 503 with Retry-After while its lease runs out, then h2's answers.
     let killed = Instant::now();
     hosts.h1.take().expect("h1 runs").kill();

@@ -6,56 +6,11 @@
 
 mod common;
 
+use common::sse::Sse;
 use common::*;
 use serde_json::Value;
-use std::io::{BufRead, BufReader, Read};
+use std::io::Read;
 use std::time::{Duration, Instant};
-
-/// An SSE stream's JSON events, read as they come.
-struct Sse {
-    lines: std::io::Lines<BufReader<Box<dyn Read + Send>>>,
-}
-
-impl Sse {
-    fn open(http: &str, path: &str) -> Sse {
-        let agent: ureq::Agent = ureq::Agent::config_builder()
-            .http_status_as_error(false)
-            .build()
-            .into();
-        let answer = agent
-            .get(format!("http://{http}{path}"))
-            .call()
-            .expect("the stream opens");
-        assert_eq!(answer.status(), 200, "{path}");
-        let reader: Box<dyn Read + Send> = Box::new(answer.into_body().into_reader());
-        Sse {
-            lines: BufReader::new(reader).lines(),
-        }
-    }
-
-    fn next(&mut self) -> Value {
-        loop {
-            let line = self
-                .lines
-                .next()
-                .expect("the stream goes on")
-                .expect("a line");
-            if let Some(data) = line.strip_prefix("data: ") {
-                return serde_json::from_str(data).expect("JSON");
-            }
-        }
-    }
-
-    /// The events of the next `period`.
-    fn during(&mut self, period: Duration) -> Vec<Value> {
-        let until = Instant::now() + period;
-        let mut out = Vec::new();
-        while Instant::now() < until {
-            out.push(self.next());
-        }
-        out
-    }
-}
 
 fn stamps(samples: &[Value]) -> Vec<u64> {
     samples

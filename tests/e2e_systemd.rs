@@ -1,4 +1,4 @@
-//! The systemd units of `deploy/systemd/`: `systemd-analyze verify` passes on both (the edge's
+//! The systemd units of `deploy/systemd/`: `systemd-analyze verify` passes on each (the edge's
 //! template as an instance), with ExecStart at the built binary, and their hardening scores
 //! at most 2.0 on `systemd-analyze security`. systemd only warns about an unknown key, so any
 //! output fails the check: a unit with a typo'd key is shown to fail it. And the services take
@@ -63,7 +63,7 @@ fn verify(unit: &Path) -> Result<(), String> {
 }
 
 #[test]
-fn both_units_verify_and_are_hardened() {
+fn every_unit_verifies_and_is_hardened() {
     let dir = temp_dir("systemd");
     let mapper = write_unit(
         &dir,
@@ -75,9 +75,14 @@ fn both_units_verify_and_are_hardened() {
         "levelmap-edge@.service",
         &unit_text("levelmap-edge@.service"),
     );
+    let gateway = write_unit(
+        &dir,
+        "levelmap-gateway.service",
+        &unit_text("levelmap-gateway.service"),
+    );
     // The template is loaded for an instance named after a robot.
     let edge = dir.join("levelmap-edge@robot3.service");
-    for unit in [&mapper, &edge] {
+    for unit in [&mapper, &edge, &gateway] {
         verify(unit).unwrap_or_else(|e| panic!("{e}"));
         // Exposure 0..10 as the tool prints it; the threshold is in tenths.
         analyze(&["security", "--offline=yes", "--threshold=20"], unit)

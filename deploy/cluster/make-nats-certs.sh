@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# deploy/cluster/make-nats-certs.sh OUT_DIR NATS_NODES MAPPER_HOSTS
+# deploy/cluster/make-nats-certs.sh OUT_DIR NATS_NODES MAPPER_HOSTS [GATEWAYS]
 #
 # The certificates of a levelmap cluster's NATS servers and of the mapper hosts that use them
 # (docs/cluster.md), both sides authenticated, and the servers' authorization:
@@ -9,10 +9,12 @@
 #                                   clients' TLS and its cluster routes (server and client use)
 #   OUT_DIR/HOST.pem, HOST.key      one per mapper host (MAPPER_HOSTS, comma-separated);
 #                                   common name = the host's name
+#   OUT_DIR/GATEWAY.pem, .key       one per HTTP gateway (GATEWAYS, comma-separated, optional)
 #   OUT_DIR/auth.conf               `include`d by every server's config: each mapper host's
 #                                   certificate maps to a user (verify_and_map) allowed the
 #                                   JetStream API and the site logs, leases and snapshots;
-#                                   nobody else is a user
+#                                   each gateway's to a user who may read the leases and the
+#                                   streams' info, and no record; nobody else is a user
 #
 # A client without a certificate of this CA cannot connect; one with a certificate of this CA
 # for a name not in MAPPER_HOSTS connects to no user and is refused. Run again with more hosts:
@@ -27,8 +29,8 @@
 # Needs bash and openssl.
 set -euo pipefail
 
-[ $# -eq 3 ] || {
-  echo "usage: $0 OUT_DIR NATS_NODES MAPPER_HOSTS (lists comma-separated)" >&2
+[ $# -eq 3 ] || [ $# -eq 4 ] || {
+  echo "usage: $0 OUT_DIR NATS_NODES MAPPER_HOSTS [GATEWAYS] (lists comma-separated)" >&2
   exit 2
 }
 command -v openssl >/dev/null || {
@@ -38,14 +40,15 @@ command -v openssl >/dev/null || {
 out="$1"
 IFS=, read -r -a nodes <<<"$2"
 IFS=, read -r -a hosts <<<"$3"
+IFS=, read -r -a gateways <<<"${4:-}"
 days="${LEVELMAP_CERT_DAYS:-825}"
-for name in "${nodes[@]}" "${hosts[@]}"; do
+for name in "${nodes[@]}" "${hosts[@]}" "${gateways[@]}"; do
   [[ "$name" =~ ^[A-Za-z0-9_-]+$ ]] || {
     echo "$0: '$name': names are [A-Za-z0-9_-]+" >&2
     exit 2
   }
 done
-if [ "$(printf '%s\n' "${nodes[@]}" "${hosts[@]}" | sort | uniq -d)" != "" ]; then
+if [ "$(printf '%s\n' "${nodes[@]}" "${hosts[@]}" "${gateways[@]}" | sort | uniq -d)" != "" ]; then
   echo "$0: a name is given twice" >&2
   exit 2
 fi
@@ -80,7 +83,7 @@ for node in "${nodes[@]}"; do
   # Routes between servers are TLS too: each server is also its peers' client.
   certificate "$node" "DNS:$node,DNS:localhost,IP:127.0.0.1$extra" "serverAuth,clientAuth"
 done
-for host in "${hosts[@]}"; do
+for host in "${hosts[@]}" "${gateways[@]}"; do
   certificate "$host" "DNS:$host" "clientAuth"
 done
 
@@ -94,11 +97,23 @@ done
   echo '    publish = ["$JS.API.>", "$JS.ACK.>", "$KV.>", "$O.>", "levelmap.site.>", "_INBOX.>"]'
   echo '    subscribe = ["$KV.>", "$O.>", "levelmap.site.>", "_INBOX.>"]'
   echo "  }"
+  # A gateway reads who holds each site (the leases' bucket, levelmap_site_leases, as the
+  # mapper names it) and whether a site's stream exists; it reads no record and writes nothing.
+  # (nats-server refuses a permissions block no user refers to: written only with gateways.)
+  if [ ${#gateways[@]} -gt 0 ]; then
+    echo "  http_gateway = {"
+    echo '    publish = ["$JS.API.INFO", "$JS.API.STREAM.INFO.>", "$JS.API.DIRECT.GET.KV_levelmap_site_leases.>", "$JS.API.STREAM.MSG.GET.KV_levelmap_site_leases"]'
+    echo '    subscribe = ["_INBOX.>"]'
+    echo "  }"
+  fi
   echo "  users = ["
   for host in "${hosts[@]}"; do
     echo "    { user: \"CN=$host\", permissions: \$mapper_host }"
   done
+  for gateway in "${gateways[@]}"; do
+    echo "    { user: \"CN=$gateway\", permissions: \$http_gateway }"
+  done
   echo "  ]"
   echo "}"
 } >auth.conf
-echo "$out: CA, ${#nodes[@]} server and ${#hosts[@]} host certificates, auth.conf"
+echo "$out: CA, ${#nodes[@]} server, ${#hosts[@]} host and ${#gateways[@]} gateway certificates, auth.conf"

@@ -6,6 +6,7 @@
 
 pub mod netns;
 pub mod openapi;
+pub mod sse;
 
 use edge::{NodeBuilder, SimSource, SimSourceConfig, Source, SourceEvent};
 use serde_json::Value;

@@ -1,18 +1,19 @@
 //! `levelmap gateway`: a stateless HTTP front of a cluster (docs/cluster.md). It holds no
 //! map: a request for a site (`/api/v1/fleets/{site}/…`) goes to the mapper host that holds
-//! the site's lease, as the leases bucket says at that moment; the fleet list is the union
-//! of every host's; anything else (the dashboard, the OpenAPI document) comes from any host
+//! the site's lease, as the leases bucket says at that moment (a robot's live feed, a
+//! WebSocket, too); the fleet list is the union of every host's, the event stream every
+//! host's merged; anything else (the dashboard, the OpenAPI document) comes from any host
 //! that answers. A site without an owner, or whose owner does not answer, is 503 with
 //! `Retry-After`. Any number of gateways may run, and any one may be killed.
 
 use crate::cluster::LEASES_BUCKET;
 use anyhow::{Context, Result};
-use axum::body::Body;
+use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
 use axum::http::{HeaderValue, Method, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use hyper_util::client::legacy::{Client, connect::HttpConnector};
-use hyper_util::rt::TokioExecutor;
+use hyper_util::rt::{TokioExecutor, TokioIo};
 use serde::{Deserialize, Serialize};
 use sitelog::{Leases, NatsAccess};
 use std::collections::BTreeMap;
@@ -22,6 +23,10 @@ use tokio::sync::OnceCell;
 
 /// The largest request body the gateway buffers to try it on several hosts.
 const MAX_BUFFERED_BODY: usize = 1 << 20;
+
+/// Events waiting for a slow client of the merged event stream; past it the hosts' streams
+/// wait (and each host skips what its subscriber missed, as for a direct client).
+const EVENTS_QUEUED: usize = 256;
 
 /// A gateway's configuration (deploy/cluster/gateway.toml).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -147,15 +152,12 @@ async fn route(State(gateway): State<Arc<Gateway>>, request: Request) -> Respons
             "each mapper host serves its own /metrics; the gateway keeps none",
         );
     }
-    if request.headers().contains_key(header::UPGRADE) {
-        return answer(
-            StatusCode::NOT_IMPLEMENTED,
-            "live feeds (WebSocket) are not passed through the gateway yet: open them on the \
-             site's owner",
-        );
-    }
-    if path == "/api/v1/fleets" && request.method() == Method::GET {
-        return gateway.fleet_list(request).await;
+    if request.method() == Method::GET {
+        match path.as_str() {
+            "/api/v1/fleets" => return gateway.fleet_list(request).await,
+            "/api/v1/events" => return gateway.events(request).await,
+            _ => {}
+        }
     }
     match path
         .strip_prefix("/api/v1/fleets/")
@@ -274,6 +276,41 @@ impl Gateway {
             .into_response()
     }
 
+    /// `/api/v1/events`: every host's event stream, merged event by event. It ends when any
+    /// host's ends (a host stopped or died): the client's `EventSource` opens it again, on
+    /// the hosts as they are then.
+    async fn events(&self, request: Request) -> Response {
+        let (parts, _) = request.into_parts();
+        let (merged, events) = tokio::sync::mpsc::channel::<Option<Bytes>>(EVENTS_QUEUED);
+        let mut opened = 0;
+        for address in self.config.hosts.values() {
+            let request = Request::from_parts(parts.clone(), Body::empty());
+            match self.forward(address, request).await {
+                Ok(response) if response.status() == StatusCode::OK => {
+                    opened += 1;
+                    tokio::spawn(pass_events(response.into_body(), merged.clone()));
+                }
+                _ => {}
+            }
+        }
+        drop(merged);
+        if opened == 0 {
+            return self.retry_after("no mapper host answers");
+        }
+        let stream = futures_util::stream::unfold(events, |mut events| async move {
+            let event = events.recv().await.flatten()?;
+            Some((Ok::<_, std::convert::Infallible>(event), events))
+        });
+        (
+            [
+                (header::CONTENT_TYPE, "text/event-stream"),
+                (header::CACHE_CONTROL, "no-cache"),
+            ],
+            Body::from_stream(stream),
+        )
+            .into_response()
+    }
+
     /// Sends `request` to the mapper host at `address`; its answer, or why there is none.
     async fn forward(&self, address: &str, request: Request) -> Result<Response, String> {
         let (mut parts, body) = request.into_parts();
@@ -287,14 +324,53 @@ impl Gateway {
             .map_err(|e| format!("{address}: {e}"))?;
         // The client names the host it connects to.
         parts.headers.remove(header::HOST);
+        let mut request = Request::from_parts(parts, body);
+        // A WebSocket (a robot's live feed): once both sides switched protocols, the bytes
+        // are copied both ways until either closes.
+        let upgrade = request
+            .headers()
+            .contains_key(header::UPGRADE)
+            .then(|| hyper::upgrade::on(&mut request));
         let timeout = Duration::from_millis(self.config.request_timeout_ms);
-        let sent = self.client.request(Request::from_parts(parts, body));
-        match tokio::time::timeout(timeout, sent).await {
-            Ok(Ok(response)) => Ok(response.map(Body::new)),
-            Ok(Err(e)) => Err(format!("{address}: {e}")),
-            Err(_) => Err(format!("{address}: no answer within {timeout:?}")),
+        let sent = self.client.request(request);
+        let mut response = match tokio::time::timeout(timeout, sent).await {
+            Ok(Ok(response)) => response,
+            Ok(Err(e)) => return Err(format!("{address}: {e}")),
+            Err(_) => return Err(format!("{address}: no answer within {timeout:?}")),
+        };
+        if let Some(client_side) = upgrade
+            && response.status() == StatusCode::SWITCHING_PROTOCOLS
+        {
+            let host_side = hyper::upgrade::on(&mut response);
+            tokio::spawn(async move {
+                let (Ok(client_side), Ok(host_side)) = tokio::join!(client_side, host_side) else {
+                    return;
+                };
+                let (mut client_side, mut host_side) =
+                    (TokioIo::new(client_side), TokioIo::new(host_side));
+                let _ = tokio::io::copy_bidirectional(&mut client_side, &mut host_side).await;
+            });
+        }
+        Ok(response.map(Body::new))
+    }
+}
+
+/// One host's event stream into `merged`, whole events at a time (an event ends with a
+/// blank line); `None` when it ends.
+async fn pass_events(body: Body, merged: tokio::sync::mpsc::Sender<Option<Bytes>>) {
+    use futures_util::StreamExt;
+    let mut data = body.into_data_stream();
+    let mut pending: Vec<u8> = Vec::new();
+    while let Some(Ok(chunk)) = data.next().await {
+        pending.extend_from_slice(&chunk);
+        while let Some(end) = pending.windows(2).position(|w| w == b"\n\n") {
+            let event: Vec<u8> = pending.drain(..end + 2).collect();
+            if merged.send(Some(Bytes::from(event))).await.is_err() {
+                return;
+            }
         }
     }
+    let _ = merged.send(None).await;
 }
 
 /// A plain-text answer.
@@ -317,5 +393,18 @@ mod tests {
         };
         let e = config.check().unwrap_err().to_string();
         assert!(e.contains("[nats] servers"), "{e}");
+    }
+
+    #[test]
+    fn the_deployed_gateway_file_is_whole_and_valid() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../deploy/cluster/gateway.toml");
+        let file: GatewayConfig = runtime::session::load_toml_with(Some(&path), []).unwrap();
+        file.check().unwrap();
+        assert_eq!(file.hosts.len(), 3);
+        assert!(
+            file.nats.cert.is_some(),
+            "a gateway has its own certificate"
+        );
     }
 }

@@ -2,7 +2,8 @@
 //! routes, certificates and authorization from `deploy/cluster/make-nats-certs.sh`. A mapper
 //! host with its certificate writes and reads a site's log; a client without a certificate,
 //! with one from another CA, or with this CA's certificate for a name that is not a mapper
-//! host can neither read nor write it. The host's permissions cover the leases' bucket.
+//! host can neither read nor write it. The host's permissions cover the leases' bucket; a
+//! gateway's certificate reads the leases and no record.
 
 mod common;
 
@@ -14,7 +15,15 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
+/// The leases' bucket as the mapper names it (`mapper::cluster::LEASES_BUCKET`): auth.conf
+/// lets a gateway read this one.
+const LEASES_BUCKET: &str = "levelmap_site_leases";
+
 fn make_certs(out: &Path, nodes: &str, hosts: &str) {
+    make_certs_with_gateways(out, nodes, hosts, None);
+}
+
+fn make_certs_with_gateways(out: &Path, nodes: &str, hosts: &str, gateways: Option<&str>) {
     let script =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../deploy/cluster/make-nats-certs.sh");
     let status = Command::new("bash")
@@ -22,6 +31,7 @@ fn make_certs(out: &Path, nodes: &str, hosts: &str) {
         .arg(out)
         .arg(nodes)
         .arg(hosts)
+        .args(gateways)
         .status()
         .expect("run make-nats-certs.sh (bash, openssl)");
     assert!(status.success(), "make-nats-certs.sh failed");
@@ -45,7 +55,7 @@ fn tls_options(ca_dir: &Path, client: Option<(&Path, &str)>) -> ConnectOptions {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn only_a_mapper_host_with_its_certificate_reads_or_writes_a_site_log() {
     let certs = TempDir::new("sitelog-certs");
-    make_certs(certs.path(), "n1,n2,n3", "h1,h2");
+    make_certs_with_gateways(certs.path(), "n1,n2,n3", "h1,h2", Some("g1"));
     let stranger = TempDir::new("sitelog-other-ca");
     make_certs(stranger.path(), "x1", "h1");
     let cluster = Cluster::start("secured", Some(certs.path()));
@@ -71,7 +81,7 @@ async fn only_a_mapper_host_with_its_certificate_reads_or_writes_a_site_log() {
     let js = jetstream::new(h1);
     let mut log = open_when_ready(js.clone(), "park").await;
     // Its permissions cover the leases' KV bucket too.
-    let leases = Leases::open(&js, "levelmap_leases", Duration::from_secs(3), 3)
+    let leases = Leases::open(&js, LEASES_BUCKET, Duration::from_secs(30), 3)
         .await
         .expect("the leases bucket under h1's permissions");
     assert!(leases.claim("park", "h1").await.unwrap().is_some());
@@ -123,6 +133,37 @@ async fn only_a_mapper_host_with_its_certificate_reads_or_writes_a_site_log() {
             }
         }
     }
+    // A gateway, with its certificate: it sees who holds the site and that its log exists,
+    // and can neither read the log's records nor write anything.
+    let g1 = cluster
+        .connect_with(tls_options(certs.path(), Some((certs.path(), "g1"))))
+        .await
+        .expect("g1 connects");
+    let js = jetstream::new(g1);
+    let seen = Leases::existing(&js, LEASES_BUCKET)
+        .await
+        .expect("the gateway opens the leases");
+    assert_eq!(seen.holder("park").await.unwrap().as_deref(), Some("h1"));
+    // A free site: the claim's write is refused (a held one reads as held).
+    assert!(
+        seen.claim("campus", "g1").await.is_err(),
+        "a gateway claims nothing"
+    );
+    assert!(sitelog::log_exists(&js, "park").await.unwrap());
+    assert!(!sitelog::log_exists(&js, "nowhere").await.unwrap());
+    let stream = js.get_stream("LEVELMAP_SITE_park").await.expect("info");
+    assert!(
+        stream.get_raw_message(1).await.is_err(),
+        "a gateway read a record of the site's log"
+    );
+    let forged = match js
+        .publish("levelmap.site.park.log", Bytes::from_static(b"forged"))
+        .await
+    {
+        Ok(ack) => ack.await.is_ok(),
+        Err(_) => false,
+    };
+    assert!(!forged, "a gateway appended to the site's log");
     // Nothing but h1's record is in the log.
     let entries = log.read_from(1).await.unwrap();
     assert_eq!(entries.len(), 1, "{entries:?}");
