@@ -4,7 +4,8 @@
     python zenoh_publisher.py ENDPOINT RECORDING rmw_zenoh|ros2dds
 
 It listens on ENDPOINT (peer mode), waits until the levelmap source subscribes to the
-cloud topic, then publishes every message in time order, one every 2 ms, on
+cloud topic, then publishes every message in time order, one every 2 ms (blocking while the link is
+congested), on
 `0/<topic>/<dds type>/RIHS01_<hash>` as rmw_zenoh does, or on `<topic>` as
 zenoh-bridge-ros2dds does.
 """
@@ -31,7 +32,11 @@ def main(endpoint, recording, style):
         for c in reader.connections:
             topic = c.topic.lstrip("/")
             key = f"0/{topic}/{dds_type(c.msgtype)}/RIHS01_{'0' * 64}" if style == "rmw_zenoh" else topic
-            publishers[c.topic] = session.declare_publisher(key)
+            # Blocking, not dropping, when the link is congested: a loaded test machine must
+            # not lose messages the test counts.
+            publishers[c.topic] = session.declare_publisher(
+                key, congestion_control=zenoh.CongestionControl.BLOCK
+            )
         cloud = publishers["/points"]
         deadline = time.time() + 30
         while not cloud.matching_status.matching:

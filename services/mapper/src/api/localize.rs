@@ -73,6 +73,7 @@ pub(super) async fn modes(
         (status = 403, description = "Write routes are off, or the token only reads", body = String),
         (status = 404, description = "No such fleet or version", body = String),
         (status = 422, description = "The version's map cannot be localized on", body = String),
+        (status = 501, description = "Cluster mode: a site's log does not keep versions and modes yet", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
@@ -84,7 +85,7 @@ pub(super) async fn set_modes(
 ) -> Reply<Json<ModesView>> {
     // The token first: a caller without one learns nothing of the body's faults.
     authorized(&api, &headers)?;
-    api.versions_of(&fleet)?;
+    api.versions_changed_in(&fleet)?;
     let change: SetModes = serde_json::from_slice(&body)
         .map_err(|e| ApiError::BadRequest(format!("not a change of mode: {e}")))?;
     for robot in change.robots.iter().flatten() {

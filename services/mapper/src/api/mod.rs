@@ -65,6 +65,8 @@ struct Api {
     modes_lock: Arc<tokio::sync::Mutex<()>>,
     /// The base map the dashboard may draw (`[http.base_map]`).
     base_map: Option<Arc<crate::config::BaseMap>>,
+    /// Cluster mode (`[cluster]`): what a site's log does not keep yet is refused.
+    cluster: bool,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -86,6 +88,8 @@ pub enum ApiError {
     Unprocessable(String),
     /// 503: the mapper is stopping.
     Unavailable(String),
+    /// 501: not kept in cluster mode yet (map versions and modes: docs/cluster.md).
+    NotInCluster(String),
     /// 503 as JSON: a quarantined fleet, or a store that cannot commit.
     Degraded(Degraded),
     /// 503 with `Retry-After: 1`: a limit is reached (heavy requests, their time, streams).
@@ -111,6 +115,7 @@ impl ApiError {
             ApiError::Unavailable(_) | ApiError::Degraded(_) | ApiError::Busy(_) => {
                 StatusCode::SERVICE_UNAVAILABLE
             }
+            ApiError::NotInCluster(_) => StatusCode::NOT_IMPLEMENTED,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -126,6 +131,7 @@ impl ApiError {
             | ApiError::Unprocessable(r)
             | ApiError::Unavailable(r)
             | ApiError::Busy(r)
+            | ApiError::NotInCluster(r)
             | ApiError::Internal(r) => r,
             ApiError::Degraded(d) => &d.reason,
         }
@@ -309,6 +315,7 @@ pub fn router(
         tiles: Arc::default(),
         served: config.fleets.clone().into(),
         max_versions: config.versions.max_versions.get(),
+        cluster: config.cluster.is_some(),
         maps,
         modes_lock: Arc::default(),
         base_map: config.http.base_map.clone().map(Arc::new),

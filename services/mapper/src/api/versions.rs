@@ -42,6 +42,19 @@ impl Api {
         }
     }
 
+    /// [`Api::versions_of`], for a change of `fleet`'s versions or modes: refused in cluster
+    /// mode, where they would stay on this host's store and be lost when the site moves.
+    pub(super) fn versions_changed_in(&self, fleet: &str) -> Reply<()> {
+        if self.cluster {
+            return Err(ApiError::NotInCluster(
+                "cluster mode: a site's log does not keep map versions and modes yet, and this \
+                 host's store alone would lose them when the site moves (docs/cluster.md)"
+                    .into(),
+            ));
+        }
+        self.versions_of(fleet)
+    }
+
     fn no_version(fleet: &str, version: u64) -> ApiError {
         ApiError::NotFound(format!(
             "no version {version} in fleet {fleet:?} (deleted, or never made)"
@@ -87,6 +100,7 @@ fn created(summary: VersionSummary) -> Response {
         (status = 404, description = "No such fleet, or no node in it yet", body = String),
         (status = 409, description = "The fleet keeps max_versions versions already: delete one", body = String),
         (status = 422, description = "The map is too large for one version file", body = String),
+        (status = 501, description = "Cluster mode: a site's log does not keep versions and modes yet", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
@@ -96,7 +110,7 @@ pub(super) async fn version_freeze(
     headers: HeaderMap,
 ) -> Reply {
     authorized(&api, &headers)?;
-    api.versions_of(&fleet)?;
+    api.versions_changed_in(&fleet)?;
     let view = api.view(&fleet)?;
     store_new(&api, move || {
         crate::versions::freeze(&view, now_ns()).map_err(|e| ApiError::Unprocessable(e.to_string()))
@@ -121,6 +135,7 @@ pub(super) async fn version_freeze(
         (status = 404, description = "A fleet this mapper does not serve", body = String),
         (status = 409, description = "The fleet keeps max_versions versions already: delete one", body = String),
         (status = 413, description = "A file over 256 MiB", body = String),
+        (status = 501, description = "Cluster mode: a site's log does not keep versions and modes yet", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
@@ -131,7 +146,7 @@ pub(super) async fn version_import(
     body: Body,
 ) -> Reply {
     authorized(&api, &headers)?;
-    api.versions_of(&fleet)?;
+    api.versions_changed_in(&fleet)?;
     let file = axum::body::to_bytes(body, MAX_MAP_VERSION_BYTES)
         .await
         .map_err(|e| {
@@ -282,6 +297,7 @@ pub(super) async fn version_file(
         (status = 403, description = "Write routes are off, or the token only reads", body = String),
         (status = 404, description = "No such fleet or version", body = String),
         (status = 409, description = "Robots localize on the version (set them to map or to another version first)", body = String),
+        (status = 501, description = "Cluster mode: a site's log does not keep versions and modes yet", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
@@ -291,7 +307,7 @@ pub(super) async fn version_delete(
     headers: HeaderMap,
 ) -> Reply<StatusCode> {
     authorized(&api, &headers)?;
-    api.versions_of(&fleet)?;
+    api.versions_changed_in(&fleet)?;
     api.limits
         .heavy_write({
             let api = api.clone();
