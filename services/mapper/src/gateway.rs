@@ -121,18 +121,8 @@ pub async fn start(config: GatewayConfig) -> Result<RunningGateway> {
         client,
     });
     let app = axum::Router::new().fallback(route).with_state(gateway);
-    let (stop, mut stopping) = tokio::sync::watch::channel(false);
-    let http = tokio::spawn(async move {
-        let stopped = async move {
-            let _ = stopping.wait_for(|s| *s).await;
-        };
-        if let Err(e) = axum::serve(listener, app)
-            .with_graceful_shutdown(stopped)
-            .await
-        {
-            tracing::error!("HTTP server: {e}");
-        }
-    });
+    let (stop, stopping) = tokio::sync::watch::channel(false);
+    let http = crate::server::serve_until_stopped(listener, app, stopping);
     Ok(RunningGateway {
         http_addr,
         stop,

@@ -167,18 +167,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
     let app = crate::api::router(shared.clone(), work_tx.clone(), store, maps, &config);
-    let mut stopping = shared.stopping.subscribe();
-    let http = tokio::spawn(async move {
-        let stopped = async move {
-            let _ = stopping.wait_for(|s| *s).await;
-        };
-        if let Err(e) = axum::serve(listener, app)
-            .with_graceful_shutdown(stopped)
-            .await
-        {
-            tracing::error!("HTTP server: {e}");
-        }
-    });
+    let http = serve_until_stopped(listener, app, shared.stopping.subscribe());
     Ok(Running {
         http_addr,
         shared,
@@ -188,6 +177,25 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         work: work_tx,
         fleets: config.fleets.clone(),
         cluster,
+    })
+}
+
+/// Serves `app` on `listener` until `stopping` turns true, then lets open requests finish.
+pub(crate) fn serve_until_stopped(
+    listener: tokio::net::TcpListener,
+    app: axum::Router,
+    mut stopping: tokio::sync::watch::Receiver<bool>,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let stopped = async move {
+            let _ = stopping.wait_for(|s| *s).await;
+        };
+        if let Err(e) = axum::serve(listener, app)
+            .with_graceful_shutdown(stopped)
+            .await
+        {
+            tracing::error!("HTTP server: {e}");
+        }
     })
 }
 

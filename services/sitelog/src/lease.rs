@@ -48,7 +48,7 @@ impl Leases {
             Err(_) => js
                 .create_key_value(config)
                 .await
-                .map_err(|e| LogError::JetStream(e.to_string()))?,
+                .map_err(LogError::jetstream)?,
         };
         Ok(Leases { store, ttl })
     }
@@ -59,11 +59,8 @@ impl Leases {
         let store = js
             .get_key_value(bucket)
             .await
-            .map_err(|e| LogError::JetStream(e.to_string()))?;
-        let status = store
-            .status()
-            .await
-            .map_err(|e| LogError::JetStream(e.to_string()))?;
+            .map_err(LogError::jetstream)?;
+        let status = store.status().await.map_err(LogError::jetstream)?;
         Ok(Leases {
             ttl: status.max_age(),
             store,
@@ -90,11 +87,7 @@ impl Leases {
 
     /// The host holding `site`, if any.
     pub async fn holder(&self, site: &str) -> Result<Option<String>, LogError> {
-        let value = self
-            .store
-            .get(site)
-            .await
-            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        let value = self.store.get(site).await.map_err(LogError::jetstream)?;
         Ok(value.map(|v| String::from_utf8_lossy(&v).into_owned()))
     }
 

@@ -133,6 +133,13 @@ pub enum LogError {
     JetStream(String),
 }
 
+impl LogError {
+    /// JetStream's own error, in its words.
+    fn jetstream(e: impl fmt::Display) -> LogError {
+        LogError::JetStream(e.to_string())
+    }
+}
+
 /// A site's log, as one writer (the site's owner) sees it.
 pub struct SiteLog {
     js: Context,
@@ -171,11 +178,8 @@ impl SiteLog {
         let mut stream = js
             .get_or_create_stream(config)
             .await
-            .map_err(|e| LogError::JetStream(e.to_string()))?;
-        let info = stream
-            .info()
-            .await
-            .map_err(|e| LogError::JetStream(e.to_string()))?;
+            .map_err(LogError::jetstream)?;
+        let info = stream.info().await.map_err(LogError::jetstream)?;
         let last_sequence = info.state.last_sequence;
         Ok(SiteLog {
             js,
@@ -251,11 +255,7 @@ impl SiteLog {
     /// The records from sequence `from` on, in order, at most `max` of them: fewer than
     /// `max` when the log ends.
     pub async fn read_some(&mut self, from: u64, max: usize) -> Result<Vec<Entry>, LogError> {
-        let info = self
-            .stream
-            .info()
-            .await
-            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        let info = self.stream.info().await.map_err(LogError::jetstream)?;
         let (first, last) = (info.state.first_sequence, info.state.last_sequence);
         let mut entries = Vec::new();
         for sequence in (from.max(first)..=last).take(max) {
@@ -266,11 +266,7 @@ impl SiteLog {
 
     /// The last sequence in the stream, as the server says now.
     pub async fn stream_last_sequence(&mut self) -> Result<u64, LogError> {
-        let info = self
-            .stream
-            .info()
-            .await
-            .map_err(|e| LogError::JetStream(e.to_string()))?;
+        let info = self.stream.info().await.map_err(LogError::jetstream)?;
         Ok(info.state.last_sequence)
     }
 
