@@ -74,11 +74,23 @@ fn record(http: &str) -> Value {
     })
 }
 
-/// A robot's record: its id, nodes, last node and chains (not its live pose or times).
+/// A robot's record: its id, nodes, last node and chains (not its live pose or times), with
+/// the fields the fixture's release served (later ones add to them).
 fn robot_record(r: &Value) -> Value {
+    let chains: Vec<Value> = r["chains"]
+        .as_array()
+        .expect("chains")
+        .iter()
+        .map(|c| {
+            serde_json::json!({
+                "chain_id": c["chain_id"], "first_node_seq": c["first_node_seq"],
+                "last_node_seq": c["last_node_seq"],
+            })
+        })
+        .collect();
     serde_json::json!({
         "id": r["id"], "nodes": r["nodes"], "last_node_seq": r["last_node_seq"],
-        "chains": r["chains"],
+        "chains": chains,
     })
 }
 

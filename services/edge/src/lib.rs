@@ -17,7 +17,7 @@ pub use cloud::CloudParams;
 pub use config::{EdgeConfig, SourceConfig};
 pub use node::{GpsReading, NodeBuilder, NodeError, NodeParams, PlanarScan, SensorScan};
 pub use outbox::{Outbox, OutboxError};
-pub use service::{EdgeReport, run};
+pub use service::{EdgeReport, ResendBackoff, run};
 pub use source::{
     FilesSource, FilesSourceConfig, McapSource, McapSourceConfig, Ros2Source, Ros2SourceConfig,
     SimSourceConfig, Source, SourceEvent,

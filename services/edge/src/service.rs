@@ -82,6 +82,7 @@ pub(super) enum Produced {
 }
 
 mod backoff;
+pub use backoff::ResendBackoff;
 mod produce;
 mod tf;
 use produce::produce;

@@ -122,7 +122,7 @@ struct BenchReport {
 }
 
 /// The nodes of the park's three loops, each a node per scan, to be replayed.
-fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<Node>> {
+pub(crate) fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<Node>> {
     (0..3)
         .map(|loop_index| {
             let config = SimSourceConfig {
@@ -151,10 +151,17 @@ fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<Node>> {
         .collect()
 }
 
-/// Node `k` of a robot as sent: a pool node moved `east_m` east (odometry and GPS), renamed,
-/// restamped, encoded as an outbox keeps it with its send fields appended.
-fn robot_node(template: &Node, robot: &str, k: u64, east_m: f64, stamp_ns: u64) -> Vec<u8> {
+/// Node `k` of a robot of `fleet` as sent: a pool node moved `east_m` east (odometry and
+/// GPS), renamed, restamped, encoded as an outbox keeps it with its send fields appended.
+pub(crate) fn robot_node(
+    template: &Node,
+    (fleet, robot): (&str, &str),
+    k: u64,
+    east_m: f64,
+    stamp_ns: u64,
+) -> Vec<u8> {
     let mut node = template.clone().into_parts();
+    node.fleet = fleet.to_owned();
     node.robot = robot.to_owned();
     node.node_seq = k;
     // One chain per robot, from node 0: chain ids are per robot.
@@ -266,11 +273,15 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     // Pose queries, during the whole run.
     let queries = {
         let per_connection = args.query_rate / args.connections.max(1) as f64;
+        let paths: Arc<Vec<String>> = Arc::new(
+            (0..args.robots)
+                .map(|r| format!("/api/v1/fleets/{FLEET}/robots/robot{r}/pose"))
+                .collect(),
+        );
         (0..args.connections)
             .map(|c| {
-                let (http, stop) = (http.clone(), stop.clone());
-                let robots = args.robots;
-                std::thread::spawn(move || query_poses(&http, robots, per_connection, c, &stop))
+                let (http, stop, paths) = (http.clone(), stop.clone(), paths.clone());
+                std::thread::spawn(move || query_poses(&http, &paths, per_connection, c, &stop))
             })
             .collect::<Vec<_>>()
     };
@@ -311,7 +322,7 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
             let stamp = epoch + started.elapsed().as_nanos() as u64;
             // Robots take turns within the node period, as real ones would not be in step.
             if node_turn == (r as u64 % node_every.max(1)) && (k as usize) < nodes_per_robot {
-                let node = robot_node(template, robot, k, east, stamp);
+                let node = robot_node(template, (FLEET, robot), k, east, stamp);
                 sent.lock()
                     .expect("sent")
                     .insert((robot.clone(), k), Instant::now());
@@ -352,9 +363,9 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     let mut query_errors = 0;
     let query_time = started.elapsed().as_secs_f64();
     for q in queries {
-        let (ms, errors) = q.join().map_err(|_| anyhow::anyhow!("query thread"))?;
-        query_ms.extend(ms);
-        query_errors += errors;
+        let queried = q.join().map_err(|_| anyhow::anyhow!("query thread"))?;
+        query_ms.extend(queried.ms);
+        query_errors += queried.errors + queried.unavailable;
     }
     let latencies: Vec<f64> = {
         let sent = sent.lock().expect("sent");
@@ -433,8 +444,12 @@ pub(crate) fn agent() -> ureq::Agent {
 }
 
 /// Reads `/api/v1/events` and notes when each node event arrives. Blocks on the stream
-/// between events; the thread ends with the mapper (or the process).
-fn follow_events(http: &str, seen: &Mutex<HashMap<(String, u64), Instant>>, stop: &AtomicBool) {
+/// between events; returns when the stream ends (with the mapper) or at `stop`.
+pub(crate) fn follow_events(
+    http: &str,
+    seen: &Mutex<HashMap<(String, u64), Instant>>,
+    stop: &AtomicBool,
+) {
     let Ok(response) = agent()
         .get(format!("http://{http}/api/v1/events"))
         .header("Accept", "text/event-stream")
@@ -469,16 +484,17 @@ fn follow_events(http: &str, seen: &Mutex<HashMap<(String, u64), Instant>>, stop
     }
 }
 
-/// GETs robot poses at `rate` per second on one keep-alive connection (the agent's pool of
-/// one thread's sequential requests); returns latencies (ms) and errors.
-fn query_poses(
+/// GETs robot poses (`paths`, one per robot) at `rate` per second on one keep-alive
+/// connection (the agent's pool of one thread's sequential requests); returns latencies (ms)
+/// and errors.
+pub(crate) fn query_poses(
     http: &str,
-    robots: usize,
+    paths: &[String],
     rate: f64,
     connection: usize,
     stop: &AtomicBool,
-) -> (Vec<f64>, u64) {
-    let (mut latencies, mut errors) = (Vec::new(), 0u64);
+) -> Queried {
+    let mut queried = Queried::default();
     let period = Duration::from_secs_f64(1.0 / rate.max(1.0));
     let agent = agent();
     let started = Instant::now();
@@ -488,9 +504,9 @@ fn query_poses(
         if let Some(wait) = due.checked_duration_since(Instant::now()) {
             std::thread::sleep(wait);
         }
-        let robot = (k as usize * 7 + connection) % robots;
+        let robot = (k as usize * 7 + connection) % paths.len();
         k += 1;
-        let url = format!("http://{http}/api/v1/fleets/{FLEET}/robots/robot{robot}/pose");
+        let url = format!("http://{http}{}", paths[robot]);
         let t0 = Instant::now();
         // The body is read to the end so that the connection can be used again.
         let status = agent.get(&url).call().and_then(|mut response| {
@@ -498,11 +514,24 @@ fn query_poses(
             Ok(response.status().as_u16())
         });
         match status {
-            Ok(200) => latencies.push(t0.elapsed().as_secs_f64() * 1e3),
+            Ok(200) => queried.ms.push(t0.elapsed().as_secs_f64() * 1e3),
             // 404 until the robot's first node is in: not a latency sample.
             Ok(404) => {}
-            _ => errors += 1,
+            // A gateway's answer while the robot's site has no owner (cluster mode).
+            Ok(503) => queried.unavailable += 1,
+            _ => queried.errors += 1,
         }
     }
-    (latencies, errors)
+    queried
+}
+
+/// What one connection's pose queries got.
+#[derive(Default)]
+pub(crate) struct Queried {
+    /// Latencies of the answered ones (ms).
+    pub ms: Vec<f64>,
+    /// 503s: the site had no owner then.
+    pub unavailable: u64,
+    /// Anything else but 200 and 404, or no answer.
+    pub errors: u64,
 }

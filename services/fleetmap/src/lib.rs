@@ -36,4 +36,4 @@ pub use fleet::{
     ChainRecord, FleetMap, IngestError, Ingested, LocalizedSpan, MAX_CHAINS_PER_ROBOT,
     MAX_ROBOTS_PER_FLEET, NodeRecord, RobotRecord, Sequence, SolvePoint, SpanReplay, grid_of,
 };
-pub use view::{FleetView, RobotView};
+pub use view::{ChainView, FleetView, RobotView};

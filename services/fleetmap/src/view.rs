@@ -19,12 +19,28 @@ pub struct RobotView {
     /// Highest node_seq taken of its newest chain.
     pub last_node_seq: u64,
     /// Its chains (one per outbox it sent from), oldest first.
-    pub chains: Vec<crate::fleet::ChainRecord>,
+    pub chains: Vec<ChainView>,
     /// The robot frame's map pose at its last node, and its odometry pose there: live odometry
     /// since then, composed onto the first, gives the live map pose.
     pub map_pose_at_last_node: Pose2,
     /// The robot's planar odometry pose at its last node.
     pub odometry_at_last_node: Pose2,
+}
+
+/// One chain of a robot's nodes (what one outbox sent), as readers see it.
+#[derive(Clone, Debug, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct ChainView {
+    /// `Node.chain_id` (0: a robot from before chains).
+    pub chain_id: u64,
+    /// The first node_seq mapped of it.
+    pub first_node_seq: u64,
+    /// The highest node_seq mapped of it.
+    pub last_node_seq: u64,
+    /// The highest node_seq taken of it, mapped or located over covered ground (a pass):
+    /// what the mapper acks. The chain's nodes are taken in sequence only, so every node
+    /// from its first to this one is in.
+    pub acked_node_seq: u64,
 }
 
 impl RobotView {
@@ -86,7 +102,18 @@ impl FleetView {
                     id: r.id.clone(),
                     nodes: r.nodes.len(),
                     last_node_seq: r.last_node_seq,
-                    chains: r.chains.clone(),
+                    chains: r
+                        .chains
+                        .iter()
+                        .map(|c| ChainView {
+                            chain_id: c.chain_id,
+                            first_node_seq: c.first_node_seq,
+                            last_node_seq: c.last_node_seq,
+                            acked_node_seq: map
+                                .chain_acked(&r.id, c.chain_id)
+                                .unwrap_or(c.last_node_seq),
+                        })
+                        .collect(),
                     map_pose_at_last_node: poses[last].compose(&record.scan_origin.inverse()),
                     odometry_at_last_node: record.robot_odometry,
                 }

@@ -38,6 +38,8 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     #[cfg(feature = "lab")]
+    BenchCluster(fleetlab::BenchClusterArgs),
+    #[cfg(feature = "lab")]
     BenchFleet(fleetlab::BenchFleetArgs),
     #[cfg(feature = "lab")]
     BenchIncremental(fleetlab::BenchIncrementalArgs),
@@ -72,6 +74,8 @@ enum Command {
 
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
+        #[cfg(feature = "lab")]
+        Command::BenchCluster(args) => fleetlab::bench_cluster::run(&args),
         #[cfg(feature = "lab")]
         Command::BenchFleet(args) => fleetlab::bench_fleet::run(&args),
         #[cfg(feature = "lab")]

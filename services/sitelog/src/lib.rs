@@ -17,6 +17,7 @@
 
 mod access;
 mod lease;
+pub mod local;
 mod placement;
 
 pub use access::NatsAccess;

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 /// The wait before the next re-send.
 #[derive(Clone, Debug, PartialEq)]
-pub(super) struct ResendBackoff {
+pub struct ResendBackoff {
     first: Duration,
     max: Duration,
     now: Duration,
@@ -16,7 +16,7 @@ pub(super) struct ResendBackoff {
 
 impl ResendBackoff {
     /// From `first`, doubling up to `max` (at least `first`).
-    pub(super) fn new(first: Duration, max: Duration) -> ResendBackoff {
+    pub fn new(first: Duration, max: Duration) -> ResendBackoff {
         let max = max.max(first);
         ResendBackoff {
             first,
@@ -26,17 +26,17 @@ impl ResendBackoff {
     }
 
     /// The wait now.
-    pub(super) fn wait(&self) -> Duration {
+    pub fn wait(&self) -> Duration {
         self.now
     }
 
     /// A re-send went out with no progress since the last: wait twice as long next time.
-    pub(super) fn resent(&mut self) {
+    pub fn resent(&mut self) {
         self.now = (self.now * 2).min(self.max);
     }
 
     /// Progress (an ack moved on) or a new session: back to the first wait.
-    pub(super) fn reset(&mut self) {
+    pub fn reset(&mut self) {
         self.now = self.first;
     }
 }

@@ -126,7 +126,7 @@ pub(super) struct RobotState {
     last_node_seq: u64,
     /// Its chains of nodes, one per outbox it sent from (a robot whose outbox was lost starts
     /// a new one), oldest first.
-    chains: Vec<fleetmap::ChainRecord>,
+    chains: Vec<fleetmap::ChainView>,
 }
 
 /// The robot's pose on the map now: live odometry since its last node, or the node itself.

@@ -1,0 +1,159 @@
+//! Three real nats-servers on this machine, one JetStream cluster, each fsyncing every
+//! write, optionally secured as `deploy/cluster/make-nats-certs.sh` makes them: their routes
+//! on loopback, their clients on every interface (a mapper host in a network namespace
+//! reaches them over its veth pair). Processes only, no client: the cluster tests, the
+//! drills (`tests/e2e_cluster.rs`) and `levelmap bench-cluster` start them through this.
+
+use std::io;
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+/// The servers' names, in the order of their ports.
+const NAMES: [&str; 3] = ["n1", "n2", "n3"];
+
+/// Three nats-servers running; killed when dropped.
+pub struct LocalCluster {
+    client_ports: Vec<u16>,
+    monitor_ports: Vec<u16>,
+    servers: Vec<Option<Child>>,
+    names: Vec<String>,
+}
+
+impl LocalCluster {
+    /// Starts `binary` three times, their configs, stores and logs in `dir` (made if
+    /// missing); with TLS and per-client certificates from `secured` when given (the
+    /// folder `make-nats-certs.sh` fills). Returns once the processes are spawned: clients
+    /// retry until the cluster answers.
+    pub fn start(binary: &Path, dir: &Path, secured: Option<&Path>) -> io::Result<LocalCluster> {
+        if !binary.is_file() {
+            return Err(io::Error::new(
+                io::ErrorKind::NotFound,
+                format!("{}: no nats-server binary there", binary.display()),
+            ));
+        }
+        std::fs::create_dir_all(dir)?;
+        let free_ports = || {
+            (0..3)
+                .map(|_| free_port())
+                .collect::<io::Result<Vec<u16>>>()
+        };
+        let (client_ports, route_ports, monitor_ports) =
+            (free_ports()?, free_ports()?, free_ports()?);
+        let routes: Vec<String> = route_ports
+            .iter()
+            .map(|p| format!("nats-route://127.0.0.1:{p}"))
+            .collect();
+        if let Some(certs) = secured {
+            // nats-server reads an include relative to the config's folder.
+            std::fs::copy(certs.join("auth.conf"), dir.join("auth.conf"))?;
+        }
+        let mut cluster = LocalCluster {
+            client_ports,
+            monitor_ports,
+            servers: Vec::new(),
+            names: NAMES.iter().map(|n| n.to_string()).collect(),
+        };
+        for (i, name) in NAMES.iter().enumerate() {
+            let config = dir.join(format!("{name}.conf"));
+            std::fs::write(
+                &config,
+                format!(
+                    "server_name: {name}\nlisten: 0.0.0.0:{client}\nhttp: 127.0.0.1:{monitor}\n\
+                     jetstream {{ store_dir: \"{store}\", sync_interval: always }}\n\
+                     cluster {{ name: levelmap, listen: 127.0.0.1:{route}, routes: [{routes}]{route_tls} }}\n\
+                     {client_tls}",
+                    client = cluster.client_ports[i],
+                    monitor = cluster.monitor_ports[i],
+                    store = dir.join(name).display(),
+                    route = route_ports[i],
+                    routes = routes.join(", "),
+                    route_tls = secured.map_or(String::new(), |d| format!(
+                        ", {}",
+                        tls(d, name, "verify: true")
+                    )),
+                    client_tls = secured.map_or(String::new(), |d| format!(
+                        "{}\ninclude \"auth.conf\"\n",
+                        tls(d, name, "verify_and_map: true")
+                    )),
+                ),
+            )?;
+            let log = std::fs::File::create(dir.join(format!("{name}.log")))?;
+            let child = Command::new(binary)
+                .arg("-c")
+                .arg(&config)
+                .stdout(Stdio::null())
+                .stderr(log)
+                .spawn()?;
+            cluster.servers.push(Some(child));
+        }
+        Ok(cluster)
+    }
+
+    /// The client port of every server.
+    pub fn ports(&self) -> &[u16] {
+        &self.client_ports
+    }
+
+    /// `nats://127.0.0.1:port` of every server.
+    pub fn client_urls(&self) -> Vec<String> {
+        self.client_ports
+            .iter()
+            .map(|p| format!("nats://127.0.0.1:{p}"))
+            .collect()
+    }
+
+    /// The monitoring port (HTTP: `/jsz`, `/varz`) of every server.
+    pub fn monitor_ports(&self) -> &[u16] {
+        &self.monitor_ports
+    }
+
+    /// The names of the servers, in the order of their ports.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// SIGKILLs the server named `name` and reaps it.
+    pub fn kill(&mut self, name: &str) -> io::Result<()> {
+        let child = self
+            .names
+            .iter()
+            .position(|n| n == name)
+            .and_then(|i| self.servers[i].as_mut())
+            .ok_or_else(|| io::Error::other(format!("no server {name} runs")))?;
+        child.kill()?;
+        child.wait()?;
+        if let Some(i) = self.names.iter().position(|n| n == name) {
+            self.servers[i] = None;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for LocalCluster {
+    fn drop(&mut self) {
+        for child in self.servers.iter_mut().flatten() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+fn free_port() -> io::Result<u16> {
+    Ok(TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
+/// A `tls` block with server `node`'s certificate from `dir`.
+fn tls(dir: &Path, node: &str, verify: &str) -> String {
+    format!(
+        "tls {{ cert_file: \"{}\", key_file: \"{}\", ca_file: \"{}\", {verify} }}",
+        dir.join(format!("{node}.pem")).display(),
+        dir.join(format!("{node}.key")).display(),
+        dir.join("ca.pem").display(),
+    )
+}
+
+/// The nats-server binary named by `NATS_SERVER_BIN`, if set.
+pub fn nats_server_from_env() -> Option<PathBuf> {
+    std::env::var_os("NATS_SERVER_BIN").map(PathBuf::from)
+}
