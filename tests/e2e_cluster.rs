@@ -1,12 +1,14 @@
 //! Cluster mode drills: two mapper hosts (h1, h2) on a three-node NATS JetStream cluster,
-//! their Zenoh routers meshed, two robots on h2's router; h1 owns the site.
+//! their Zenoh routers meshed, two robots on h2's router; h1 owns the site (it is first in
+//! the site's order).
 //! - h1 killed (SIGKILL) while the robots publish: h2 claims the site's lease once it
 //!   lapses, reads the site's log into its own store and maps on;
 //! - the robots on h1's router when h1 is killed: they move to h2's;
 //! - h1 frozen (SIGSTOP) past its lease, then let go: h2 takes the site; h1, awake, finds
-//!   its lease lost or its append fenced and drops the site;
+//!   its lease lost or its append fenced and drops the site; h2 hands it back once h1 has
+//!   been alive again for the hand-back time;
 //! - h1 cut from NATS by iptables (h1 in its own network namespace): it stops acking within
-//!   its lease and h2 takes the site;
+//!   its lease and h2 takes the site; the cut healed, the site goes back to h1 the same way;
 //! - the NATS server leading the site's log killed (SIGKILL): the site maps on once a new
 //!   leader is elected;
 //! - a rolling restart: h1 stopped and started again (the site moves to h2), then h2 (it
@@ -216,6 +218,18 @@ impl TwoHosts {
     /// Every node each robot made is in h2's map once, in order.
     fn every_node_once_on_h2(&self, edges: Vec<std::process::Child>) {
         self.every_node_once(edges, || self.h2().http.clone());
+    }
+
+    /// h1, back after a fault, gets the site again from h2 once it has been alive for the
+    /// hand-back time (it is first in the site's order); every node made is there once.
+    fn every_node_once_back_home_on_h1(&self, edges: Vec<std::process::Child>) {
+        self.every_node_once(edges, || {
+            wait_for(Duration::from_secs(60), || summary_nodes(self.h1_http()))
+                .expect("h2 hands the site back to h1, first in its order");
+            self.h1_http().to_owned()
+        });
+        let metrics = http_get(&self.h2().http, "/metrics").expect("metrics").1;
+        assert_eq!(metric(&metrics, "levelmap_sites_handed_back_total"), 1);
     }
 
     /// Every node each robot made is in the map of the host `serving` names once the robots
@@ -596,7 +610,7 @@ fn a_host_frozen_past_its_lease_drops_its_site_on_waking_and_loses_nothing() {
         summary_nodes(hosts.h1_http()).is_none(),
         "h1 no longer serves the site"
     );
-    hosts.every_node_once_on_h2(edges);
+    hosts.every_node_once_back_home_on_h1(edges);
 }
 
 #[test]
@@ -678,11 +692,11 @@ fn a_host_cut_from_nats_stops_acking_within_its_lease_and_its_site_moves() {
             "DROP",
         ]);
     }
-    hosts.every_node_once_on_h2(edges);
     assert!(
         summary_nodes(hosts.h1_http()).is_none(),
-        "h1 does not serve the site"
+        "h1 does not serve the site on its own once the cut heals"
     );
+    hosts.every_node_once_back_home_on_h1(edges);
     let fenced = metric(
         &http_get(hosts.h1_http(), "/metrics").expect("metrics").1,
         "levelmap_log_appends_fenced_total",

@@ -166,6 +166,12 @@ pub fn run(args: &BenchClusterArgs) -> Result<()> {
     deployment
         .wait_served(&sites, Duration::from_secs(120))
         .with_context(|| format!("logs are in {}", args.dir.display()))?;
+    if !args.single_machine {
+        say(args, "waiting for every site to be on its first host…");
+        deployment
+            .wait_home(&sites, Duration::from_secs(120))
+            .with_context(|| format!("logs are in {}", args.dir.display()))?;
+    }
     crate::runtime()?.block_on(drive(args, &sites, &pool, nodes_per_robot, deployment))
 }
 

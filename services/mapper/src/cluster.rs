@@ -14,6 +14,7 @@
 pub mod record;
 
 mod keeper;
+mod presence;
 
 use crate::config::MapperConfig;
 use crate::store::Store;
@@ -49,6 +50,10 @@ pub struct ClusterConfig {
     /// A free site is claimed by the host of rank r in its order after r times this (ms):
     /// the first host in the order wins unless it is down.
     pub claim_stagger_ms: u64,
+    /// A host holding a site hands it back to a host before it in the site's order once
+    /// that one has been alive this long (ms): a host started, or back, gets its sites
+    /// after it has shown it stays, not at every blink.
+    pub hand_back_after_ms: u64,
 }
 
 impl Default for ClusterConfig {
@@ -60,6 +65,7 @@ impl Default for ClusterConfig {
             replicas: 3,
             lease_ttl_ms: 3000,
             claim_stagger_ms: 500,
+            hand_back_after_ms: 10_000,
         }
     }
 }
@@ -115,6 +121,7 @@ struct Host {
     store: Arc<Store>,
     shared: Arc<Shared>,
     work: mpsc::SyncSender<Work>,
+    presence: presence::Presence,
 }
 
 /// Connects to NATS (retried in the background until the servers answer).
@@ -156,12 +163,14 @@ impl Cluster {
             store,
             shared,
             work,
+            presence: presence::Presence::default(),
         });
-        let keepers = config
+        let mut keepers: Vec<_> = config
             .fleets
             .iter()
             .map(|site| tokio::spawn(keeper::keep(host.clone(), site.clone())))
             .collect();
+        keepers.push(tokio::spawn(presence::keep_presence(host.clone())));
         Ok(Cluster {
             leases,
             held,
@@ -169,8 +178,8 @@ impl Cluster {
         })
     }
 
-    /// After the worker stopped: gives up every lease held, so the next hosts take the
-    /// sites over at once rather than after the leases lapse.
+    /// After the worker stopped: gives up every lease held, this host's presence with them,
+    /// so the next hosts take the sites over at once rather than after the leases lapse.
     pub async fn release_all(self) {
         for keeper in &self.keepers {
             keeper.abort();

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use sitelog::{Leases, NatsAccess};
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use tokio::sync::OnceCell;
 
 /// The largest request body the gateway buffers to try it on several hosts.
@@ -84,7 +84,13 @@ struct Gateway {
     /// Opened on first use: the gateway serves (503) before NATS answers.
     leases: OnceCell<Leases>,
     client: Client<HttpConnector, Body>,
+    /// Who held each site when its lease was last read, and when.
+    holders: std::sync::Mutex<std::collections::HashMap<String, (String, Instant)>>,
 }
+
+/// A GET goes to the site's holder as read this recently without reading the lease again;
+/// an error or a 404 from it reads the lease again (the site may have moved).
+const HOLDER_FRESH: Duration = Duration::from_secs(1);
 
 /// A running gateway.
 pub struct RunningGateway {
@@ -119,6 +125,7 @@ pub async fn start(config: GatewayConfig) -> Result<RunningGateway> {
         js,
         leases: OnceCell::new(),
         client,
+        holders: Default::default(),
     });
     let app = axum::Router::new().fallback(route).with_state(gateway);
     let (stop, stopping) = tokio::sync::watch::channel(false);
@@ -177,14 +184,47 @@ impl Gateway {
             .await
     }
 
-    /// The request, answered by the host that holds `site`'s lease.
+    /// The request, answered by the host that holds `site`'s lease: for a plain GET, the
+    /// holder read within [`HOLDER_FRESH`] first (a lease read per request would cost a NATS
+    /// round trip each).
     async fn to_owner(&self, site: &str, request: Request) -> Response {
+        let plain_get =
+            request.method() == Method::GET && !request.headers().contains_key(header::UPGRADE);
+        let cached = plain_get.then(|| self.cached_holder(site)).flatten();
+        let Some(address) = cached.and_then(|host| self.config.hosts.get(&host)) else {
+            return self.to_owner_now(site, request).await;
+        };
+        let (parts, _) = request.into_parts();
+        let again = || Request::from_parts(parts.clone(), Body::empty());
+        match self.forward(address, again()).await {
+            Ok(response) if response.status() != StatusCode::NOT_FOUND => response,
+            _ => {
+                self.holders.lock().expect("holders lock").remove(site);
+                self.to_owner_now(site, again()).await
+            }
+        }
+    }
+
+    fn cached_holder(&self, site: &str) -> Option<String> {
+        let holders = self.holders.lock().expect("holders lock");
+        let (host, read) = holders.get(site)?;
+        (read.elapsed() < HOLDER_FRESH).then(|| host.clone())
+    }
+
+    /// The request, answered by the host that holds `site`'s lease as read now.
+    async fn to_owner_now(&self, site: &str, request: Request) -> Response {
         let holder = match self.leases().await {
             Ok(leases) => leases.holder(site).await,
             Err(e) => Err(e),
         };
         let host = match holder {
-            Ok(Some(host)) => host,
+            Ok(Some(host)) => {
+                self.holders
+                    .lock()
+                    .expect("holders lock")
+                    .insert(site.to_owned(), (host.clone(), Instant::now()));
+                host
+            }
             Ok(None) => {
                 return match sitelog::log_exists(&self.js, site).await {
                     Ok(false) => answer(StatusCode::NOT_FOUND, &format!("no site {site}")),

@@ -118,15 +118,22 @@ impl Deployment {
         self.hosts.iter().map(|h| h.zenoh.clone()).collect()
     }
 
-    /// Waits until every site answers through [`Self::http`] (its owner has claimed it), or
-    /// fails naming those that do not, and any process that exited.
+    /// Waits until every site answers through [`Self::http`] (its owner has claimed it; the
+    /// single mapper: until it answers), or fails naming those that do not, and any process
+    /// that exited.
     pub fn wait_served(&mut self, sites: &[String], timeout: Duration) -> Result<()> {
         let deadline = Instant::now() + timeout;
         loop {
-            let missing: Vec<&String> = sites
-                .iter()
-                .filter(|s| status(self.http(), &format!("/api/v1/fleets/{s}/summary")) != 200)
-                .collect();
+            let missing: Vec<&String> = if self.gateway.is_none() {
+                // A single mapper makes a fleet at its first node.
+                let up = status(self.http(), "/healthz") == 200;
+                sites.iter().filter(|_| !up).collect()
+            } else {
+                sites
+                    .iter()
+                    .filter(|s| status(self.http(), &format!("/api/v1/fleets/{s}/summary")) != 200)
+                    .collect()
+            };
             if missing.is_empty() {
                 return Ok(());
             }
@@ -137,6 +144,37 @@ impl Deployment {
                 bail!("no owner serves {missing:?} after {timeout:?}");
             }
             std::thread::sleep(Duration::from_millis(200));
+        }
+    }
+
+    /// Waits until each site is served by its home, the first host in its order (a site
+    /// claimed by another host while the hosts were starting is handed back), so that the
+    /// bench measures the placement the hash gives.
+    pub fn wait_home(&self, sites: &[String], timeout: Duration) -> Result<()> {
+        let names: Vec<&str> = self.hosts.iter().map(|h| h.name.as_str()).collect();
+        let home: BTreeMap<&str, &str> = sites
+            .iter()
+            .map(|s| (s.as_str(), sitelog::host_order(s, &names)[0]))
+            .collect();
+        let deadline = Instant::now() + timeout;
+        loop {
+            let owners = self.owners();
+            let away: Vec<&str> = home
+                .iter()
+                .filter(|(site, host)| {
+                    !owners
+                        .get(**host)
+                        .is_some_and(|o| o.iter().any(|s| s == *site))
+                })
+                .map(|(site, _)| *site)
+                .collect();
+            if away.is_empty() {
+                return Ok(());
+            }
+            if Instant::now() > deadline {
+                bail!("sites {away:?} are not on their first host after {timeout:?}: {owners:?}");
+            }
+            std::thread::sleep(Duration::from_millis(500));
         }
     }
 

@@ -29,15 +29,29 @@ const FOLLOW_MAX: usize = 4 * CATCH_UP_BATCH;
 const FIRST_TAKEOVER_RETRY: Duration = Duration::from_millis(250);
 const MAX_TAKEOVER_RETRY: Duration = Duration::from_secs(5);
 
+/// A host that handed a site back does not claim it again for this long: the site's home
+/// host claims it meanwhile.
+const HAND_BACK_HOLD_OFF: Duration = Duration::from_secs(3);
+
+/// A site is handed back at most this often: a home host that is alive but does not claim
+/// it does not make the site bounce.
+const HAND_BACK_EVERY: Duration = Duration::from_secs(60);
+
+/// How a host's ownership of a site ended.
+enum Owned {
+    /// The mapper is stopping.
+    Stopping,
+    /// The lease was lost (or the site could not be kept): dropped.
+    Lost,
+    /// Handed back to the site's home host: dropped, the lease released.
+    HandedBack,
+}
+
 /// Keeps `site` on this host while it may, until the mapper stops.
 pub(super) async fn keep(host: Arc<Host>, site: String) {
     let names: Vec<&str> = host.cluster.hosts.iter().map(String::as_str).collect();
     let order = sitelog::host_order(&site, &names);
-    let rank = order
-        .iter()
-        .position(|h| *h == host.cluster.host)
-        .unwrap_or(0) as u32;
-    let stagger = Duration::from_millis(host.cluster.claim_stagger_ms) * rank;
+    let this = host.cluster.host.as_str();
     let mut stopping = host.shared.stopping.subscribe();
     let mut free_since: Option<Instant> = None;
     let mut complained = false;
@@ -45,19 +59,32 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
     let mut follower: Option<SiteLog> = None;
     let mut next_follow = Instant::now();
     let mut follow_failed = false;
+    let (mut claim_from, mut handed_back) = (Instant::now(), None::<Instant>);
     loop {
         if *stopping.borrow() {
             return;
         }
-        match host.leases.holder(&site).await {
-            Ok(None) => {
+        // The order over the live hosts, once this host has read who is alive.
+        let live = host.presence.live_order(&order, this);
+        match (live, host.leases.holder(&site).await) {
+            (None, _) => {}
+            (Some(live), Ok(None)) => {
+                let rank = live.iter().position(|h| *h == this).unwrap_or(0) as u32;
+                let stagger = Duration::from_millis(host.cluster.claim_stagger_ms) * rank;
                 let since = *free_since.get_or_insert_with(Instant::now);
-                if since.elapsed() >= stagger {
+                if since.elapsed() >= stagger && Instant::now() >= claim_from {
                     free_since = None;
-                    match host.leases.claim(&site, &host.cluster.host).await {
+                    match host.leases.claim(&site, this).await {
                         Ok(Some(lease)) => {
-                            if own(&host, lease, &mut stopping).await {
-                                return;
+                            let may_hand_back =
+                                handed_back.is_none_or(|t| t.elapsed() >= HAND_BACK_EVERY);
+                            match own(&host, lease, &order, may_hand_back, &mut stopping).await {
+                                Owned::Stopping => return,
+                                Owned::Lost => {}
+                                Owned::HandedBack => {
+                                    handed_back = Some(Instant::now());
+                                    claim_from = Instant::now() + HAND_BACK_HOLD_OFF;
+                                }
                             }
                         }
                         Ok(None) => complained = false,
@@ -69,11 +96,11 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
                     }
                 }
             }
-            Ok(Some(holder)) => {
+            (Some(live), Ok(Some(holder))) => {
                 free_since = None;
                 complained = false;
-                let standby = order.iter().find(|h| **h != holder);
-                if standby == Some(&host.cluster.host.as_str()) && Instant::now() >= next_follow {
+                let standby = live.iter().find(|h| **h != holder);
+                if standby == Some(&this) && Instant::now() >= next_follow {
                     next_follow = Instant::now() + FOLLOW_EVERY;
                     match follow(&host, &site, &mut follower).await {
                         Ok(()) => follow_failed = false,
@@ -87,11 +114,11 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
                     }
                 }
             }
-            Err(e) if !complained => {
+            (Some(_), Err(e)) if !complained => {
                 tracing::warn!(site, "cluster: the lease cannot be read: {e}");
                 complained = true;
             }
-            Err(_) => {}
+            (Some(_), Err(_)) => {}
         }
         tokio::select! {
             _ = tokio::time::sleep(POLL) => {}
@@ -100,13 +127,17 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
     }
 }
 
-/// Owns the site while `lease` holds: takes it over, renews the lease. Whether the mapper is
-/// stopping (the lease is left held, for `Cluster::release_all` once the worker stopped).
+/// Owns the site while `lease` holds: takes it over, renews the lease, and, when
+/// `may_hand_back`, hands the site back to a live host before this one in its `order`
+/// once that host has been alive for `hand_back_after_ms`. The lease is left held when the
+/// mapper stops, for `Cluster::release_all` once the worker stopped.
 async fn own(
     host: &Arc<Host>,
     lease: Lease,
+    order: &[&str],
+    may_hand_back: bool,
     stopping: &mut tokio::sync::watch::Receiver<bool>,
-) -> bool {
+) -> Owned {
     let site = lease.site.clone();
     let claimed = Instant::now();
     tracing::info!(site, "cluster: lease claimed; taking the site over");
@@ -153,11 +184,11 @@ async fn own(
                 }
             }
             _ = tokio::time::sleep(ttl / 3) => {}
-            _ = stopping.changed() => return true,
+            _ = stopping.changed() => return Owned::Stopping,
         }
         let fenced = host.fenced.lock().expect("fenced lock").remove(&site);
         let Some(mut lease) = host.held.lock().expect("leases lock").get(&site).cloned() else {
-            return false;
+            return Owned::Lost;
         };
         // A renewal that does not answer within a third of the lease counts as failed: a
         // host cut off from NATS must notice before its lease lapses.
@@ -203,9 +234,38 @@ async fn own(
             // A takeover under way hands the site to the worker first: drop it after.
             finish(takeover).await;
             drop_site(host, &site).await;
-            return false;
+            return Owned::Lost;
+        }
+        let settled = Duration::from_millis(host.cluster.hand_back_after_ms);
+        if may_hand_back
+            && takeover.is_none()
+            && let Some(home) = host
+                .presence
+                .home_before(order, &host.cluster.host, settled)
+        {
+            hand_back(host, &site, home).await;
+            return Owned::HandedBack;
         }
     }
+}
+
+/// Gives `site` to `home`, a live host before this one in its order: the site dropped here
+/// first (no more appends or acks from this host), then its lease released, so that `home`
+/// claims it at once. Its robots see a pause of acks.
+async fn hand_back(host: &Arc<Host>, site: &str, home: &str) {
+    tracing::info!(
+        site,
+        home,
+        "cluster: handing the site back to {home}, before this host in its order"
+    );
+    drop_site(host, site).await;
+    let lease = host.held.lock().expect("leases lock").remove(site);
+    if let Some(lease) = lease
+        && let Err(e) = host.leases.release(lease).await
+    {
+        tracing::warn!(site, "cluster: lease not released (it lapses): {e}");
+    }
+    host.shared.instruments.sites_handed_back.inc();
 }
 
 /// Waits for a takeover under way to end.

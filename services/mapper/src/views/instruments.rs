@@ -21,8 +21,11 @@ pub struct Instruments {
     pub sites_owned: Gauge,
     /// Cluster mode: sites this host took over.
     pub sites_adopted: Counter,
-    /// Cluster mode: sites this host dropped (lease lost, append fenced).
+    /// Cluster mode: sites this host dropped (lease lost, append fenced, handed back).
     pub sites_dropped: Counter,
+    /// Cluster mode: sites this host handed back to their home host (a live host before it
+    /// in the site's order).
+    pub sites_handed_back: Counter,
     /// Cluster mode: appends refused because another writer appended to the site's log.
     pub appends_fenced: Counter,
     /// Cluster mode: records of sites another host owns, read into this host's store as
@@ -45,6 +48,7 @@ impl Default for Instruments {
             sites_owned: Gauge::default(),
             sites_adopted: Counter::default(),
             sites_dropped: Counter::default(),
+            sites_handed_back: Counter::default(),
             appends_fenced: Counter::default(),
             records_followed: Counter::default(),
             records_taken_over: Counter::default(),
@@ -85,8 +89,13 @@ impl Default for Instruments {
             ),
             (
                 "levelmap_sites_dropped",
-                "Cluster mode: sites this host dropped (lease lost, append fenced).",
+                "Cluster mode: sites this host dropped (lease lost, append fenced, handed back).",
                 &i.sites_dropped,
+            ),
+            (
+                "levelmap_sites_handed_back",
+                "Cluster mode: sites this host handed back to their home host, before it in the site's order.",
+                &i.sites_handed_back,
             ),
             (
                 "levelmap_log_appends_fenced",

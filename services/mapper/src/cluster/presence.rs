@@ -1,0 +1,177 @@
+//! Which mapper hosts are alive, as the leases bucket says: each host holds a lease of its
+//! own, `host.<name>`, while it runs (renewed as the sites' are, released on a graceful
+//! stop). Keys with a dot are no fleet id, so they never meet a site's. The sites' orders
+//! are taken over the live hosts: the first live host in a site's order claims it at once
+//! and the next one stands by; and a holder hands a site back to a live host before it in
+//! the order once that host has been seen alive for `hand_back_after_ms`, so that a host
+//! started (or back after a fault) gets its own sites and only those.
+//!
+//! The bucket is the source of truth for ownership already; taking liveness from it too
+//! means a host that cannot reach NATS is not counted alive, whatever else it reaches.
+
+use super::Host;
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// The lease key of a host's presence.
+pub(super) fn presence_key(host: &str) -> String {
+    format!("host.{host}")
+}
+
+/// The live hosts as this host last read them, with when it first saw each alive.
+#[derive(Default)]
+pub(super) struct Presence {
+    /// `None` until the first reading.
+    live: Mutex<Option<BTreeMap<String, Instant>>>,
+}
+
+impl Presence {
+    /// `order` without the hosts not alive (this host always is); `None` before the first
+    /// reading.
+    pub fn live_order<'h>(&self, order: &[&'h str], this: &str) -> Option<Vec<&'h str>> {
+        let live = self.live.lock().expect("presence lock");
+        let live = live.as_ref()?;
+        Some(
+            order
+                .iter()
+                .copied()
+                .filter(|h| *h == this || live.contains_key(*h))
+                .collect(),
+        )
+    }
+
+    /// The first host of `order` before `this` seen alive for at least `settled`: where
+    /// the site belongs, if not here.
+    pub fn home_before<'h>(
+        &self,
+        order: &[&'h str],
+        this: &str,
+        settled: Duration,
+    ) -> Option<&'h str> {
+        let live = self.live.lock().expect("presence lock");
+        let live = live.as_ref()?;
+        order
+            .iter()
+            .take_while(|h| **h != this)
+            .find(|h| {
+                live.get(**h)
+                    .is_some_and(|since| since.elapsed() >= settled)
+            })
+            .copied()
+    }
+
+    fn set(&self, alive: &[String]) {
+        let mut live = self.live.lock().expect("presence lock");
+        let before = live.take().unwrap_or_default();
+        *live = Some(
+            alive
+                .iter()
+                .map(|h| {
+                    (
+                        h.clone(),
+                        before.get(h).copied().unwrap_or_else(Instant::now),
+                    )
+                })
+                .collect(),
+        );
+    }
+}
+
+/// Holds this host's presence and reads every host's, every third of a lease, until the
+/// mapper stops.
+pub(super) async fn keep_presence(host: Arc<Host>) {
+    let key = presence_key(&host.cluster.host);
+    let every = host.leases.ttl() / 3;
+    let mut stopping = host.shared.stopping.subscribe();
+    let mut complained = false;
+    loop {
+        if let Err(e) = hold(&host, &key).await {
+            if !complained {
+                tracing::warn!("cluster: this host's presence: {e}");
+            }
+            complained = true;
+        } else {
+            complained = false;
+        }
+        let mut alive = Vec::new();
+        for other in &host.cluster.hosts {
+            if *other != host.cluster.host
+                && let Ok(Some(_)) = host.leases.holder(&presence_key(other)).await
+            {
+                alive.push(other.clone());
+            }
+        }
+        host.presence.set(&alive);
+        tokio::select! {
+            _ = tokio::time::sleep(every) => {}
+            _ = stopping.changed() => return,
+        }
+    }
+}
+
+/// Claims this host's presence, or renews it; kept with the sites' leases (`held`) so that
+/// a graceful stop releases it with them. A presence left by this host's previous run is
+/// claimed once it lapses.
+async fn hold(host: &Host, key: &str) -> Result<(), sitelog::LogError> {
+    let held = host.held.lock().expect("leases lock").get(key).cloned();
+    match held {
+        Some(mut lease) => {
+            if !host.leases.renew(&mut lease).await? {
+                host.held.lock().expect("leases lock").remove(key);
+                return Ok(());
+            }
+            host.held
+                .lock()
+                .expect("leases lock")
+                .insert(key.to_owned(), lease);
+        }
+        None => {
+            if let Some(lease) = host.leases.claim(key, &host.cluster.host).await? {
+                host.held
+                    .lock()
+                    .expect("leases lock")
+                    .insert(key.to_owned(), lease);
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_site_goes_home_only_to_a_live_settled_host_before_this_one() {
+        let presence = Presence::default();
+        let order = ["h3", "h1", "h2"];
+        assert_eq!(presence.live_order(&order, "h2"), None, "unread yet");
+        presence.set(&["h1".into()]);
+        assert_eq!(presence.live_order(&order, "h2"), Some(vec!["h1", "h2"]));
+        // h1 is alive but only just seen: not yet settled.
+        assert_eq!(
+            presence.home_before(&order, "h2", Duration::from_secs(60)),
+            None
+        );
+        assert_eq!(
+            presence.home_before(&order, "h2", Duration::ZERO),
+            Some("h1")
+        );
+        // Nothing before h1 is alive: its sites stay.
+        assert_eq!(presence.home_before(&order, "h1", Duration::ZERO), None);
+        // h3 comes: first in the order.
+        presence.set(&["h1".into(), "h3".into()]);
+        assert_eq!(
+            presence.home_before(&order, "h1", Duration::ZERO),
+            Some("h3")
+        );
+        // A host gone and back is seen anew.
+        std::thread::sleep(Duration::from_millis(20));
+        presence.set(&["h3".into()]);
+        presence.set(&["h1".into(), "h3".into()]);
+        let settled = Duration::from_millis(15);
+        assert_eq!(presence.home_before(&order, "h2", settled), Some("h3"));
+        assert_eq!(presence.home_before(&["h1", "h2"], "h2", settled), None);
+    }
+}
