@@ -77,14 +77,7 @@ impl Robots {
             let session = &opened[r % opened.len()];
             let (name, site) = (format!("robot{r}"), r % sites.len());
             let fleet = &sites[site];
-            let state = Arc::new(Mutex::new(AckState {
-                acked: None,
-                unacked: BTreeMap::new(),
-                resend_from: None,
-                backoff: ResendBackoff::new(Duration::from_secs(1), Duration::from_secs(8)),
-                since: Instant::now(),
-                resent: 0,
-            }));
+            let state = Arc::new(Mutex::new(AckState::new()));
             let (on_ack, progress) = (state.clone(), progress.clone());
             let ack_subscriber = session
                 .declare_subscriber(wire::ack_key(fleet, &name)?)
@@ -179,6 +172,19 @@ impl Robots {
 }
 
 impl AckState {
+    /// Nothing sent yet: re-sends after 1 s without progress, doubling up to 8 s (the edge's
+    /// `resend_after_ms` and `resend_max_after_ms`).
+    fn new() -> AckState {
+        AckState {
+            acked: None,
+            unacked: BTreeMap::new(),
+            resend_from: None,
+            backoff: ResendBackoff::new(Duration::from_secs(1), Duration::from_secs(8)),
+            since: Instant::now(),
+            resent: 0,
+        }
+    }
+
     /// Takes an ack of the robot's chain (1); true when it acked more than before.
     fn take(&mut self, ack: &wire::v1::Ack) -> bool {
         if ack.chain_id != 1 {
@@ -226,5 +232,55 @@ impl AckState {
             .collect();
         self.resent += window.len() as u64;
         window
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ack(acked: Option<u64>, resend_from: Option<u64>) -> wire::v1::Ack {
+        wire::v1::Ack {
+            acked_node_seq: acked,
+            chain_id: 1,
+            resend_from,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn unacked_nodes_are_sent_again_after_a_wait_that_doubles_and_at_once_when_asked() {
+        let mut state = AckState::new();
+        let t0 = Instant::now();
+        for seq in 0..3 {
+            state.unacked.insert(seq, (vec![seq as u8], t0));
+        }
+        assert!(state.due(t0).is_empty(), "sent just now");
+        // An ack of 0 moves on: 1 and 2 wait again from now.
+        assert!(state.take(&ack(Some(0), None)));
+        assert!(
+            !state.take(&ack(Some(0), None)),
+            "the same ack again is no progress"
+        );
+        let start = state.since;
+        assert!(state.due(start + Duration::from_millis(900)).is_empty());
+        assert_eq!(
+            state.due(start + Duration::from_secs(1)),
+            [vec![1], vec![2]]
+        );
+        // No progress: the next re-send waits 2 s.
+        let later = start + Duration::from_secs(1);
+        assert!(state.due(later + Duration::from_millis(1900)).is_empty());
+        assert_eq!(state.due(later + Duration::from_secs(2)).len(), 2);
+        // Asked from 2: at once, whatever the wait.
+        assert!(!state.take(&ack(Some(0), Some(2))));
+        assert_eq!(state.due(later + Duration::from_secs(2)), [vec![2]]);
+        assert_eq!(state.resent, 5);
+        // Another chain's ack is not this robot's.
+        let mut other = ack(Some(2), None);
+        other.chain_id = 7;
+        assert!(!state.take(&other));
+        assert!(state.take(&ack(Some(2), None)));
+        assert!(state.unacked.is_empty());
     }
 }

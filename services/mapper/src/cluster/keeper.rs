@@ -60,6 +60,9 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
     let mut next_follow = Instant::now();
     let mut follow_failed = false;
     let (mut claim_from, mut handed_back) = (Instant::now(), None::<Instant>);
+    // The holder last seen: once the site is free, the ranks are taken without it, so that
+    // its standby claims at once and the others after their stagger.
+    let mut last_holder: Option<String> = None;
     loop {
         if *stopping.borrow() {
             return;
@@ -69,7 +72,11 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
         match (live, host.leases.holder(&site).await) {
             (None, _) => {}
             (Some(live), Ok(None)) => {
-                let rank = live.iter().position(|h| *h == this).unwrap_or(0) as u32;
+                let rank = live
+                    .iter()
+                    .filter(|h| last_holder.as_deref() != Some(**h) || **h == this)
+                    .position(|h| *h == this)
+                    .unwrap_or(0) as u32;
                 let stagger = Duration::from_millis(host.cluster.claim_stagger_ms) * rank;
                 let since = *free_since.get_or_insert_with(Instant::now);
                 if since.elapsed() >= stagger && Instant::now() >= claim_from {
@@ -99,6 +106,7 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
             (Some(live), Ok(Some(holder))) => {
                 free_since = None;
                 complained = false;
+                last_holder = Some(holder.clone());
                 let standby = live.iter().find(|h| **h != holder);
                 if standby == Some(&this) && Instant::now() >= next_follow {
                     next_follow = Instant::now() + FOLLOW_EVERY;
@@ -236,9 +244,12 @@ async fn own(
             drop_site(host, &site).await;
             return Owned::Lost;
         }
+        // Not within `hand_back_after_ms` of the claim either: a site just taken over under
+        // duress (its standby slow to claim) is not moved twice in a row.
         let settled = Duration::from_millis(host.cluster.hand_back_after_ms);
         if may_hand_back
             && takeover.is_none()
+            && claimed.elapsed() >= settled
             && let Some(home) = host
                 .presence
                 .home_before(order, &host.cluster.host, settled)
@@ -367,7 +378,12 @@ async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
         deadline: host.leases.ttl(),
         ..RetryPolicy::default()
     };
-    let mut log = SiteLog::open(host.js.clone(), &site, host.cluster.replicas, retry).await?;
+    // While a NATS server is lost the stream's info may not come for the client's 10 s
+    // request timeout: give up after a lease's time and try again (the keeper retries).
+    let open = SiteLog::open(host.js.clone(), &site, host.cluster.replicas, retry);
+    let mut log = tokio::time::timeout(host.leases.ttl(), open)
+        .await
+        .map_err(|_| anyhow::anyhow!("the site's log did not open within the lease's time"))??;
     let records = catch_up(&host, &site, &mut log, usize::MAX).await?;
     host.shared
         .instruments

@@ -61,6 +61,12 @@ impl Presence {
             .copied()
     }
 
+    /// Whether `host` was alive at the last reading.
+    fn is_alive(&self, host: &str) -> bool {
+        let live = self.live.lock().expect("presence lock");
+        live.as_ref().is_some_and(|l| l.contains_key(host))
+    }
+
     fn set(&self, alive: &[String]) {
         let mut live = self.live.lock().expect("presence lock");
         let before = live.take().unwrap_or_default();
@@ -96,10 +102,17 @@ pub(super) async fn keep_presence(host: Arc<Host>) {
         }
         let mut alive = Vec::new();
         for other in &host.cluster.hosts {
-            if *other != host.cluster.host
-                && let Ok(Some(_)) = host.leases.holder(&presence_key(other)).await
-            {
-                alive.push(other.clone());
+            if *other == host.cluster.host {
+                continue;
+            }
+            // Only a lease read and found missing says a host is gone: a read that fails
+            // (a loaded or electing bucket) keeps what was known.
+            let known = host.presence.is_alive(other);
+            match host.leases.holder(&presence_key(other)).await {
+                Ok(Some(_)) => alive.push(other.clone()),
+                Ok(None) => {}
+                Err(_) if known => alive.push(other.clone()),
+                Err(_) => {}
             }
         }
         host.presence.set(&alive);
