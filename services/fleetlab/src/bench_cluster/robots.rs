@@ -40,6 +40,13 @@ pub(super) struct AckState {
     pub resent: u64,
 }
 
+/// What an ack says, as the bench reads it.
+struct Ack {
+    chain_id: u64,
+    acked: Option<u64>,
+    resend_from: Option<u64>,
+}
+
 /// When a site's ack moved on: for the time a moved site takes to ack again.
 pub(super) type AckProgress = Arc<Mutex<Vec<(usize, Instant)>>>;
 
@@ -83,7 +90,11 @@ impl Robots {
                 .declare_subscriber(wire::ack_key(fleet, &name)?)
                 .callback(move |sample| {
                     if let Ok(ack) = wire::decode_ack(&sample.payload().to_bytes()) {
-                        let moved = on_ack.lock().expect("acks").take(&ack);
+                        let moved = on_ack.lock().expect("acks").take(Ack {
+                            chain_id: ack.chain_id,
+                            acked: ack.acked_node_seq,
+                            resend_from: ack.resend_from,
+                        });
                         if moved {
                             progress
                                 .lock()
@@ -186,14 +197,14 @@ impl AckState {
     }
 
     /// Takes an ack of the robot's chain (1); true when it acked more than before.
-    fn take(&mut self, ack: &wire::v1::Ack) -> bool {
+    fn take(&mut self, ack: Ack) -> bool {
         if ack.chain_id != 1 {
             return false;
         }
         if let Some(from) = ack.resend_from {
             self.resend_from = Some(from);
         }
-        let Some(acked) = ack.acked_node_seq else {
+        let Some(acked) = ack.acked else {
             return false;
         };
         if self.acked.is_some_and(|a| a >= acked) {
@@ -239,12 +250,11 @@ impl AckState {
 mod tests {
     use super::*;
 
-    fn ack(acked: Option<u64>, resend_from: Option<u64>) -> wire::v1::Ack {
-        wire::v1::Ack {
-            acked_node_seq: acked,
+    fn ack(acked: Option<u64>, resend_from: Option<u64>) -> Ack {
+        Ack {
             chain_id: 1,
+            acked,
             resend_from,
-            ..Default::default()
         }
     }
 
@@ -257,9 +267,9 @@ mod tests {
         }
         assert!(state.due(t0).is_empty(), "sent just now");
         // An ack of 0 moves on: 1 and 2 wait again from now.
-        assert!(state.take(&ack(Some(0), None)));
+        assert!(state.take(ack(Some(0), None)));
         assert!(
-            !state.take(&ack(Some(0), None)),
+            !state.take(ack(Some(0), None)),
             "the same ack again is no progress"
         );
         let start = state.since;
@@ -273,14 +283,14 @@ mod tests {
         assert!(state.due(later + Duration::from_millis(1900)).is_empty());
         assert_eq!(state.due(later + Duration::from_secs(2)).len(), 2);
         // Asked from 2: at once, whatever the wait.
-        assert!(!state.take(&ack(Some(0), Some(2))));
+        assert!(!state.take(ack(Some(0), Some(2))));
         assert_eq!(state.due(later + Duration::from_secs(2)), [vec![2]]);
         assert_eq!(state.resent, 5);
         // Another chain's ack is not this robot's.
         let mut other = ack(Some(2), None);
         other.chain_id = 7;
-        assert!(!state.take(&other));
-        assert!(state.take(&ack(Some(2), None)));
+        assert!(!state.take(other));
+        assert!(state.take(ack(Some(2), None)));
         assert!(state.unacked.is_empty());
     }
 }
