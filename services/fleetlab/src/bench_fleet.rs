@@ -16,6 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use wire::Node;
+use zenoh::pubsub::Publisher;
 
 /// Load-test the mapper: N simulated robots publishing nodes and odometry over Zenoh, with
 /// pose queries over HTTP at the same time.
@@ -232,31 +233,11 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     for r in 0..args.robots {
         let session = &sessions[r % sessions.len()];
         let robot = format!("robot{r}");
-        let node = session
-            .declare_publisher(wire::node_key(FLEET, &robot)?)
-            .congestion_control(zenoh::qos::CongestionControl::Block)
-            .await
-            .map_err(anyhow::Error::from_boxed)?;
-        let odom = session
-            .declare_publisher(wire::odom_key(FLEET, &robot)?)
-            .await
-            .map_err(anyhow::Error::from_boxed)?;
+        let (node, odom) = robot_publishers(session, FLEET, &robot).await?;
         publishers.push((robot, node, odom));
     }
-    for (_, node, _) in &publishers {
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while !node
-            .matching_status()
-            .await
-            .map_err(anyhow::Error::from_boxed)?
-            .matching()
-        {
-            anyhow::ensure!(
-                Instant::now() < deadline,
-                "the mapper's subscriber never matched"
-            );
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+    for (robot, node, _) in &publishers {
+        wait_matched(node, robot, Instant::now() + Duration::from_secs(10)).await?;
     }
 
     // Live feed clients, during the whole run; they stop half a second before the robots
@@ -433,6 +414,46 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
         tokio::signal::ctrl_c().await?;
     }
     mapper.stop().await
+}
+
+/// A robot's node publisher (blocking when congested: a bench drops no node) and its
+/// odometry publisher, on `session`.
+pub(crate) async fn robot_publishers(
+    session: &zenoh::Session,
+    fleet: &str,
+    robot: &str,
+) -> Result<(Publisher<'static>, Publisher<'static>)> {
+    let node = session
+        .declare_publisher(wire::node_key(fleet, robot)?)
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .await
+        .map_err(anyhow::Error::from_boxed)?;
+    let odometry = session
+        .declare_publisher(wire::odom_key(fleet, robot)?)
+        .await
+        .map_err(anyhow::Error::from_boxed)?;
+    Ok((node, odometry))
+}
+
+/// Waits until `robot`'s node publisher matches a mapper's subscriber, until `deadline`.
+pub(crate) async fn wait_matched(
+    node: &Publisher<'_>,
+    robot: &str,
+    deadline: Instant,
+) -> Result<()> {
+    while !node
+        .matching_status()
+        .await
+        .map_err(anyhow::Error::from_boxed)?
+        .matching()
+    {
+        anyhow::ensure!(
+            Instant::now() < deadline,
+            "no mapper's subscriber matched {robot}'s nodes"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    Ok(())
 }
 
 /// An HTTP client that hands every status back (a 404 is an answer, not an error).

@@ -4,6 +4,7 @@
 //! without ack progress, the wait doubling up to 8 s while nothing answers (the edge's
 //! [`ResendBackoff`]), and at once from where an ack asks (`resend_from`).
 
+use crate::bench_fleet::{robot_publishers, wait_matched};
 use anyhow::Result;
 use edge::ResendBackoff;
 use runtime::session::{Role, SessionConfig};
@@ -105,15 +106,7 @@ impl Robots {
                 })
                 .await
                 .map_err(anyhow::Error::from_boxed)?;
-            let node = session
-                .declare_publisher(wire::node_key(fleet, &name)?)
-                .congestion_control(zenoh::qos::CongestionControl::Block)
-                .await
-                .map_err(anyhow::Error::from_boxed)?;
-            let odometry = session
-                .declare_publisher(wire::odom_key(fleet, &name)?)
-                .await
-                .map_err(anyhow::Error::from_boxed)?;
+            let (node, odometry) = robot_publishers(session, fleet, &name).await?;
             linked.push(Robot {
                 name,
                 site,
@@ -125,20 +118,7 @@ impl Robots {
         }
         let deadline = Instant::now() + Duration::from_secs(30);
         for robot in &linked {
-            while !robot
-                .node
-                .matching_status()
-                .await
-                .map_err(anyhow::Error::from_boxed)?
-                .matching()
-            {
-                anyhow::ensure!(
-                    Instant::now() < deadline,
-                    "no mapper's subscriber matched {}'s nodes",
-                    robot.name
-                );
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
+            wait_matched(&robot.node, &robot.name, deadline).await?;
         }
         Ok(Robots {
             robots: linked,
