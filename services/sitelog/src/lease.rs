@@ -1,13 +1,15 @@
 //! Who owns a site: a lease in a JetStream KV bucket. The bucket keeps each entry for
 //! `ttl` only (its `max_age`), so a lease that is not renewed lapses by itself. A host claims a
-//! site with `create` (refused while another holds it), renews it with `update` at the
-//! revision it holds (refused once another host claimed it after a lapse), and releases it
-//! with a delete at that revision on a graceful stop. The lease says who may try to write;
-//! the log's fence (`SiteLog::append`) is what stops a writer that lost it and does not know.
+//! site by writing its key at the revision of the key's last entry, read from the bucket's
+//! stream leader (refused while another holds it); renews it with `update` at the revision it
+//! holds (refused once another host claimed it after a lapse); and releases it with a delete
+//! at that revision on a graceful stop. The lease says who may try to write; the log's fence
+//! (`SiteLog::append`) is what stops a writer that lost it and does not know.
 
 use crate::LogError;
 use async_nats::jetstream::context::Context;
-use async_nats::jetstream::kv::{Config, CreateErrorKind, Store, UpdateErrorKind};
+use async_nats::jetstream::kv::{Config, Store, UpdateErrorKind};
+use async_nats::jetstream::stream::LastRawMessageErrorKind;
 use bytes::Bytes;
 use std::time::Duration;
 
@@ -16,6 +18,20 @@ pub struct Leases {
     store: Store,
     ttl: Duration,
 }
+
+/// A lease key's last entry.
+enum Latest {
+    Held {
+        host: String,
+    },
+    /// Deleted (a graceful release); claimed again by an update at this revision.
+    Released {
+        revision: u64,
+    },
+}
+
+/// The header a KV entry names its operation in (`PUT`, `DEL`, `PURGE`).
+const KV_OPERATION: &str = "KV-Operation";
 
 /// A site held by this host, at the revision it last wrote.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -74,21 +90,61 @@ impl Leases {
 
     /// Claims `site` for `host`: the lease, or `None` while another host holds it.
     pub async fn claim(&self, site: &str, host: &str) -> Result<Option<Lease>, LogError> {
-        match self.store.create(site, Bytes::from(host.to_owned())).await {
+        let value = Bytes::from(host.to_owned());
+        // Revision 0: the key was never written or its last entry lapsed.
+        let expected = match self.latest(site).await? {
+            None => 0,
+            Some(Latest::Released { revision }) => revision,
+            Some(Latest::Held { .. }) => return Ok(None),
+        };
+        match self.store.update(site, value, expected).await {
             Ok(revision) => Ok(Some(Lease {
                 site: site.to_owned(),
                 host: host.to_owned(),
                 revision,
             })),
-            Err(e) if e.kind() == CreateErrorKind::AlreadyExists => Ok(None),
+            // Another host wrote in between: it holds the site.
+            Err(e) if e.kind() == UpdateErrorKind::WrongLastRevision => Ok(None),
             Err(e) => Err(LogError::JetStream(e.to_string())),
         }
     }
 
     /// The host holding `site`, if any.
     pub async fn holder(&self, site: &str) -> Result<Option<String>, LogError> {
-        let value = self.store.get(site).await.map_err(LogError::jetstream)?;
-        Ok(value.map(|v| String::from_utf8_lossy(&v).into_owned()))
+        Ok(match self.latest(site).await? {
+            Some(Latest::Held { host }) => Some(host),
+            _ => None,
+        })
+    }
+
+    /// The key's last entry, read from the bucket's stream leader. The KV's own reads go to
+    /// any replica (direct get) and may lag: seen in CI, a claim right after a release was
+    /// refused as if the site were still held.
+    async fn latest(&self, site: &str) -> Result<Option<Latest>, LogError> {
+        let subject = format!("{}{}", self.store.prefix, site);
+        let message = match self
+            .store
+            .stream
+            .get_last_raw_message_by_subject(&subject)
+            .await
+        {
+            Ok(message) => message,
+            Err(e) if e.kind() == LastRawMessageErrorKind::NoMessageFound => return Ok(None),
+            Err(e) => return Err(LogError::JetStream(e.to_string())),
+        };
+        let released = message
+            .headers
+            .get(KV_OPERATION)
+            .is_some_and(|op| op.as_str() != "PUT");
+        Ok(Some(if released {
+            Latest::Released {
+                revision: message.sequence,
+            }
+        } else {
+            Latest::Held {
+                host: String::from_utf8_lossy(&message.payload).into_owned(),
+            }
+        }))
     }
 
     /// Renews `lease` for another `ttl`. `Ok(false)`: it was lost (it lapsed and another host
