@@ -2,7 +2,8 @@
 //! their Zenoh routers meshed, two robots on h2's router; h1 owns the site (it is first in
 //! the site's order).
 //! - h1 killed (SIGKILL) while the robots publish: h2 claims the site's lease once it
-//!   lapses, reads the site's log into its own store and maps on;
+//!   lapses, reads the site's log into its own store and maps on, its map restored from
+//!   the snapshot h1 shared in the object store and the nodes after it;
 //! - the robots on h1's router when h1 is killed: they move to h2's;
 //! - h1 frozen (SIGSTOP) past its lease, then let go: h2 takes the site; h1, awake, finds
 //!   its lease lost or its append fenced and drops the site; h2 hands it back once h1 has
@@ -32,7 +33,8 @@ use std::time::{Duration, Instant};
 const ROBOTS: usize = 2;
 
 /// A mapper host's config: site `park`, hosts h1 and h2, its Zenoh listening and connecting,
-/// the NATS servers at address `nats` on `ports`.
+/// the NATS servers at address `nats` on `ports`; a snapshot every 5 nodes, so that every
+/// drill's takeovers restore from shared snapshots.
 fn host_config(
     dir: &Path,
     host: &str,
@@ -43,6 +45,7 @@ fn host_config(
     let connect = connect.map_or(String::new(), |c| format!("connect = [{c:?}]\n"));
     format!(
         "store_path = {store:?}\nfleets = [\"park\"]\n\
+         [store]\nsnapshot_every_nodes = 5\n\n\
          [mapping.coverage]\nenabled = false\n\n\
          [zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\n{connect}\n\
          [cluster]\nhost = {host:?}\nhosts = [\"h1\", \"h2\"]\nlease_ttl_ms = 3000\n\n\
@@ -263,6 +266,11 @@ impl Drop for TwoHosts {
 fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
     let mut hosts = TwoHosts::start("cluster-host-kill");
     let (edges, before) = hosts.robots_on_h1();
+    wait_for(Duration::from_secs(60), || {
+        let metrics = http_get(hosts.h1_http(), "/metrics")?.1;
+        (metric(&metrics, "levelmap_snapshots_shared_total") > 0).then_some(())
+    })
+    .expect("h1 shares a snapshot of the site");
     let killed = Instant::now();
     hosts.h1.take().expect("h1 runs").kill();
     let taken = hosts.h2_takes_over(killed);
@@ -271,6 +279,20 @@ fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
         taken.as_secs_f64()
     );
     assert_restored(&hosts.h2().http, &before);
+    // h2 restored the map from h1's shared snapshot, not by replaying every node.
+    let log = std::fs::read_to_string(hosts.dir.join("h2/mapper.log")).expect("h2's log");
+    let restored = log
+        .lines()
+        .map(without_colours)
+        .find(|l| l.contains("restored in"))
+        .expect("h2 logs its restore");
+    let covered: u64 = restored
+        .split_whitespace()
+        .find_map(|w| w.strip_prefix("snapshot_nodes="))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("snapshot_nodes in {restored:?}"));
+    eprintln!("kill: h2's restore: {restored}");
+    assert!(covered >= 5, "restored from a shared snapshot: {restored}");
     hosts.every_node_once_on_h2(edges);
     let metrics = http_get(&hosts.h2().http, "/metrics").expect("metrics").1;
     assert_eq!(metric(&metrics, "levelmap_sites_adopted_total"), 1);
@@ -284,6 +306,7 @@ fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
         "kill: h2 followed {followed} records of the log as standby; its takeover read {tail}"
     );
     assert!(followed > 0, "h2, the site's standby, follows its log");
+    assert!(metric(&metrics, "levelmap_snapshots_taken_in_total") > 0);
     let appends = metric(&metrics, "levelmap_log_append_seconds_count");
     let acked = metric(&metrics, "levelmap_node_ack_seconds_count");
     assert!(

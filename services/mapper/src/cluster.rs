@@ -15,6 +15,9 @@ pub mod record;
 
 mod keeper;
 mod presence;
+mod shelf;
+
+pub use shelf::{Shelf, Shelved, Shelving, shelf};
 
 use crate::config::MapperConfig;
 use crate::store::Store;
@@ -22,7 +25,7 @@ use crate::views::Shared;
 use crate::worker::{Fenced, Work};
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
-use sitelog::{Lease, Leases, NatsAccess};
+use sitelog::{Lease, Leases, NatsAccess, Snapshots};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::Duration;
@@ -105,7 +108,12 @@ pub struct Cluster {
     leases: Arc<Leases>,
     held: Held,
     keepers: Vec<tokio::task::JoinHandle<()>>,
+    sharing: tokio::task::JoinHandle<()>,
 }
+
+/// How long a graceful stop waits for the last snapshots to be shared before it releases
+/// the leases (the next owners restore from them).
+const LAST_SNAPSHOTS: Duration = Duration::from_secs(3);
 
 /// The leases this host holds, by site.
 type Held = Arc<Mutex<HashMap<String, Lease>>>;
@@ -122,6 +130,9 @@ struct Host {
     shared: Arc<Shared>,
     work: mpsc::SyncSender<Work>,
     presence: presence::Presence,
+    snapshots: Snapshots,
+    /// The log sequence of each site's shared snapshot last looked at (`shelf::take_in`).
+    snapshots_seen: Mutex<HashMap<String, u64>>,
 }
 
 /// Connects to NATS (retried in the background until the servers answer).
@@ -132,7 +143,8 @@ pub async fn connect(cluster: &ClusterConfig) -> Result<sitelog::JetStream> {
 }
 
 impl Cluster {
-    /// Starts a keeper for each site of `config.fleets`.
+    /// Starts a keeper for each site of `config.fleets`, and the task that shares the
+    /// snapshots the worker puts on the shelf.
     pub async fn start(
         config: &MapperConfig,
         js: sitelog::JetStream,
@@ -140,6 +152,7 @@ impl Cluster {
         shared: Arc<Shared>,
         work: mpsc::SyncSender<Work>,
         fenced: Fenced,
+        shelving: Shelving,
     ) -> Result<Cluster> {
         let cluster = config.cluster.clone().context("no [cluster]")?;
         let leases = loop {
@@ -148,6 +161,15 @@ impl Cluster {
                 Ok(leases) => break Arc::new(leases),
                 Err(e) => {
                     tracing::warn!("cluster: the leases bucket is not reachable yet: {e}");
+                    tokio::time::sleep(Duration::from_secs(1)).await;
+                }
+            }
+        };
+        let snapshots = loop {
+            match Snapshots::open(&js, shelf::SNAPSHOTS_BUCKET, cluster.replicas).await {
+                Ok(snapshots) => break snapshots,
+                Err(e) => {
+                    tracing::warn!("cluster: the snapshots bucket is not reachable yet: {e}");
                     tokio::time::sleep(Duration::from_secs(1)).await;
                 }
             }
@@ -164,6 +186,8 @@ impl Cluster {
             shared,
             work,
             presence: presence::Presence::default(),
+            snapshots,
+            snapshots_seen: Mutex::default(),
         });
         let mut keepers: Vec<_> = config
             .fleets
@@ -171,18 +195,27 @@ impl Cluster {
             .map(|site| tokio::spawn(keeper::keep(host.clone(), site.clone())))
             .collect();
         keepers.push(tokio::spawn(presence::keep_presence(host.clone())));
+        let sharing = tokio::spawn(shelf::share(host, shelving));
         Ok(Cluster {
             leases,
             held,
             keepers,
+            sharing,
         })
     }
 
-    /// After the worker stopped: gives up every lease held, this host's presence with them,
-    /// so the next hosts take the sites over at once rather than after the leases lapse.
+    /// After the worker stopped: shares its last snapshots (waiting [`LAST_SNAPSHOTS`] at
+    /// most), then gives up every lease held, this host's presence with them, so the next
+    /// hosts take the sites over at once rather than after the leases lapse.
     pub async fn release_all(self) {
         for keeper in &self.keepers {
             keeper.abort();
+        }
+        if tokio::time::timeout(LAST_SNAPSHOTS, self.sharing)
+            .await
+            .is_err()
+        {
+            tracing::warn!("cluster: the last snapshots were not all shared in time");
         }
         let held: Vec<Lease> = self
             .held

@@ -113,6 +113,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     let session = config.zenoh.open(runtime::session::Role::Router).await?;
     let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
     let fenced = crate::worker::Fenced::default();
+    let (shelf, shelving) = crate::cluster::shelf();
     let subscriptions = subscribe(&session, &config, &shared, work_tx.clone()).await?;
     let worker = {
         let worker = Worker::new(
@@ -128,6 +129,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             Some(_) => worker.with_site_logs(crate::worker::SiteLogs::new(
                 tokio::runtime::Handle::current(),
                 fenced.clone(),
+                shelf,
             )),
             None => worker,
         };
@@ -157,6 +159,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
                 shared.clone(),
                 work_tx.clone(),
                 fenced,
+                shelving,
             )
             .await?,
         ),

@@ -19,12 +19,14 @@ mod access;
 mod lease;
 pub mod local;
 mod placement;
+mod snapshots;
 
 pub use access::NatsAccess;
 /// A JetStream client, as [`NatsAccess::jetstream`] opens it.
 pub use async_nats::jetstream::Context as JetStream;
 pub use lease::{Lease, Leases};
 pub use placement::host_order;
+pub use snapshots::{SnapshotTag, Snapshots};
 
 use async_nats::HeaderMap;
 use async_nats::jetstream::context::{Context, PublishErrorKind};

@@ -2,14 +2,15 @@
 //! pinned in `.ci/run`; its path in `NATS_SERVER_BIN`): the stream's leader killed with
 //! SIGKILL in the middle of appends loses no acked record and stores none twice; a second
 //! writer fences the first; a retried append is recognised as a duplicate; a site's lease
-//! is held by one host at a time, lapses when not renewed, and its old holder learns so.
+//! is held by one host at a time, lapses when not renewed, and its old holder learns so; a
+//! map snapshot put by one host is read whole by another, and replaced by the next.
 
 mod common;
 
 use async_nats::jetstream;
 use bytes::Bytes;
 use common::{Cluster, open_when_ready};
-use sitelog::{Appended, Leases, LogError, RecordId, RetryPolicy, SiteLog};
+use sitelog::{Appended, Leases, LogError, RecordId, RetryPolicy, SiteLog, SnapshotTag, Snapshots};
 use std::time::{Duration, Instant};
 
 async fn stream_leader(js: &jetstream::Context, site: &str) -> String {
@@ -204,4 +205,64 @@ async fn a_lease_is_held_by_one_host_lapses_unrenewed_and_its_old_holder_learns_
         leases_a.claim("park", "h1").await.unwrap().is_some(),
         "released"
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_snapshot_put_by_one_host_is_read_whole_by_another_and_replaced_by_the_next() {
+    let cluster = Cluster::start("snapshots", None);
+    let js_a = jetstream::new(cluster.client().await);
+    let js_b = jetstream::new(cluster.client().await);
+    let started = Instant::now();
+    let owner = loop {
+        match Snapshots::open(&js_a, "levelmap_snapshots", 3).await {
+            Ok(snapshots) => break snapshots,
+            Err(e) if started.elapsed() < Duration::from_secs(60) => {
+                eprintln!("waiting for the cluster: {e}");
+                tokio::time::sleep(Duration::from_millis(500)).await;
+            }
+            Err(e) => panic!("the cluster never took the bucket: {e}"),
+        }
+    };
+    let standby = Snapshots::open(&js_b, "levelmap_snapshots", 3)
+        .await
+        .unwrap();
+    assert_eq!(standby.tag("park").await.unwrap(), None, "none yet");
+    assert!(standby.get("park").await.unwrap().is_none());
+
+    // Many chunks (the client cuts 128 KiB), bytes that differ everywhere.
+    let first: Vec<u8> = (0..1_500_000u32).map(|i| (i * 7 + i / 251) as u8).collect();
+    let tag = |log_sequence, nodes| SnapshotTag {
+        log_sequence,
+        nodes,
+        mapping_version: "test-1".into(),
+    };
+    owner.put("park", &tag(40, 30), &first).await.unwrap();
+    let read = loop {
+        // The standby's reads may reach a replica a moment behind.
+        if let Some(read) = standby.get("park").await.unwrap() {
+            break read;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60), "never seen");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    assert_eq!(read.0, tag(40, 30));
+    assert!(read.1 == first, "the bytes read back whole");
+
+    let second = vec![9u8; 300_000];
+    owner.put("park", &tag(90, 70), &second).await.unwrap();
+    let read = loop {
+        let read = standby.get("park").await.unwrap().expect("still there");
+        if read.0.log_sequence == 90 {
+            break read;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "never replaced"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    assert_eq!(read.0, tag(90, 70));
+    assert!(read.1 == second, "the newer snapshot, whole");
+    assert_eq!(standby.tag("park").await.unwrap(), Some(tag(90, 70)));
+    assert_eq!(standby.tag("yard").await.unwrap(), None, "another site's");
 }

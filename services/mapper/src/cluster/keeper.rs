@@ -318,6 +318,10 @@ async fn follow(host: &Arc<Host>, site: &str, follower: &mut Option<SiteLog>) ->
     let log = follower.as_mut().expect("opened above");
     let read = catch_up(host, site, log, FOLLOW_MAX).await?;
     host.shared.instruments.records_followed.inc_by(read as u64);
+    if let Err(e) = super::shelf::take_in(host, site).await {
+        // The log is followed all the same; the snapshot is looked at again next round.
+        tracing::debug!(site, "cluster: the shared snapshot not taken in: {e:#}");
+    }
     Ok(())
 }
 
@@ -385,6 +389,14 @@ async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
         .await
         .map_err(|_| anyhow::anyhow!("the site's log did not open within the lease's time"))??;
     let records = catch_up(&host, &site, &mut log, usize::MAX).await?;
+    // The newest shared snapshot, if this host's store has none as new: the restore then
+    // replays only the nodes after it. Never waited on for longer than a lease.
+    let taken_in = tokio::time::timeout(host.leases.ttl(), super::shelf::take_in(&host, &site));
+    match taken_in.await {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => tracing::warn!(site, "cluster: the shared snapshot not taken in: {e:#}"),
+        Err(_) => tracing::warn!(site, "cluster: the shared snapshot not taken in: timed out"),
+    }
     host.shared
         .instruments
         .records_taken_over

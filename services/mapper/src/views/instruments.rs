@@ -33,6 +33,11 @@ pub struct Instruments {
     pub records_followed: Counter,
     /// Cluster mode: records read at a takeover (what the standby had not read yet).
     pub records_taken_over: Counter,
+    /// Cluster mode: snapshots of this host's sites put in the object store.
+    pub snapshots_shared: Counter,
+    /// Cluster mode: snapshots of other hosts' sites taken from the object store into this
+    /// host's store.
+    pub snapshots_taken_in: Counter,
     registry: Registry,
 }
 
@@ -52,6 +57,8 @@ impl Default for Instruments {
             appends_fenced: Counter::default(),
             records_followed: Counter::default(),
             records_taken_over: Counter::default(),
+            snapshots_shared: Counter::default(),
+            snapshots_taken_in: Counter::default(),
             registry: Registry::default(),
         };
         let mut registry = Registry::default();
@@ -111,6 +118,16 @@ impl Default for Instruments {
                 "levelmap_log_records_taken_over",
                 "Cluster mode: records read at a takeover (what the standby had not read yet).",
                 &i.records_taken_over,
+            ),
+            (
+                "levelmap_snapshots_shared",
+                "Cluster mode: snapshots of this host's sites put in the object store.",
+                &i.snapshots_shared,
+            ),
+            (
+                "levelmap_snapshots_taken_in",
+                "Cluster mode: snapshots of other hosts' sites taken from the object store into this host's store.",
+                &i.snapshots_taken_in,
             ),
         ];
         for (name, help, counter) in counted {

@@ -18,18 +18,26 @@ pub struct SiteLogs {
     logs: HashMap<String, SiteLog>,
     /// Sites dropped by the worker itself (a fenced append): their keepers stop renewing.
     fenced: Fenced,
+    /// Where the snapshots of the sites owned go to be shared.
+    shelf: crate::cluster::Shelf,
 }
 
 /// Sites whose append was fenced, from the worker to their keepers (`crate::cluster`).
 pub type Fenced = std::sync::Arc<std::sync::Mutex<std::collections::HashSet<String>>>;
 
 impl SiteLogs {
-    /// No site yet; appends run on `runtime`; fenced sites are told on `fenced`.
-    pub fn new(runtime: tokio::runtime::Handle, fenced: Fenced) -> SiteLogs {
+    /// No site yet; appends run on `runtime`; fenced sites are told on `fenced`; snapshots
+    /// go on `shelf`.
+    pub fn new(
+        runtime: tokio::runtime::Handle,
+        fenced: Fenced,
+        shelf: crate::cluster::Shelf,
+    ) -> SiteLogs {
         SiteLogs {
             runtime,
             logs: HashMap::new(),
             fenced,
+            shelf,
         }
     }
 
@@ -162,6 +170,29 @@ impl Worker {
             .instruments
             .sites_owned
             .set(self.fleets.len() as i64);
+    }
+
+    /// In cluster mode, shares a snapshot of `site` just stored: tagged with the last log
+    /// record the store holds of it (the snapshot holds nothing the store does not).
+    pub(super) fn share_snapshot(&self, site: &str, nodes: usize, bytes: Vec<u8>) {
+        let Some(sites) = &self.sites else { return };
+        let log_sequence = match self.store.site_log_sequence(site) {
+            Ok(sequence) => sequence,
+            Err(e) => {
+                tracing::warn!(site, "snapshot not shared: {e}");
+                return;
+            }
+        };
+        let tag = sitelog::SnapshotTag {
+            log_sequence,
+            nodes: nodes as u64,
+            mapping_version: self.config.mapping_version().to_string(),
+        };
+        sites.shelf.shelve(crate::cluster::Shelved {
+            site: site.to_owned(),
+            tag,
+            bytes,
+        });
     }
 
     /// Drops the sites whose appends were fenced from what a commit held.

@@ -42,14 +42,17 @@ impl Worker {
             let stored = self.store.put_snapshot(&id, &snapshot);
             let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
             match stored {
-                Ok(()) => tracing::info!(
-                    fleet = %id,
-                    nodes,
-                    bytes = snapshot.len(),
-                    "snapshot stored: encoded in {:.1} ms, written in {:.1} ms",
-                    ms(encoded),
-                    ms(started.elapsed() - encoded)
-                ),
+                Ok(()) => {
+                    tracing::info!(
+                        fleet = %id,
+                        nodes,
+                        bytes = snapshot.len(),
+                        "snapshot stored: encoded in {:.1} ms, written in {:.1} ms",
+                        ms(encoded),
+                        ms(started.elapsed() - encoded)
+                    );
+                    self.share_snapshot(&id, nodes, snapshot);
+                }
                 // Tried again after as many nodes: the last one stays usable.
                 Err(e) => tracing::warn!(fleet = %id, "snapshot not stored: {e}"),
             }

@@ -1,0 +1,125 @@
+//! Each site's newest map snapshot, shared through the object store (`sitelog::Snapshots`).
+//! The owner's worker shelves every snapshot it stores and goes on; one task puts them, one
+//! at a time (a snapshot that finds the shelf full is not shared: the next one, as many nodes
+//! later, is). The site's standby takes the newest one into its own store as it follows the
+//! log, and a host taking a site over does so before it restores the map: the restore then
+//! starts from the snapshot and replays only the nodes after it.
+
+use super::Host;
+use anyhow::Result;
+use sitelog::SnapshotTag;
+use std::sync::Arc;
+use std::time::Instant;
+use tokio::sync::mpsc;
+
+/// The object store of the sites' snapshots.
+pub const SNAPSHOTS_BUCKET: &str = "levelmap_site_snapshots";
+
+/// Snapshots waiting to be put, at most: each is a whole map (megabytes for a big site).
+const SHELF: usize = 2;
+
+/// A snapshot on its way to the object store.
+pub struct Shelved {
+    /// The site it maps.
+    pub site: String,
+    /// What it covers.
+    pub tag: SnapshotTag,
+    /// The snapshot, as `fleetmap` wrote it.
+    pub bytes: Vec<u8>,
+}
+
+/// The worker's end of the shelf.
+pub struct Shelf(mpsc::Sender<Shelved>);
+
+/// The sharing task's end of the shelf.
+pub struct Shelving(mpsc::Receiver<Shelved>);
+
+/// A shelf, empty.
+pub fn shelf() -> (Shelf, Shelving) {
+    let (tx, rx) = mpsc::channel(SHELF);
+    (Shelf(tx), Shelving(rx))
+}
+
+impl Shelf {
+    /// Hands `shelved` to the sharing task without waiting.
+    pub fn shelve(&self, shelved: Shelved) {
+        if let Err(mpsc::error::TrySendError::Full(s)) = self.0.try_send(shelved) {
+            tracing::warn!(
+                site = s.site,
+                nodes = s.tag.nodes,
+                "snapshot not shared: the ones before it are still being put"
+            );
+        }
+    }
+}
+
+/// Puts the shelved snapshots in the object store until the worker stops shelving.
+pub(super) async fn share(host: Arc<Host>, mut shelving: Shelving) {
+    while let Some(s) = shelving.0.recv().await {
+        let started = Instant::now();
+        match host.snapshots.put(&s.site, &s.tag, &s.bytes).await {
+            Ok(()) => {
+                host.shared.instruments.snapshots_shared.inc();
+                tracing::info!(
+                    site = s.site,
+                    nodes = s.tag.nodes,
+                    log_sequence = s.tag.log_sequence,
+                    bytes = s.bytes.len(),
+                    "snapshot shared in {:.0} ms",
+                    started.elapsed().as_secs_f64() * 1e3
+                );
+            }
+            // The one before it stays usable; the next one comes as many nodes later.
+            Err(e) => tracing::warn!(site = s.site, "snapshot not shared: {e}"),
+        }
+    }
+}
+
+/// Takes `site`'s shared snapshot into this host's store if it is of the running mapping
+/// version, covers more nodes than the store's own, and the store holds every record it
+/// covers (else it is looked at again next time). A snapshot that does not fit the stored
+/// nodes after all is refused by the restore, which then replays them.
+pub(super) async fn take_in(host: &Arc<Host>, site: &str) -> Result<()> {
+    let Some(tag) = host.snapshots.tag(site).await? else {
+        return Ok(());
+    };
+    let seen = host.snapshots_seen.lock().expect("seen lock").get(site) == Some(&tag.log_sequence);
+    if seen {
+        return Ok(());
+    }
+    let (store, name) = (host.store.clone(), site.to_owned());
+    let (have, local_nodes) = tokio::task::spawn_blocking(move || -> Result<(u64, u64)> {
+        let local = store.snapshot(&name)?;
+        let nodes = local.map_or(0, |b| fleetmap::FleetMap::snapshot_nodes(&b).unwrap_or(0));
+        Ok((store.site_log_sequence(&name)?, nodes))
+    })
+    .await??;
+    if have < tag.log_sequence {
+        return Ok(());
+    }
+    let running = host.config.mapping_version().to_string();
+    if tag.mapping_version == running && tag.nodes > local_nodes {
+        let Some((tag, bytes)) = host.snapshots.get(site).await? else {
+            return Ok(());
+        };
+        if have < tag.log_sequence || tag.mapping_version != running {
+            // Replaced since its tag was read: looked at again next time.
+            return Ok(());
+        }
+        let (store, name, size) = (host.store.clone(), site.to_owned(), bytes.len());
+        tokio::task::spawn_blocking(move || store.put_snapshot(&name, &bytes)).await??;
+        host.shared.instruments.snapshots_taken_in.inc();
+        tracing::info!(
+            site,
+            nodes = tag.nodes,
+            log_sequence = tag.log_sequence,
+            bytes = size,
+            "cluster: the site's shared snapshot taken into this host's store"
+        );
+    }
+    host.snapshots_seen
+        .lock()
+        .expect("seen lock")
+        .insert(site.to_owned(), tag.log_sequence);
+    Ok(())
+}

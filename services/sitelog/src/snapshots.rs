@@ -1,0 +1,114 @@
+//! The sites' map snapshots in a JetStream object store: one object per site, replaced by
+//! each newer one, tagged with the log sequence it covers (every record up to it), how many
+//! nodes it holds and who made it. A snapshot is derived from the log and never the record:
+//! a host that takes a site over restores the map from the newest snapshot its store has
+//! caught up with and replays only the log after it, rather than every node.
+
+use crate::LogError;
+use async_nats::jetstream::context::Context;
+use async_nats::jetstream::object_store::{
+    Config, GetErrorKind, InfoErrorKind, ObjectMetadata, ObjectStore,
+};
+use std::collections::HashMap;
+use tokio::io::AsyncReadExt;
+
+/// What a snapshot covers, as tagged on its object.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SnapshotTag {
+    /// The log sequence of the last record the snapshot's map holds.
+    pub log_sequence: u64,
+    /// How many of the site's nodes (in log order) it holds.
+    pub nodes: u64,
+    /// The mapping version that made it: a snapshot of another is no use to a host.
+    pub mapping_version: String,
+}
+
+/// The snapshots bucket.
+pub struct Snapshots {
+    store: ObjectStore,
+}
+
+const LOG_SEQUENCE: &str = "log_sequence";
+const NODES: &str = "nodes";
+const MAPPING_VERSION: &str = "mapping_version";
+
+impl Snapshots {
+    /// Opens (or creates) the object store `bucket`, kept on `replicas` servers.
+    pub async fn open(js: &Context, bucket: &str, replicas: usize) -> Result<Snapshots, LogError> {
+        let store = match js.get_object_store(bucket).await {
+            Ok(store) => store,
+            Err(_) => js
+                .create_object_store(Config {
+                    bucket: bucket.to_owned(),
+                    description: Some("levelmap: each site's newest map snapshot".into()),
+                    num_replicas: replicas,
+                    ..Default::default()
+                })
+                .await
+                .map_err(LogError::jetstream)?,
+        };
+        Ok(Snapshots { store })
+    }
+
+    /// Replaces `site`'s snapshot with `bytes`, tagged `tag`.
+    pub async fn put(&self, site: &str, tag: &SnapshotTag, bytes: &[u8]) -> Result<(), LogError> {
+        let metadata = HashMap::from([
+            (LOG_SEQUENCE.to_owned(), tag.log_sequence.to_string()),
+            (NODES.to_owned(), tag.nodes.to_string()),
+            (MAPPING_VERSION.to_owned(), tag.mapping_version.clone()),
+        ]);
+        let meta = ObjectMetadata {
+            name: site.to_owned(),
+            metadata,
+            ..Default::default()
+        };
+        let mut reader = bytes;
+        self.store
+            .put(meta, &mut reader)
+            .await
+            .map_err(LogError::jetstream)?;
+        Ok(())
+    }
+
+    /// The tag of `site`'s snapshot, if it has one.
+    pub async fn tag(&self, site: &str) -> Result<Option<SnapshotTag>, LogError> {
+        match self.store.info(site).await {
+            Ok(info) if info.deleted => Ok(None),
+            Ok(info) => tag_of(&info.metadata).map(Some),
+            Err(e) if e.kind() == InfoErrorKind::NotFound => Ok(None),
+            Err(e) => Err(LogError::JetStream(e.to_string())),
+        }
+    }
+
+    /// `site`'s snapshot and its tag, if it has one. The object's digest is checked by the
+    /// client as it is read.
+    pub async fn get(&self, site: &str) -> Result<Option<(SnapshotTag, Vec<u8>)>, LogError> {
+        let mut object = match self.store.get(site).await {
+            Ok(object) => object,
+            Err(e) if e.kind() == GetErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(LogError::JetStream(e.to_string())),
+        };
+        let tag = tag_of(&object.info.metadata)?;
+        let mut bytes = Vec::with_capacity(object.info.size);
+        object
+            .read_to_end(&mut bytes)
+            .await
+            .map_err(|e| LogError::JetStream(format!("reading {site}'s snapshot: {e}")))?;
+        Ok(Some((tag, bytes)))
+    }
+}
+
+/// The tag kept in an object's metadata.
+fn tag_of(metadata: &HashMap<String, String>) -> Result<SnapshotTag, LogError> {
+    let number = |key: &str| {
+        metadata
+            .get(key)
+            .and_then(|v| v.parse::<u64>().ok())
+            .ok_or_else(|| LogError::JetStream(format!("a snapshot without a readable {key}")))
+    };
+    Ok(SnapshotTag {
+        log_sequence: number(LOG_SEQUENCE)?,
+        nodes: number(NODES)?,
+        mapping_version: metadata.get(MAPPING_VERSION).cloned().unwrap_or_default(),
+    })
+}
