@@ -137,6 +137,7 @@ pub fn answer_map_query(shared: &Shared, query: &zenoh::query::Query) {
     let _ = query.reply(key, body).wait();
 }
 
+pub mod feeds;
 pub mod odometry;
 pub mod recording;
 pub mod ros_out;

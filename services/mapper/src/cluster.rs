@@ -4,10 +4,12 @@
 //!
 //! Each site has a keeper task on every host (`cluster/keeper.rs`): while the site's lease
 //! is free it claims it (the hosts in the site's rendezvous order, each waiting its rank's
-//! stagger), then takes the site over: the log after what this host's store holds is read into the
-//! store (the store is the host's cache of the logs), the map restored from it as a start
-//! restores a fleet, and handed to the worker ([`Work::Adopt`]), which from then on appends
-//! each of the site's batches to the log before its commit and ack. The keeper renews the
+//! stagger), then takes the site over: the log after what this host's store holds is read
+//! into the store (the store is the host's cache of the logs), the newest shared snapshot
+//! taken in (`cluster/shelf.rs`), the map restored from them as a start restores a fleet,
+//! and handed to the worker ([`Work::Adopt`]), which from then on appends each of the
+//! site's batches to the log before its commit and ack; the keeper then declares the site's
+//! feeds (`crate::bus::feeds`), held while it owns the site. The keeper renews the
 //! lease every third of its time to live; a lease lost (or not renewed for two thirds of
 //! it) drops the site at once ([`Work::Drop`]), as does a fenced append in the worker.
 
@@ -29,6 +31,12 @@ use sitelog::{Lease, Leases, NatsAccess, Snapshots};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::Duration;
+
+/// The `[store] snapshot_every_nodes` a cluster host is deployed with
+/// (deploy/cluster/mapper-host.toml): a takeover restores from the newest shared snapshot and
+/// replays the nodes after it, up to this many; under `bench-cluster`'s load a node replays
+/// in about 20 ms, and a 673-node map writes its snapshot in a few ms (docs/cluster.md).
+pub const SNAPSHOT_EVERY_NODES: u64 = 100;
 
 /// The KV bucket of the sites' leases.
 pub const LEASES_BUCKET: &str = "levelmap_site_leases";
@@ -131,6 +139,8 @@ struct Host {
     work: mpsc::SyncSender<Work>,
     presence: presence::Presence,
     snapshots: Snapshots,
+    /// Declares the feeds of each site this host owns.
+    feeds: crate::bus::feeds::Feeds,
     /// The log sequence of each site's shared snapshot last looked at (`shelf::take_in`).
     snapshots_seen: Mutex<HashMap<String, u64>>,
 }
@@ -142,18 +152,35 @@ pub async fn connect(cluster: &ClusterConfig) -> Result<sitelog::JetStream> {
     Ok(cluster.nats.jetstream(&name).await?)
 }
 
+/// The cluster's ends of what it shares with the mapper's worker.
+pub struct WorkerEnds {
+    /// The worker's queue (takeovers, drops).
+    pub work: mpsc::SyncSender<Work>,
+    /// The sites the worker dropped on a fenced append.
+    pub fenced: Fenced,
+    /// The snapshots the worker stored, to share.
+    pub shelving: Shelving,
+    /// Declares a site's feeds, which go to the worker.
+    pub feeds: crate::bus::feeds::Feeds,
+}
+
 impl Cluster {
-    /// Starts a keeper for each site of `config.fleets`, and the task that shares the
-    /// snapshots the worker puts on the shelf.
+    /// Starts a keeper for each site of `config.fleets` (each declares its site's feeds
+    /// while it owns the site), and the task that shares the snapshots the worker puts on
+    /// the shelf.
     pub async fn start(
         config: &MapperConfig,
         js: sitelog::JetStream,
         store: Arc<Store>,
         shared: Arc<Shared>,
-        work: mpsc::SyncSender<Work>,
-        fenced: Fenced,
-        shelving: Shelving,
+        worker: WorkerEnds,
     ) -> Result<Cluster> {
+        let WorkerEnds {
+            work,
+            fenced,
+            shelving,
+            feeds,
+        } = worker;
         let cluster = config.cluster.clone().context("no [cluster]")?;
         let leases = loop {
             // The servers may still be starting, or electing: the keepers need the bucket.
@@ -187,6 +214,7 @@ impl Cluster {
             work,
             presence: presence::Presence::default(),
             snapshots,
+            feeds,
             snapshots_seen: Mutex::default(),
         });
         let mut keepers: Vec<_> = config

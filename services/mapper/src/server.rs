@@ -6,6 +6,7 @@
 //! mapping work, so teleoperation sees it at once.
 
 use crate::bus::Bus;
+use crate::bus::feeds::{Declared, EVERY_FLEET, Feeds};
 use crate::bus::recording::FeedReport;
 use crate::config::MapperConfig;
 use crate::localization::MapCache;
@@ -17,7 +18,6 @@ use runtime::session::now_ns;
 use std::sync::Arc;
 use std::sync::mpsc;
 use std::time::Duration;
-use wire::Topic;
 
 /// How long [`Running::stop`] lets open HTTP requests finish.
 pub const HTTP_DRAIN: Duration = Duration::from_secs(5);
@@ -114,7 +114,13 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
     let fenced = crate::worker::Fenced::default();
     let (shelf, shelving) = crate::cluster::shelf();
-    let subscriptions = subscribe(&session, &config, &shared, work_tx.clone()).await?;
+    let feeds = Feeds::new(
+        session.clone(),
+        shared.clone(),
+        &config.fleets,
+        work_tx.clone(),
+    );
+    let subscriptions = subscribe(&session, &feeds, nats.is_some(), &shared).await?;
     let worker = {
         let worker = Worker::new(
             config.clone(),
@@ -157,9 +163,12 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
                 js,
                 store.clone(),
                 shared.clone(),
-                work_tx.clone(),
-                fenced,
-                shelving,
+                crate::cluster::WorkerEnds {
+                    work: work_tx.clone(),
+                    fenced,
+                    shelving,
+                    feeds,
+                },
             )
             .await?,
         ),
@@ -202,84 +211,30 @@ pub(crate) fn serve_until_stopped(
     })
 }
 
-/// What the mapper declares on the bus, held as long as the worker runs.
-type Subscriptions = (
-    zenoh::pubsub::Subscriber<()>,
-    zenoh::pubsub::Subscriber<()>,
-    zenoh::pubsub::Subscriber<()>,
-    zenoh::query::Queryable<()>,
-);
+/// What the mapper declares on the bus for as long as the worker runs: every fleet's feeds
+/// (single-machine mode; in cluster mode each site's keeper declares its own), the map
+/// queryable.
+type Subscriptions = (Option<Declared>, zenoh::query::Queryable<()>);
 
-/// Nodes to the worker, live odometry and live scans to their callbacks, `levelmap/{fleet}/map/*` queries to
-/// the current views.
+/// Every fleet's feeds unless in cluster mode, and `levelmap/{fleet}/map/*` queries to the
+/// current views.
 async fn subscribe(
     session: &zenoh::Session,
-    config: &MapperConfig,
+    feeds: &Feeds,
+    cluster: bool,
     shared: &Arc<Shared>,
-    work: mpsc::SyncSender<Work>,
 ) -> Result<Subscriptions> {
-    let node_keys = format!("{}/*/robots/*/{}", wire::KEY_ROOT, Topic::Node);
-    let shed = shared.clone();
-    let nodes = session
-        .declare_subscriber(node_keys)
-        .callback(move |sample| {
-            let payload = sample.payload().to_bytes().into_owned();
-            let node = Work::node(sample.key_expr().as_str(), payload);
-            // Behind by a full queue: the node stays in its robot's outbox and comes again
-            // (the next node's gap asks for it), instead of the mapper's memory growing.
-            if let Err(mpsc::TrySendError::Full(_)) = work.try_send(node) {
-                shed.metrics.reject("node", "queue_full");
-            }
-        })
-        .await
-        .map_err(anyhow::Error::from_boxed)?;
-    let odometry = declare_live(
-        session,
-        shared,
-        config,
-        Topic::Odom,
-        crate::bus::odometry::on_odometry,
-    )
-    .await?;
-    let scans = declare_live(
-        session,
-        shared,
-        config,
-        Topic::Scan,
-        crate::bus::odometry::on_live_scan,
-    )
-    .await?;
+    let declared = match cluster {
+        true => None,
+        false => Some(feeds.declare(EVERY_FLEET).await?),
+    };
     let views = shared.clone();
     let queries = session
         .declare_queryable(format!("{}/*/map/*", wire::KEY_ROOT))
         .callback(move |query| crate::bus::answer_map_query(&views, &query))
         .await
         .map_err(anyhow::Error::from_boxed)?;
-    Ok((nodes, odometry, scans, queries))
-}
-
-/// A subscription to one live topic of every robot (odometry, live scans), handled in its
-/// callback by `handle(shared, fleets served, key, payload)`, with no mapping work.
-async fn declare_live(
-    session: &zenoh::Session,
-    shared: &Arc<Shared>,
-    config: &MapperConfig,
-    topic: Topic,
-    handle: fn(&Shared, &[String], &str, &[u8]),
-) -> Result<zenoh::pubsub::Subscriber<()>> {
-    let (live, known) = (shared.clone(), config.fleets.clone());
-    session
-        .declare_subscriber(format!("{}/*/robots/*/{topic}", wire::KEY_ROOT))
-        .callback(move |sample| {
-            handle(
-                &live,
-                &known,
-                sample.key_expr().as_str(),
-                &sample.payload().to_bytes(),
-            )
-        })
-        .await
-        .map_err(anyhow::Error::from_boxed)
+    Ok((declared, queries))
 }
 
 /// Applies the cloud retention policy (`[clouds]`) to every fleet every `prune_every_s`, on

@@ -55,6 +55,8 @@ impl Deployment {
             let mut config = site_mapper(&dir.join(name), sites, &http, &zenoh)?;
             // Each router connects to those started before it: a full mesh, one link a pair.
             config.zenoh.connect = Some(started.iter().map(|h| h.zenoh.clone()).collect());
+            // As deploy/cluster/mapper-host.toml: a takeover replays at most this tail.
+            config.store.snapshot_every_nodes = mapper::cluster::SNAPSHOT_EVERY_NODES;
             config.cluster = Some(ClusterConfig {
                 host: name.clone(),
                 hosts: names.clone(),

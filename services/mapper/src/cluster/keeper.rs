@@ -157,6 +157,8 @@ async fn own(
     let ttl = host.leases.ttl();
     let mut renewed = Instant::now();
     let mut retry = FIRST_TAKEOVER_RETRY;
+    // The site's feeds, declared once it is taken over, undeclared when this returns.
+    let (mut taken, mut feeds) = (false, None);
     loop {
         tokio::select! {
             done = async { takeover.as_mut().expect("guarded").await }, if takeover.is_some() => {
@@ -173,6 +175,7 @@ async fn own(
                             "cluster: site taken over {:.0} ms after its lease was claimed",
                             claimed.elapsed().as_secs_f64() * 1e3
                         );
+                        taken = true;
                     }
                     Ok(Err(e)) => {
                         // Its stream may have no leader yet (an election takes 4–9 s): the
@@ -193,6 +196,12 @@ async fn own(
             }
             _ = tokio::time::sleep(ttl / 3) => {}
             _ = stopping.changed() => return Owned::Stopping,
+        }
+        if taken && feeds.is_none() {
+            match host.feeds.declare(&site).await {
+                Ok(declared) => feeds = Some(declared),
+                Err(e) => tracing::warn!(site, "cluster: the site's feeds not declared yet: {e:#}"),
+            }
         }
         let fenced = host.fenced.lock().expect("fenced lock").remove(&site);
         let Some(mut lease) = host.held.lock().expect("leases lock").get(&site).cloned() else {
