@@ -274,7 +274,11 @@ fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
     // The robots publish on h2's router, but only h1, the owner, subscribes to the site.
     let h2_metrics = http_get(&hosts.h2().http, "/metrics").expect("metrics").1;
     let not_owner = r#"levelmap_rejected_total{topic="node",reason="not_owner"}"#;
-    assert_eq!(metric(&h2_metrics, not_owner), 0, "h2 was sent nodes of h1's site");
+    assert_eq!(
+        metric(&h2_metrics, not_owner),
+        0,
+        "h2 was sent nodes of h1's site"
+    );
     let killed = Instant::now();
     hosts.h1.take().expect("h1 runs").kill();
     let taken = hosts.h2_takes_over(killed);

@@ -34,8 +34,7 @@ use std::time::Duration;
 
 /// The `[store] snapshot_every_nodes` a cluster host is deployed with
 /// (deploy/cluster/mapper-host.toml): a takeover restores from the newest shared snapshot and
-/// replays the nodes after it, up to this many; under `bench-cluster`'s load a node replays
-/// in about 20 ms, and a 673-node map writes its snapshot in a few ms (docs/cluster.md).
+/// replays the nodes and solves after it, up to this many (docs/cluster.md).
 pub const SNAPSHOT_EVERY_NODES: u64 = 100;
 
 /// The KV bucket of the sites' leases.

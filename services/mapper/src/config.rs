@@ -237,10 +237,11 @@ impl Default for VersionsConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct StoreConfig {
-    /// A fleet's snapshot is written once it took this many nodes since its last one (when
-    /// no solve of it is out), and at a graceful stop; 0: never, and none stored is used (a
-    /// restart replays every node). Writing one stalls the worker for a time that grows with
-    /// the map.
+    /// A fleet's snapshot is written once it took this many nodes and solves since its last
+    /// one (what a restore from it would replay; robots passing over mapped ground add
+    /// solves, not nodes), when no solve of it is out, and at a graceful stop; 0: never, and
+    /// none stored is used (a restart replays every node). Writing one stalls the worker for
+    /// a time that grows with the map.
     pub snapshot_every_nodes: u64,
 }
 

@@ -1,5 +1,6 @@
 //! The worker's snapshots of the fleets' maps (`fleetmap::snapshot`): a fleet's is
-//! written once it took `[store] snapshot_every_nodes` nodes since its last one, and at a
+//! written once it took `[store] snapshot_every_nodes` nodes and solves since its last one
+//! (what a restore from it would replay), and at a
 //! graceful stop. Only between solves (none of the fleet's out, so its state is whole) and
 //! after its nodes and solve points are committed: a snapshot never holds what the store
 //! does not. It has a transaction of its own, so a failed one costs no node its ack.
@@ -9,7 +10,9 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 impl Worker {
-    /// The nodes each fleet's stored snapshot covers, as the restore found them.
+    /// The nodes each fleet's stored snapshot covers, as the restore found them (the solves
+    /// it covers are not counted: a fleet restored with solves after its snapshot soon gets
+    /// a new one).
     pub fn with_snapshots(mut self, covered: HashMap<String, usize>) -> Worker {
         self.snapshots = covered;
         self
@@ -25,11 +28,15 @@ impl Worker {
         let mut ids: Vec<String> = self.fleets.keys().cloned().collect();
         ids.sort_unstable();
         for id in ids {
-            let nodes = self.fleets[&id].nodes().len();
+            let map = &self.fleets[&id];
+            let nodes = map.nodes().len();
+            // What a restore from the last snapshot would replay: the nodes and the solves
+            // after it (robots passing over mapped ground add solves, not nodes).
+            let work = nodes + map.solves_applied() as usize;
             let covered = self.snapshots.get(&id).copied().unwrap_or(0);
             let due = match all {
-                true => nodes > covered,
-                false => nodes >= covered + every,
+                true => work > covered,
+                false => work >= covered + every,
             };
             if !due || self.solve_out(&id) {
                 continue;
@@ -56,7 +63,7 @@ impl Worker {
                 // Tried again after as many nodes: the last one stays usable.
                 Err(e) => tracing::warn!(fleet = %id, "snapshot not stored: {e}"),
             }
-            self.snapshots.insert(id, nodes);
+            self.snapshots.insert(id, work);
         }
     }
 }
