@@ -557,6 +557,7 @@ mod localized;
 pub use localized::{LocalizedSpan, SpanReplay};
 
 pub(crate) mod snapshot;
+pub use snapshot::SnapshotCovers;
 
 #[cfg(test)]
 pub(crate) mod tests;

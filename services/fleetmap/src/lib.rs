@@ -34,6 +34,7 @@ pub const MAPPING_CODE: &str = concat!("levelmap ", env!("CARGO_PKG_VERSION"), "
 
 pub use fleet::{
     ChainRecord, FleetMap, IngestError, Ingested, LocalizedSpan, MAX_CHAINS_PER_ROBOT,
-    MAX_ROBOTS_PER_FLEET, NodeRecord, RobotRecord, Sequence, SolvePoint, SpanReplay, grid_of,
+    MAX_ROBOTS_PER_FLEET, NodeRecord, RobotRecord, Sequence, SnapshotCovers, SolvePoint,
+    SpanReplay, grid_of,
 };
 pub use view::{ChainView, FleetView, RobotView};

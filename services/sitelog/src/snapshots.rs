@@ -19,6 +19,8 @@ pub struct SnapshotTag {
     pub log_sequence: u64,
     /// How many of the site's nodes (in log order) it holds.
     pub nodes: u64,
+    /// How many of the site's solves it has applied.
+    pub solves: u64,
     /// The mapping version that made it: a snapshot of another is no use to a host.
     pub mapping_version: String,
 }
@@ -30,6 +32,7 @@ pub struct Snapshots {
 
 const LOG_SEQUENCE: &str = "log_sequence";
 const NODES: &str = "nodes";
+const SOLVES: &str = "solves";
 const MAPPING_VERSION: &str = "mapping_version";
 
 impl Snapshots {
@@ -55,6 +58,7 @@ impl Snapshots {
         let metadata = HashMap::from([
             (LOG_SEQUENCE.to_owned(), tag.log_sequence.to_string()),
             (NODES.to_owned(), tag.nodes.to_string()),
+            (SOLVES.to_owned(), tag.solves.to_string()),
             (MAPPING_VERSION.to_owned(), tag.mapping_version.clone()),
         ]);
         let meta = ObjectMetadata {
@@ -109,6 +113,7 @@ fn tag_of(metadata: &HashMap<String, String>) -> Result<SnapshotTag, LogError> {
     Ok(SnapshotTag {
         log_sequence: number(LOG_SEQUENCE)?,
         nodes: number(NODES)?,
+        solves: number(SOLVES)?,
         mapping_version: metadata.get(MAPPING_VERSION).cloned().unwrap_or_default(),
     })
 }

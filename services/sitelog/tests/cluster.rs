@@ -234,6 +234,7 @@ async fn a_snapshot_put_by_one_host_is_read_whole_by_another_and_replaced_by_the
     let tag = |log_sequence, nodes| SnapshotTag {
         log_sequence,
         nodes,
+        solves: nodes / 2,
         mapping_version: "test-1".into(),
     };
     owner.put("park", &tag(40, 30), &first).await.unwrap();

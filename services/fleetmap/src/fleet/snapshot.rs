@@ -30,6 +30,15 @@ pub enum SnapshotError {
     Mismatch(String),
 }
 
+/// What a snapshot covers: a restore from it replays the nodes and solves after these.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SnapshotCovers {
+    /// The first stored nodes it holds.
+    pub nodes: u64,
+    /// The solves applied in it.
+    pub solves: u64,
+}
+
 /// One chain of a robot: `ChainRecord` with the fields the API does not show.
 #[derive(Serialize, Deserialize)]
 struct SavedChain {
@@ -107,9 +116,14 @@ impl FleetMap {
         Some(bytes)
     }
 
-    /// Nodes a snapshot covers (its first `n` stored nodes), if it is readable.
-    pub fn snapshot_nodes(bytes: &[u8]) -> Result<u64, SnapshotError> {
-        Ok(read(bytes)?.nodes)
+    /// What a snapshot covers (its first `nodes` stored nodes, its first `solves` solve
+    /// points), if it is readable.
+    pub fn snapshot_covers(bytes: &[u8]) -> Result<SnapshotCovers, SnapshotError> {
+        let saved = read(bytes)?;
+        Ok(SnapshotCovers {
+            nodes: saved.nodes,
+            solves: saved.solve_points,
+        })
     }
 
     /// This map (empty, as the configuration makes it) restored from `bytes`, with the

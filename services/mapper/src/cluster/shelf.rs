@@ -76,8 +76,8 @@ pub(super) async fn share(host: Arc<Host>, mut shelving: Shelving) {
 }
 
 /// Takes `site`'s shared snapshot into this host's store if it is of the running mapping
-/// version, covers more nodes than the store's own, and the store holds every record it
-/// covers (else it is looked at again next time). A snapshot that does not fit the stored
+/// version, covers more nodes and solves than the store's own, and the store holds every
+/// record it covers (else it is looked at again next time). A snapshot that does not fit the stored
 /// nodes after all is refused by the restore, which then replays them.
 pub(super) async fn take_in(host: &Arc<Host>, site: &str) -> Result<()> {
     let Some(tag) = host.snapshots.tag(site).await? else {
@@ -88,17 +88,19 @@ pub(super) async fn take_in(host: &Arc<Host>, site: &str) -> Result<()> {
         return Ok(());
     }
     let (store, name) = (host.store.clone(), site.to_owned());
-    let (have, local_nodes) = tokio::task::spawn_blocking(move || -> Result<(u64, u64)> {
+    let (have, local_work) = tokio::task::spawn_blocking(move || -> Result<(u64, u64)> {
         let local = store.snapshot(&name)?;
-        let nodes = local.map_or(0, |b| fleetmap::FleetMap::snapshot_nodes(&b).unwrap_or(0));
-        Ok((store.site_log_sequence(&name)?, nodes))
+        let covers = local.and_then(|b| fleetmap::FleetMap::snapshot_covers(&b).ok());
+        let work = covers.map_or(0, |c| c.nodes + c.solves);
+        Ok((store.site_log_sequence(&name)?, work))
     })
     .await??;
     if have < tag.log_sequence {
         return Ok(());
     }
+    // Newer: more of what a restore would otherwise replay (nodes and solves).
     let running = host.config.mapping_version().to_string();
-    if tag.mapping_version == running && tag.nodes > local_nodes {
+    if tag.mapping_version == running && tag.nodes + tag.solves > local_work {
         let Some((tag, bytes)) = host.snapshots.get(site).await? else {
             return Ok(());
         };

@@ -8,7 +8,7 @@
 use super::{Batch, Worker, commit::Unstored};
 use crate::store::{FleetBatch, StoreError};
 use crate::views::instruments::Instruments;
-use fleetmap::FleetMap;
+use fleetmap::{FleetMap, SnapshotCovers};
 use sitelog::{Appended, LogError, SiteLog};
 use std::collections::HashMap;
 
@@ -174,7 +174,7 @@ impl Worker {
 
     /// In cluster mode, shares a snapshot of `site` just stored: tagged with the last log
     /// record the store holds of it (the snapshot holds nothing the store does not).
-    pub(super) fn share_snapshot(&self, site: &str, nodes: usize, bytes: Vec<u8>) {
+    pub(super) fn share_snapshot(&self, site: &str, covers: SnapshotCovers, bytes: Vec<u8>) {
         let Some(sites) = &self.sites else { return };
         let log_sequence = match self.store.site_log_sequence(site) {
             Ok(sequence) => sequence,
@@ -185,7 +185,8 @@ impl Worker {
         };
         let tag = sitelog::SnapshotTag {
             log_sequence,
-            nodes: nodes as u64,
+            nodes: covers.nodes,
+            solves: covers.solves,
             mapping_version: self.config.mapping_version().to_string(),
         };
         sites.shelf.shelve(crate::cluster::Shelved {

@@ -32,7 +32,11 @@ impl Worker {
             let nodes = map.nodes().len();
             // What a restore from the last snapshot would replay: the nodes and the solves
             // after it (robots passing over mapped ground add solves, not nodes).
-            let work = nodes + map.solves_applied() as usize;
+            let covers = fleetmap::SnapshotCovers {
+                nodes: nodes as u64,
+                solves: map.solves_applied(),
+            };
+            let work = (covers.nodes + covers.solves) as usize;
             let covered = self.snapshots.get(&id).copied().unwrap_or(0);
             let due = match all {
                 true => work > covered,
@@ -58,7 +62,7 @@ impl Worker {
                         ms(encoded),
                         ms(started.elapsed() - encoded)
                     );
-                    self.share_snapshot(&id, nodes, snapshot);
+                    self.share_snapshot(&id, covers, snapshot);
                 }
                 // Tried again after as many nodes: the last one stays usable.
                 Err(e) => tracing::warn!(fleet = %id, "snapshot not stored: {e}"),
