@@ -231,7 +231,7 @@ impl Cluster {
         })
     }
 
-    /// After the worker stopped: shares its last snapshots (waiting [`LAST_SNAPSHOTS`] at
+    /// After the worker stopped: shares its last snapshots (waiting `LAST_SNAPSHOTS` at
     /// most), then gives up every lease held, this host's presence with them, so the next
     /// hosts take the sites over at once rather than after the leases lapse.
     pub async fn release_all(self) {
