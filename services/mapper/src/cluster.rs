@@ -181,25 +181,17 @@ impl Cluster {
             feeds,
         } = worker;
         let cluster = config.cluster.clone().context("no [cluster]")?;
-        let leases = loop {
-            // The servers may still be starting, or electing: the keepers need the bucket.
-            match Leases::open(&js, LEASES_BUCKET, cluster.ttl(), cluster.replicas).await {
-                Ok(leases) => break Arc::new(leases),
-                Err(e) => {
-                    tracing::warn!("cluster: the leases bucket is not reachable yet: {e}");
-                    tokio::time::sleep(Duration::from_secs(1)).await;
-                }
-            }
-        };
-        let snapshots = loop {
-            match Snapshots::open(&js, shelf::SNAPSHOTS_BUCKET, cluster.replicas).await {
-                Ok(snapshots) => break snapshots,
-                Err(e) => {
-                    tracing::warn!("cluster: the snapshots bucket is not reachable yet: {e}");
-                    tokio::time::sleep(Duration::from_secs(1)).await;
-                }
-            }
-        };
+        // The servers may still be starting, or electing: the keepers need both buckets.
+        let leases = Arc::new(
+            when_reachable("the leases bucket", || {
+                Leases::open(&js, LEASES_BUCKET, cluster.ttl(), cluster.replicas)
+            })
+            .await,
+        );
+        let snapshots = when_reachable("the snapshots bucket", || {
+            Snapshots::open(&js, shelf::SNAPSHOTS_BUCKET, cluster.replicas)
+        })
+        .await;
         let held = Held::default();
         let host = Arc::new(Host {
             cluster,
@@ -256,6 +248,23 @@ impl Cluster {
             match self.leases.release(lease).await {
                 Ok(()) => tracing::info!(site, "lease released"),
                 Err(e) => tracing::warn!(site, "lease not released (it lapses): {e}"),
+            }
+        }
+    }
+}
+
+/// `open` tried every second until NATS answers.
+async fn when_reachable<T, F, Opening>(what: &str, open: F) -> T
+where
+    F: Fn() -> Opening,
+    Opening: std::future::Future<Output = Result<T, sitelog::LogError>>,
+{
+    loop {
+        match open().await {
+            Ok(opened) => return opened,
+            Err(e) => {
+                tracing::warn!("cluster: {what} is not reachable yet: {e}");
+                tokio::time::sleep(Duration::from_secs(1)).await;
             }
         }
     }
