@@ -52,12 +52,9 @@ pub fn assert_restored(http: &str, before: &[Vec<u64>]) {
     }
 }
 
-/// A port nobody listens on right now.
+/// A loopback port nobody listens on, outside the range outgoing connections take theirs from.
 pub fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port()
+    sitelog::local::free_local_port().expect("a free port")
 }
 
 /// A fresh folder under the target's temp dir.

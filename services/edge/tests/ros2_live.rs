@@ -30,13 +30,6 @@ fn summary(events: &[SourceEvent]) -> Summary {
     (odometry, scans)
 }
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port()
-}
-
 #[test]
 fn live_rmw_zenoh_topics_give_what_the_recording_gives() {
     live_topics_give_what_the_recording_gives(KeyStyle::RmwZenoh, "rmw_zenoh");
@@ -53,7 +46,10 @@ fn live_topics_give_what_the_recording_gives(style: KeyStyle, name: &str) {
     let expected = summary(&play(&rec).0);
     let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
 
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let endpoint = format!(
+        "tcp/127.0.0.1:{}",
+        sitelog::local::free_local_port().expect("a free port")
+    );
     let mut publisher = Command::new(&python)
         .arg(tests.join("zenoh_publisher.py"))
         .arg(&endpoint)

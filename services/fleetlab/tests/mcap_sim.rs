@@ -209,10 +209,7 @@ fn the_park_run_recorded_by_rosbags_maps_as_the_simulated_source_does() {
 fn live_events(rec: &Path, columns: usize, wanted: usize) -> Vec<SourceEvent> {
     let endpoint = format!(
         "tcp/127.0.0.1:{}",
-        std::net::TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .expect("a free port")
-            .port()
+        sitelog::local::free_local_port().expect("a free port")
     );
     let publisher_script =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../edge/tests/zenoh_publisher.py");

@@ -8,6 +8,7 @@ use std::io;
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
 
 /// The servers' names, in the order of their ports.
 const NAMES: [&str; 3] = ["n1", "n2", "n3"];
@@ -35,7 +36,7 @@ impl LocalCluster {
         std::fs::create_dir_all(dir)?;
         let free_ports = || {
             (0..3)
-                .map(|_| free_port())
+                .map(|_| free_local_port())
                 .collect::<io::Result<Vec<u16>>>()
         };
         let (client_ports, route_ports, monitor_ports) =
@@ -139,8 +140,36 @@ impl Drop for LocalCluster {
     }
 }
 
-fn free_port() -> io::Result<u16> {
-    Ok(TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+/// A loopback port nothing listens on, for a process started next to listen on. Taken below
+/// the kernel's ephemeral range: a port from `bind(0)` lies in that range, and any outgoing
+/// connection made before the process binds it may be given the same port (a drill failed
+/// so, "Address already in use"). Distinct on every call within a process.
+pub fn free_local_port() -> io::Result<u16> {
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    let ephemeral_low = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range")
+        .ok()
+        .and_then(|range| range.split_whitespace().next()?.parse::<u32>().ok())
+        .unwrap_or(32768)
+        .min(u32::from(u16::MAX));
+    let low = (ephemeral_low / 2).max(1024);
+    if ephemeral_low <= low {
+        // No room below the range: the kernel's choice, racy as it is.
+        return Ok(TcpListener::bind("127.0.0.1:0")?.local_addr()?.port());
+    }
+    let span = ephemeral_low - low;
+    // Processes start apart (by pid) so that two test binaries rarely probe the same ports.
+    let start = std::process::id().wrapping_mul(7919);
+    for _ in 0..span {
+        let port = low + start.wrapping_add(NEXT.fetch_add(1, Ordering::Relaxed)) % span;
+        let port = u16::try_from(port).expect("below the ephemeral range");
+        if TcpListener::bind(("127.0.0.1", port)).is_ok() {
+            return Ok(port);
+        }
+    }
+    Err(io::Error::new(
+        io::ErrorKind::AddrInUse,
+        format!("every port in {low}..{ephemeral_low} is in use"),
+    ))
 }
 
 /// A `tls` block with server `node`'s certificate from `dir`.
@@ -156,4 +185,30 @@ fn tls(dir: &Path, node: &str, verify: &str) -> String {
 /// The nats-server binary named by `NATS_SERVER_BIN`, if set.
 pub fn nats_server_from_env() -> Option<PathBuf> {
     std::env::var_os("NATS_SERVER_BIN").map(PathBuf::from)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn free_local_ports_are_distinct_bindable_and_below_the_ephemeral_range() {
+        let ephemeral_low: u16 = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range")
+            .expect("Linux names its ephemeral range")
+            .split_whitespace()
+            .next()
+            .and_then(|low| low.parse().ok())
+            .expect("a number");
+        let ports: Vec<u16> = (0..50)
+            .map(|_| free_local_port().expect("a port"))
+            .collect();
+        let mut distinct = ports.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        assert_eq!(distinct.len(), ports.len(), "a port given twice: {ports:?}");
+        for port in ports {
+            assert!(port < ephemeral_low, "{port} is in the ephemeral range");
+            TcpListener::bind(("127.0.0.1", port)).expect("the port is free");
+        }
+    }
 }

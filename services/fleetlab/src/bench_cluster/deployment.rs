@@ -13,7 +13,6 @@ use runtime::session::SessionConfig;
 use sitelog::NatsAccess;
 use sitelog::local::LocalCluster;
 use std::collections::BTreeMap;
-use std::net::TcpListener;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -275,8 +274,7 @@ fn empty(dir: &Path) -> Result<()> {
 
 /// A free `127.0.0.1:port`.
 fn local_address() -> Result<String> {
-    let port = TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
-    Ok(format!("127.0.0.1:{port}"))
+    Ok(format!("127.0.0.1:{}", sitelog::local::free_local_port()?))
 }
 
 /// The HTTP status of GET `path` (0: no answer).
