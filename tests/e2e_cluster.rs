@@ -31,6 +31,8 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 const ROBOTS: usize = 2;
+/// The hosts' write token.
+const TOKEN: &str = "s3cret";
 
 /// A mapper host's config: site `park`, hosts h1 and h2, its Zenoh listening and connecting,
 /// the NATS servers at address `nats` on `ports`; a snapshot every 5 nodes, so that every
@@ -44,7 +46,7 @@ fn host_config(
     let servers: Vec<String> = ports.iter().map(|p| format!("nats://{nats}:{p}")).collect();
     let connect = connect.map_or(String::new(), |c| format!("connect = [{c:?}]\n"));
     format!(
-        "store_path = {store:?}\nfleets = [\"park\"]\n\
+        "store_path = {store:?}\nfleets = [\"park\"]\ntoken = {TOKEN:?}\n\
          [store]\nsnapshot_every_nodes = 5\n\n\
          [mapping.coverage]\nenabled = false\n\n\
          [zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\n{connect}\n\
@@ -321,6 +323,81 @@ fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
         appends > 0 && acked > 0,
         "appends {appends}, acked nodes {acked}"
     );
+}
+
+/// Map versions and robots' modes are records of the site's log: made on h1, they are on
+/// h2 after h1's kill as h1 left them, and h2 goes on changing them; a version's number is
+/// never given twice, even across hosts.
+#[test]
+fn versions_and_modes_move_with_their_site() {
+    let mut hosts = TwoHosts::start("cluster-versions");
+    let (edges, _) = hosts.robots_on_h1();
+    let (h1, h2) = (hosts.h1_http().to_owned(), hosts.h2().http.clone());
+    let versions = "/api/v1/fleets/park/versions";
+    let modes = "/api/v1/fleets/park/modes";
+    let json = |body: &[u8]| serde_json::from_slice::<serde_json::Value>(body).expect("JSON");
+    let made = |http: &str| {
+        let (status, body, _) = call(http, "POST", versions, TOKEN, b"");
+        assert_eq!(status, 201, "{}", String::from_utf8_lossy(&body));
+        json(&body)["version"].as_u64().expect("a number")
+    };
+    assert_eq!(made(&h1), 1);
+    assert_eq!(made(&h1), 2);
+    let (status, ..) = call(&h1, "DELETE", &format!("{versions}/2"), TOKEN, b"");
+    assert_eq!(status, 204);
+    let (_, file, _) = call(&h1, "GET", &format!("{versions}/1/file"), TOKEN, b"");
+    let localize = br#"{"mode": "localize", "version": 1, "robots": ["robot1"]}"#;
+    let (status, body, _) = call(&h1, "PUT", modes, TOKEN, localize);
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    // h2 holds no lease: it changes nothing (the site's owner alone appends to its log).
+    let map_all = br#"{"mode": "map"}"#;
+    let (status, ..) = call(&h2, "PUT", modes, TOKEN, map_all);
+    assert_ne!(
+        status, 200,
+        "a change of modes on a host that does not own the site"
+    );
+
+    let killed = Instant::now();
+    hosts.h1.take().expect("h1 runs").kill();
+    let taken = hosts.h2_takes_over(killed);
+    eprintln!(
+        "versions: h2 serves the site {:.1} s after h1's kill",
+        taken.as_secs_f64()
+    );
+    let (_, body, _) = call(&h2, "GET", versions, TOKEN, b"");
+    let listed: Vec<u64> = json(&body)["versions"]
+        .as_array()
+        .expect("versions")
+        .iter()
+        .map(|v| v["version"].as_u64().expect("a number"))
+        .collect();
+    assert_eq!(listed, [1], "h2 keeps version 1, and not the deleted 2");
+    let (status, moved, _) = call(&h2, "GET", &format!("{versions}/1/file"), TOKEN, b"");
+    assert_eq!(status, 200);
+    assert!(
+        moved == file,
+        "version 1's file on h2 is h1's, byte for byte"
+    );
+    let (_, body, _) = call(&h2, "GET", modes, TOKEN, b"");
+    let now = json(&body);
+    assert_eq!(
+        now["modes"]["robots"]["robot1"],
+        serde_json::json!({"mode": "localize", "version": 1}),
+        "{now}"
+    );
+    // h2, the owner now, changes them on: robot1 in use of 1 until it maps again.
+    let (status, ..) = call(&h2, "DELETE", &format!("{versions}/1"), TOKEN, b"");
+    assert_eq!(status, 409, "version 1 is in use by robot1");
+    let (status, ..) = call(&h2, "PUT", modes, TOKEN, map_all);
+    assert_eq!(status, 200);
+    let (status, ..) = call(&h2, "DELETE", &format!("{versions}/1"), TOKEN, b"");
+    assert_eq!(status, 204);
+    assert_eq!(made(&h2), 3, "numbers 1 and 2 were given on h1");
+    // Every robot's every node acked, mapped or localized.
+    for (r, edge) in edges.into_iter().enumerate() {
+        let report = edge_report(edge, Duration::from_secs(180));
+        assert_eq!(report["outbox_pending"], 0, "robot{r}: {report}");
+    }
 }
 
 #[test]

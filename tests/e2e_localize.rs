@@ -55,18 +55,13 @@ fn a_fourth_robot_localizes_on_the_surveyed_park_without_growing_the_network() {
 }
 
 /// `method path` with the bearer token and a JSON body: (status, body).
+/// `method path` with a bearer token and a JSON body: (status, JSON answer or its text).
 fn call(http: &str, method: &str, path: &str, token: &str, body: Option<Value>) -> (u16, Value) {
-    let request = ureq::http::Request::builder()
-        .method(method)
-        .uri(format!("http://{http}{path}"))
-        .header("Authorization", format!("Bearer {token}"))
-        .header("Content-Type", "application/json")
-        .body(body.map_or_else(Vec::new, |b| serde_json::to_vec(&b).unwrap()))
-        .expect("a request");
-    let mut response = agent().run(request).expect("an answer");
-    let text = response.body_mut().read_to_string().unwrap_or_default();
-    let body = serde_json::from_str(&text).unwrap_or(Value::String(text));
-    (response.status().as_u16(), body)
+    let body = body.map_or_else(Vec::new, |b| serde_json::to_vec(&b).unwrap());
+    let (status, answer, _) = common::call(http, method, path, token, &body);
+    let text = String::from_utf8_lossy(&answer).into_owned();
+    let answer = serde_json::from_str(&text).unwrap_or(Value::String(text));
+    (status, answer)
 }
 
 const TOKEN: &str = "s3cret";

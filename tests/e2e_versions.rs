@@ -14,29 +14,6 @@ use std::path::Path;
 const TOKEN: &str = "s3cret";
 const READ: &str = "r3ad-only";
 
-/// `method path` with a bearer token and a body: (status, body bytes, Location).
-fn call(http: &str, method: &str, path: &str, token: &str, body: &[u8]) -> (u16, Vec<u8>, String) {
-    let request = ureq::http::Request::builder()
-        .method(method)
-        .uri(format!("http://{http}{path}"))
-        .header("Authorization", format!("Bearer {token}"))
-        .body(body.to_vec())
-        .expect("a request");
-    let mut response = agent().run(request).expect("an answer");
-    let location = response
-        .headers()
-        .get("location")
-        .map(|v| v.to_str().unwrap().to_owned())
-        .unwrap_or_default();
-    let body = response
-        .body_mut()
-        .with_config()
-        .limit(u64::MAX)
-        .read_to_vec()
-        .expect("a body");
-    (response.status().as_u16(), body, location)
-}
-
 fn json(body: &[u8]) -> Value {
     serde_json::from_slice(body)
         .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(body)))

@@ -116,6 +116,35 @@ pub fn http_call(addr: &str, method: &str, path: &str, headers: &[(&str, &str)])
     })
 }
 
+/// `method path` with a bearer token and a body: (status, body bytes, Location).
+pub fn call(
+    http: &str,
+    method: &str,
+    path: &str,
+    token: &str,
+    body: &[u8],
+) -> (u16, Vec<u8>, String) {
+    let request = ureq::http::Request::builder()
+        .method(method)
+        .uri(format!("http://{http}{path}"))
+        .header("Authorization", format!("Bearer {token}"))
+        .body(body.to_vec())
+        .expect("a request");
+    let mut response = agent().run(request).expect("an answer");
+    let location = response
+        .headers()
+        .get("location")
+        .map(|v| v.to_str().unwrap().to_owned())
+        .unwrap_or_default();
+    let body = response
+        .body_mut()
+        .with_config()
+        .limit(u64::MAX)
+        .read_to_vec()
+        .expect("a body");
+    (response.status().as_u16(), body, location)
+}
+
 /// GET `path` with a bearer token (none: without one).
 pub fn http_get_with(addr: &str, path: &str, token: Option<&str>) -> Option<Answer> {
     let auth = token.map(|t| format!("Bearer {t}"));

@@ -27,7 +27,7 @@ use crate::views::Shared;
 use crate::worker::{Fenced, Work};
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
-use sitelog::{Lease, Leases, NatsAccess, Snapshots};
+use sitelog::{Lease, Leases, NatsAccess, Snapshots, VersionFiles};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::Duration;
@@ -39,6 +39,8 @@ pub const SNAPSHOT_EVERY_NODES: u64 = 100;
 
 /// The KV bucket of the sites' leases.
 pub const LEASES_BUCKET: &str = "levelmap_site_leases";
+/// The object store of the sites' map version files (`sitelog::VersionFiles`).
+pub const VERSION_FILES_BUCKET: &str = "levelmap_site_versions";
 
 /// A mapper host's place in the cluster (`[cluster]`); unset: single-machine mode.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -138,6 +140,10 @@ struct Host {
     work: mpsc::SyncSender<Work>,
     presence: presence::Presence,
     snapshots: Snapshots,
+    /// The files of the versions the sites' logs name.
+    version_files: VersionFiles,
+    /// The versions' localization maps (shared with the worker and the API).
+    maps: Arc<crate::localization::MapCache>,
     /// Declares the feeds of each site this host owns.
     feeds: crate::bus::feeds::Feeds,
     /// The log sequence of each site's shared snapshot last looked at (`shelf::take_in`).
@@ -161,6 +167,8 @@ pub struct WorkerEnds {
     pub shelving: Shelving,
     /// Declares a site's feeds, which go to the worker.
     pub feeds: crate::bus::feeds::Feeds,
+    /// The versions' localization maps: a site taken over is handed its modes with them.
+    pub maps: Arc<crate::localization::MapCache>,
 }
 
 impl Cluster {
@@ -179,6 +187,7 @@ impl Cluster {
             fenced,
             shelving,
             feeds,
+            maps,
         } = worker;
         let cluster = config.cluster.clone().context("no [cluster]")?;
         // The servers may still be starting, or electing: the keepers need both buckets.
@@ -190,6 +199,10 @@ impl Cluster {
         );
         let snapshots = when_reachable("the snapshots bucket", || {
             Snapshots::open(&js, shelf::SNAPSHOTS_BUCKET, cluster.replicas)
+        })
+        .await;
+        let version_files = when_reachable("the version files bucket", || {
+            VersionFiles::open(&js, VERSION_FILES_BUCKET, cluster.replicas)
         })
         .await;
         let held = Held::default();
@@ -205,6 +218,8 @@ impl Cluster {
             work,
             presence: presence::Presence::default(),
             snapshots,
+            version_files,
+            maps,
             feeds,
             snapshots_seen: Mutex::default(),
         });

@@ -193,21 +193,33 @@ pub fn restore(
 ) -> Result<HashMap<String, Localizing>, crate::store::StoreError> {
     let mut fleets = HashMap::new();
     for (fleet, stored) in store.modes()? {
-        let modes = modes_of(&stored);
-        let mut built = HashMap::new();
-        for version in modes.versions() {
-            match maps.get(store, &fleet, version) {
-                Ok(map) => {
-                    built.insert(version, map);
-                }
-                Err(e) => tracing::error!(fleet, version, "localization map not built: {e}"),
-            }
-        }
+        let (modes, built) = with_maps(store, maps, &fleet, &stored);
         let mut localizing = Localizing::default();
         localizing.set(modes, built);
         fleets.insert(fleet, localizing);
     }
     Ok(fleets)
+}
+
+/// `fleet`'s stored modes with the maps they name. A map that cannot be built is logged:
+/// its robots are answered lost until their mode changes.
+pub fn with_maps(
+    store: &Store,
+    maps: &MapCache,
+    fleet: &str,
+    stored: &StoredModes,
+) -> (FleetModes, HashMap<u64, Arc<LocalizationMap>>) {
+    let modes = modes_of(stored);
+    let mut built = HashMap::new();
+    for version in modes.versions() {
+        match maps.get(store, fleet, version) {
+            Ok(map) => {
+                built.insert(version, map);
+            }
+            Err(e) => tracing::error!(fleet, version, "localization map not built: {e}"),
+        }
+    }
+    (modes, built)
 }
 
 /// A fleet's modes as stored.

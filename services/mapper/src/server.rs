@@ -156,6 +156,11 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             config.fleets.clone(),
         );
     }
+    // Changes of versions and modes go through the site's log in cluster mode.
+    let site_changes = nats
+        .as_ref()
+        .zip(config.cluster.as_ref())
+        .map(|(js, cluster)| Arc::new(crate::api::SiteChanges::new(js.clone(), cluster.replicas)));
     let cluster = match nats {
         Some(js) => Some(
             crate::cluster::Cluster::start(
@@ -168,6 +173,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
                     fenced,
                     shelving,
                     feeds,
+                    maps: maps.clone(),
                 },
             )
             .await?,
@@ -178,7 +184,14 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
-    let app = crate::api::router(shared.clone(), work_tx.clone(), store, maps, &config);
+    let app = crate::api::router(
+        shared.clone(),
+        work_tx.clone(),
+        store,
+        maps,
+        site_changes,
+        &config,
+    );
     let http = serve_until_stopped(listener, app, shared.stopping.subscribe());
     Ok(Running {
         http_addr,

@@ -22,11 +22,13 @@ use std::ops::Bound;
 use std::path::Path;
 use std::sync::{Mutex, RwLock};
 
+mod changes;
 mod localization;
 mod meta;
 pub mod restore;
 mod retention;
 mod versions;
+pub use changes::SiteChange;
 pub use localization::{ModeError, StoredModes};
 pub use meta::{MappingVersion, STORE_FORMAT};
 pub use retention::Pruned;

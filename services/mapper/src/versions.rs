@@ -16,22 +16,32 @@ use wire::MapVersion;
 pub fn store(
     store: &Store,
     max: usize,
-    mut version: MapVersion,
+    version: MapVersion,
 ) -> Result<VersionSummary, AddVersionError<VersionError>> {
     let fleet = version.fleet.clone();
     let mut summary = None;
     store.add_version(&fleet, max, |number| {
-        version.number = number;
-        let file = wire::encode_map_version_file(&version)?;
-        let made = summary_of(&version, file.len());
-        let json = serde_json::to_vec(&made).expect("a summary serializes");
+        let (made, rows) = numbered(version, number)?;
         summary = Some(made);
-        Ok(VersionRows {
-            file,
-            summary: json,
-        })
+        Ok(rows)
     })?;
     Ok(summary.expect("made with the rows"))
+}
+
+/// `version` under `number`: its summary, and its rows as the store keeps them.
+pub fn numbered(
+    mut version: MapVersion,
+    number: u64,
+) -> Result<(VersionSummary, VersionRows), VersionError> {
+    version.number = number;
+    let file = wire::encode_map_version_file(&version)?;
+    let summary = summary_of(&version, file.len());
+    let json = serde_json::to_vec(&summary).expect("a summary serializes");
+    let rows = VersionRows {
+        file,
+        summary: json,
+    };
+    Ok((summary, rows))
 }
 
 #[cfg(test)]

@@ -104,6 +104,20 @@ pub enum Work {
         /// Answered once its nodes are taken.
         reply: tokio::sync::oneshot::Sender<()>,
     },
+    /// Cluster mode: a change of `site`'s versions or modes, checked by the API: appended
+    /// to the site's log, then stored (`crate::store::SiteChange`).
+    Change {
+        /// The site.
+        site: String,
+        /// The change.
+        change: crate::store::SiteChange,
+        /// An added version's file (in the version files already).
+        file: Option<Vec<u8>>,
+        /// When the operator asked (names a change of modes in the log).
+        asked_ns: u64,
+        /// Answered once stored, or with why not.
+        reply: tokio::sync::oneshot::Sender<Result<(), ChangeError>>,
+    },
     /// Cluster mode: this host lost `site`'s lease: drop it at once.
     Drop {
         /// The site.
@@ -111,6 +125,20 @@ pub enum Work {
         /// Answered once nothing of it is acked any more.
         reply: tokio::sync::oneshot::Sender<()>,
     },
+}
+
+/// Why a change of a site's versions or modes was not made.
+#[derive(Debug, thiserror::Error)]
+pub enum ChangeError {
+    /// This host does not hold the site (any more): its owner takes the change.
+    #[error("this host does not hold site {0} now; ask again (through a gateway)")]
+    NotOwner(String),
+    /// The log did not take it (not reachable in time, or fenced: the site was dropped).
+    #[error("{0}")]
+    Log(String),
+    /// Appended, and this host's store failed to keep it: the log has it.
+    #[error("{0}")]
+    Store(String),
 }
 
 /// Why an optimize request got no report.
@@ -335,6 +363,16 @@ impl Worker {
                 } => {
                     self.adopt(site, *map, covered, *log);
                     let _ = reply.send(());
+                }
+                Work::Change {
+                    site,
+                    change,
+                    file,
+                    asked_ns,
+                    reply,
+                } => {
+                    let done = self.change_site(&site, &change, file, asked_ns, &mut batch);
+                    let _ = reply.send(done);
                 }
                 Work::Drop { site, reply } => {
                     self.drop_site(&site, "its lease was lost", &mut batch);

@@ -20,6 +20,7 @@ mod lease;
 pub mod local;
 mod placement;
 mod snapshots;
+mod versions;
 
 pub use access::NatsAccess;
 /// A JetStream client, as [`NatsAccess::jetstream`] opens it.
@@ -27,6 +28,7 @@ pub use async_nats::jetstream::Context as JetStream;
 pub use lease::{Lease, Leases};
 pub use placement::host_order;
 pub use snapshots::{SnapshotTag, Snapshots};
+pub use versions::VersionFiles;
 
 use async_nats::HeaderMap;
 use async_nats::jetstream::context::{Context, PublishErrorKind};

@@ -38,18 +38,8 @@ const MAPPING_VERSION: &str = "mapping_version";
 impl Snapshots {
     /// Opens (or creates) the object store `bucket`, kept on `replicas` servers.
     pub async fn open(js: &Context, bucket: &str, replicas: usize) -> Result<Snapshots, LogError> {
-        let store = match js.get_object_store(bucket).await {
-            Ok(store) => store,
-            Err(_) => js
-                .create_object_store(Config {
-                    bucket: bucket.to_owned(),
-                    description: Some("levelmap: each site's newest map snapshot".into()),
-                    num_replicas: replicas,
-                    ..Default::default()
-                })
-                .await
-                .map_err(LogError::jetstream)?,
-        };
+        let description = "levelmap: each site's newest map snapshot";
+        let store = object_store(js, bucket, description, replicas).await?;
         Ok(Snapshots { store })
     }
 
@@ -87,18 +77,10 @@ impl Snapshots {
     /// `site`'s snapshot and its tag, if it has one. The object's digest is checked by the
     /// client as it is read.
     pub async fn get(&self, site: &str) -> Result<Option<(SnapshotTag, Vec<u8>)>, LogError> {
-        let mut object = match self.store.get(site).await {
-            Ok(object) => object,
-            Err(e) if e.kind() == GetErrorKind::NotFound => return Ok(None),
-            Err(e) => return Err(LogError::JetStream(e.to_string())),
-        };
-        let tag = tag_of(&object.info.metadata)?;
-        let mut bytes = Vec::with_capacity(object.info.size);
-        object
-            .read_to_end(&mut bytes)
-            .await
-            .map_err(|e| LogError::JetStream(format!("reading {site}'s snapshot: {e}")))?;
-        Ok(Some((tag, bytes)))
+        match read_whole(&self.store, site).await? {
+            Some((info, bytes)) => Ok(Some((tag_of(&info.metadata)?, bytes))),
+            None => Ok(None),
+        }
     }
 }
 
@@ -116,4 +98,44 @@ fn tag_of(metadata: &HashMap<String, String>) -> Result<SnapshotTag, LogError> {
         solves: number(SOLVES)?,
         mapping_version: metadata.get(MAPPING_VERSION).cloned().unwrap_or_default(),
     })
+}
+
+/// The object store `bucket`, made (on `replicas` servers) when missing.
+pub(crate) async fn object_store(
+    js: &Context,
+    bucket: &str,
+    description: &str,
+    replicas: usize,
+) -> Result<ObjectStore, LogError> {
+    match js.get_object_store(bucket).await {
+        Ok(store) => Ok(store),
+        Err(_) => js
+            .create_object_store(Config {
+                bucket: bucket.to_owned(),
+                description: Some(description.to_owned()),
+                num_replicas: replicas,
+                ..Default::default()
+            })
+            .await
+            .map_err(LogError::jetstream),
+    }
+}
+
+/// The whole of an object read, its digest checked by the client as it is read; `None`
+/// when there is no such object.
+pub(crate) async fn read_whole(
+    store: &ObjectStore,
+    name: &str,
+) -> Result<Option<(async_nats::jetstream::object_store::ObjectInfo, Vec<u8>)>, LogError> {
+    let mut object = match store.get(name).await {
+        Ok(object) => object,
+        Err(e) if e.kind() == GetErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(LogError::JetStream(e.to_string())),
+    };
+    let mut bytes = Vec::with_capacity(object.info.size);
+    object
+        .read_to_end(&mut bytes)
+        .await
+        .map_err(|e| LogError::JetStream(format!("reading {name}: {e}")))?;
+    Ok(Some((object.info.clone(), bytes)))
 }

@@ -5,7 +5,7 @@
 use super::access::authorized;
 use super::{Api, ApiError, Reply};
 use crate::localization::{FleetModes, NodeLocalization, RobotMode};
-use crate::store::ModeError;
+use crate::store::{ModeError, SiteChange};
 use axum::Json;
 use axum::body::Body;
 use axum::extract::{Path, Query, State};
@@ -73,7 +73,6 @@ pub(super) async fn modes(
         (status = 403, description = "Write routes are off, or the token only reads", body = String),
         (status = 404, description = "No such fleet or version", body = String),
         (status = 422, description = "The version's map cannot be localized on", body = String),
-        (status = 501, description = "Cluster mode: a site's log does not keep versions and modes yet", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
@@ -85,7 +84,7 @@ pub(super) async fn set_modes(
 ) -> Reply<Json<ModesView>> {
     // The token first: a caller without one learns nothing of the body's faults.
     authorized(&api, &headers)?;
-    api.versions_changed_in(&fleet)?;
+    api.versions_of(&fleet)?;
     let change: SetModes = serde_json::from_slice(&body)
         .map_err(|e| ApiError::BadRequest(format!("not a change of mode: {e}")))?;
     for robot in change.robots.iter().flatten() {
@@ -104,9 +103,33 @@ pub(super) async fn set_modes(
                         .get(&api.store, &fleet, version)
                         .map_err(|e| map_error(&api, e))?;
                 }
-                api.store
-                    .set_modes(&fleet, change.robots.as_deref(), version)
-                    .map_err(|e| mode_error(&api, e))?;
+                match &api.site_changes {
+                    None => api
+                        .store
+                        .set_modes(&fleet, change.robots.as_deref(), version)
+                        .map_err(|e| mode_error(&api, e))?,
+                    Some(_) => {
+                        // Checked here, on the owner, which alone appends to the site's log.
+                        let known = version == 0
+                            || api
+                                .store
+                                .version_summary(&fleet, version)
+                                .map_err(|e| api.store_error(e))?
+                                .is_some();
+                        if !known {
+                            let e = ModeError::NoVersion {
+                                fleet: fleet.clone(),
+                                version,
+                            };
+                            return Err(mode_error(&api, e));
+                        }
+                        let set = SiteChange::ModesSet {
+                            robots: change.robots.clone(),
+                            version,
+                        };
+                        api.change_site_blocking(&fleet, set, None)?;
+                    }
+                }
                 let modes = api.stored_modes(&fleet)?;
                 let mut maps = HashMap::new();
                 for v in modes.versions() {

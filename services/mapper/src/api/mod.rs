@@ -17,6 +17,7 @@ mod localize;
 mod map;
 mod nodes;
 mod service;
+mod site_changes;
 mod versions;
 mod web;
 mod window;
@@ -36,6 +37,7 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 pub use faults::Degraded;
+pub use site_changes::SiteChanges;
 pub use web::WEB_DIR_ENV;
 
 /// What every handler shares.
@@ -65,8 +67,8 @@ struct Api {
     modes_lock: Arc<tokio::sync::Mutex<()>>,
     /// The base map the dashboard may draw (`[http.base_map]`).
     base_map: Option<Arc<crate::config::BaseMap>>,
-    /// Cluster mode (`[cluster]`): what a site's log does not keep yet is refused.
-    cluster: bool,
+    /// Cluster mode (`[cluster]`): changes of versions and modes go through the site's log.
+    site_changes: Option<Arc<SiteChanges>>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -88,8 +90,6 @@ pub enum ApiError {
     Unprocessable(String),
     /// 503: the mapper is stopping.
     Unavailable(String),
-    /// 501: not kept in cluster mode yet (map versions and modes: docs/cluster.md).
-    NotInCluster(String),
     /// 503 as JSON: a quarantined fleet, or a store that cannot commit.
     Degraded(Degraded),
     /// 503 with `Retry-After: 1`: a limit is reached (heavy requests, their time, streams).
@@ -115,7 +115,6 @@ impl ApiError {
             ApiError::Unavailable(_) | ApiError::Degraded(_) | ApiError::Busy(_) => {
                 StatusCode::SERVICE_UNAVAILABLE
             }
-            ApiError::NotInCluster(_) => StatusCode::NOT_IMPLEMENTED,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -131,7 +130,6 @@ impl ApiError {
             | ApiError::Unprocessable(r)
             | ApiError::Unavailable(r)
             | ApiError::Busy(r)
-            | ApiError::NotInCluster(r)
             | ApiError::Internal(r) => r,
             ApiError::Degraded(d) => &d.reason,
         }
@@ -302,6 +300,7 @@ pub fn router(
     work: mpsc::SyncSender<Work>,
     store: Arc<Store>,
     maps: Arc<crate::localization::MapCache>,
+    site_changes: Option<Arc<SiteChanges>>,
     config: &MapperConfig,
 ) -> Router {
     let api = Api {
@@ -315,7 +314,7 @@ pub fn router(
         tiles: Arc::default(),
         served: config.fleets.clone().into(),
         max_versions: config.versions.max_versions.get(),
-        cluster: config.cluster.is_some(),
+        site_changes,
         maps,
         modes_lock: Arc::default(),
         base_map: config.http.base_map.clone().map(Arc::new),

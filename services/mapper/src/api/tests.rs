@@ -94,7 +94,7 @@ fn app(config: MapperConfig) -> Router {
         &config.localization,
         config.max_range_m,
     ));
-    router(shared, mpsc::sync_channel(1).0, store, maps, &config)
+    router(shared, mpsc::sync_channel(1).0, store, maps, None, &config)
 }
 
 fn tokens() -> MapperConfig {
@@ -291,26 +291,4 @@ async fn event_streams_are_capped_and_a_closed_one_frees_its_place() {
         metrics.contains("levelmap_http_refused_total{reason=\"streams\"} 1"),
         "{metrics}"
     );
-}
-
-#[tokio::test]
-async fn cluster_mode_refuses_versions_and_modes_its_logs_do_not_keep() {
-    let app = app(MapperConfig {
-        cluster: Some(crate::cluster::ClusterConfig::default()),
-        ..tokens()
-    });
-    let auth = [("authorization", "Bearer w-token")];
-    for (method, path) in [
-        (Method::POST, "/api/v1/fleets/park/versions"),
-        (Method::POST, "/api/v1/fleets/park/versions/import"),
-        (Method::DELETE, "/api/v1/fleets/park/versions/1"),
-        (Method::PUT, "/api/v1/fleets/park/modes"),
-    ] {
-        let r = send(&app, method.clone(), path, &auth).await;
-        assert_eq!(r.status(), StatusCode::NOT_IMPLEMENTED, "{method} {path}");
-        assert!(text(r).await.contains("cluster mode"), "{method} {path}");
-    }
-    // Reading them is as in the single-machine mode.
-    let r = get(&app, "/api/v1/fleets/park/versions", Some("r-token")).await;
-    assert_ne!(r.status(), StatusCode::NOT_IMPLEMENTED);
 }

@@ -4,7 +4,7 @@
 
 use super::access::authorized;
 use super::{Api, ApiError, Reply};
-use crate::store::{AddVersionError, ModeError};
+use crate::store::{AddVersionError, ModeError, SiteChange};
 use crate::versions::{VersionError, VersionSummary};
 use axum::Json;
 use axum::body::Body;
@@ -42,19 +42,6 @@ impl Api {
         }
     }
 
-    /// [`Api::versions_of`], for a change of `fleet`'s versions or modes: refused in cluster
-    /// mode, where they would stay on this host's store and be lost when the site moves.
-    pub(super) fn versions_changed_in(&self, fleet: &str) -> Reply<()> {
-        if self.cluster {
-            return Err(ApiError::NotInCluster(
-                "cluster mode: a site's log does not keep map versions and modes yet, and this \
-                 host's store alone would lose them when the site moves (docs/cluster.md)"
-                    .into(),
-            ));
-        }
-        self.versions_of(fleet)
-    }
-
     fn no_version(fleet: &str, version: u64) -> ApiError {
         ApiError::NotFound(format!(
             "no version {version} in fleet {fleet:?} (deleted, or never made)"
@@ -66,11 +53,16 @@ impl Api {
         &self,
         result: Result<VersionSummary, AddVersionError<VersionError>>,
     ) -> Reply<VersionSummary> {
-        result.map_err(|e| match e {
+        result.map_err(|e| self.add_error(e))
+    }
+
+    /// Why a version was not stored, as an answer.
+    fn add_error(&self, e: AddVersionError<VersionError>) -> ApiError {
+        match e {
             AddVersionError::Full { .. } => ApiError::Conflict(e.to_string()),
             AddVersionError::Make(e) => ApiError::Unprocessable(e.to_string()),
             AddVersionError::Store(e) => self.store_error(e),
-        })
+        }
     }
 }
 
@@ -100,7 +92,6 @@ fn created(summary: VersionSummary) -> Response {
         (status = 404, description = "No such fleet, or no node in it yet", body = String),
         (status = 409, description = "The fleet keeps max_versions versions already: delete one", body = String),
         (status = 422, description = "The map is too large for one version file", body = String),
-        (status = 501, description = "Cluster mode: a site's log does not keep versions and modes yet", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
@@ -110,9 +101,9 @@ pub(super) async fn version_freeze(
     headers: HeaderMap,
 ) -> Reply {
     authorized(&api, &headers)?;
-    api.versions_changed_in(&fleet)?;
+    api.versions_of(&fleet)?;
     let view = api.view(&fleet)?;
-    store_new(&api, move || {
+    store_new(&api, fleet, move || {
         crate::versions::freeze(&view, now_ns()).map_err(|e| ApiError::Unprocessable(e.to_string()))
     })
     .await
@@ -135,7 +126,6 @@ pub(super) async fn version_freeze(
         (status = 404, description = "A fleet this mapper does not serve", body = String),
         (status = 409, description = "The fleet keeps max_versions versions already: delete one", body = String),
         (status = 413, description = "A file over 256 MiB", body = String),
-        (status = 501, description = "Cluster mode: a site's log does not keep versions and modes yet", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
@@ -146,7 +136,7 @@ pub(super) async fn version_import(
     body: Body,
 ) -> Reply {
     authorized(&api, &headers)?;
-    api.versions_changed_in(&fleet)?;
+    api.versions_of(&fleet)?;
     let file = axum::body::to_bytes(body, MAX_MAP_VERSION_BYTES)
         .await
         .map_err(|e| {
@@ -154,7 +144,7 @@ pub(super) async fn version_import(
                 "the file was not read whole within {MAX_MAP_VERSION_BYTES} bytes: {e}"
             ))
         })?;
-    store_new(&api, move || {
+    store_new(&api, fleet.clone(), move || {
         crate::versions::import(&fleet, &file, now_ns()).map_err(|e| {
             ApiError::BadRequest(format!("not a map version file: {e}; nothing stored"))
         })
@@ -166,8 +156,12 @@ pub(super) async fn version_import(
 /// its summary.
 async fn store_new(
     api: &Api,
+    fleet: String,
     make: impl FnOnce() -> Reply<wire::MapVersion> + Send + 'static,
 ) -> Reply {
+    if let Some(changes) = api.site_changes.clone() {
+        return store_new_in_cluster(api, &changes, fleet, make).await;
+    }
     let summary = api
         .limits
         .heavy_write({
@@ -186,6 +180,44 @@ async fn store_new(
 }
 
 /// The fleet's versions, oldest first.
+/// [`store_new`] in cluster mode: numbered by this host's store (caught up with the site's
+/// log, which only its owner appends to), its file put in the version files, then appended
+/// to the log and stored. One change at a time.
+async fn store_new_in_cluster(
+    api: &Api,
+    changes: &super::SiteChanges,
+    fleet: String,
+    make: impl FnOnce() -> Reply<wire::MapVersion> + Send + 'static,
+) -> Reply {
+    let _one_at_a_time = api.modes_lock.lock().await;
+    let files = changes.files().await?;
+    let (summary, rows) = api
+        .limits
+        .heavy_write({
+            let (api, fleet) = (api.clone(), fleet.clone());
+            move || {
+                let version = make()?;
+                let number = api
+                    .store
+                    .next_version_number(&fleet, api.max_versions)
+                    .map_err(|e| api.add_error(e))?;
+                crate::versions::numbered(version, number)
+                    .map_err(|e| api.add_error(AddVersionError::Make(e)))
+            }
+        })
+        .await?;
+    files
+        .put(&fleet, summary.version, &rows.file)
+        .await
+        .map_err(|e| ApiError::Unavailable(format!("the version's file was not stored: {e}")))?;
+    let added = SiteChange::VersionAdded {
+        number: summary.version,
+        summary: rows.summary,
+    };
+    api.change_site(&fleet, added, Some(rows.file)).await?;
+    Ok(created(summary))
+}
+
 #[utoipa::path(get, path = "/api/v1/fleets/{fleet}/versions", tag = "versions",
     params(("fleet" = String, Path, description = "Fleet id")),
     responses(
@@ -297,7 +329,6 @@ pub(super) async fn version_file(
         (status = 403, description = "Write routes are off, or the token only reads", body = String),
         (status = 404, description = "No such fleet or version", body = String),
         (status = 409, description = "Robots localize on the version (set them to map or to another version first)", body = String),
-        (status = 501, description = "Cluster mode: a site's log does not keep versions and modes yet", body = String),
         (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
@@ -307,17 +338,38 @@ pub(super) async fn version_delete(
     headers: HeaderMap,
 ) -> Reply<StatusCode> {
     authorized(&api, &headers)?;
-    api.versions_changed_in(&fleet)?;
+    api.versions_of(&fleet)?;
+    let in_cluster = api.site_changes.clone();
+    let _one_at_a_time = match &in_cluster {
+        Some(_) => Some(api.modes_lock.lock().await),
+        None => None,
+    };
     api.limits
         .heavy_write({
-            let api = api.clone();
-            move || match api.store.delete_version(&fleet, version) {
-                Ok(true) => Ok(StatusCode::NO_CONTENT),
-                Ok(false) => Err(Api::no_version(&fleet, version)),
-                Err(e @ ModeError::InUse { .. }) => Err(ApiError::Conflict(e.to_string())),
-                Err(ModeError::Store(e)) => Err(api.store_error(e)),
-                Err(e @ ModeError::NoVersion { .. }) => Err(ApiError::NotFound(e.to_string())),
+            let (api, fleet) = (api.clone(), fleet.clone());
+            move || {
+                let deleted = match &in_cluster {
+                    None => api.store.delete_version(&fleet, version),
+                    Some(_) => api.store.deletable(&fleet, version),
+                };
+                match deleted {
+                    Ok(true) => Ok(()),
+                    Ok(false) => Err(Api::no_version(&fleet, version)),
+                    Err(e @ ModeError::InUse { .. }) => Err(ApiError::Conflict(e.to_string())),
+                    Err(ModeError::Store(e)) => Err(api.store_error(e)),
+                    Err(e @ ModeError::NoVersion { .. }) => Err(ApiError::NotFound(e.to_string())),
+                }
             }
         })
-        .await
+        .await?;
+    if let Some(changes) = &api.site_changes {
+        let deleted = SiteChange::VersionDeleted { number: version };
+        api.change_site(&fleet, deleted, None).await?;
+        // The record is the truth: a file left behind is only space (a host reading the
+        // log skips a deleted version's file either way).
+        if let Err(e) = changes.files().await?.delete(&fleet, version).await {
+            tracing::warn!(fleet, version, "the deleted version's file stays: {e}");
+        }
+    }
+    Ok(StatusCode::NO_CONTENT)
 }

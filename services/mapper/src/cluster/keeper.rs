@@ -3,8 +3,8 @@
 //! is lost.
 
 use super::Host;
-use super::record::SiteRecord;
-use crate::store::Store;
+use super::record::{LogRecord, SiteRecord};
+use crate::store::{SiteChange, Store};
 use crate::worker::Work;
 use anyhow::{Context, Result, bail};
 use sitelog::{Lease, RetryPolicy, SiteLog};
@@ -353,31 +353,66 @@ async fn catch_up(host: &Arc<Host>, site: &str, log: &mut SiteLog, max: usize) -
         let Some(newest) = entries.last() else { break };
         next = newest.sequence + 1;
         read += entries.len();
+        let records = read_records(host, site, &entries).await?;
         let (store, name) = (host.store.clone(), site.to_owned());
-        tokio::task::spawn_blocking(move || commit_records(&store, &name, &entries)).await??;
+        tokio::task::spawn_blocking(move || commit_records(&store, &name, records)).await??;
     }
     Ok(read)
 }
 
-/// Stores the log's `entries` of `site` as the worker would have committed them.
-fn commit_records(store: &Store, site: &str, entries: &[sitelog::Entry]) -> Result<()> {
-    let records: Vec<(u64, SiteRecord, Vec<slam::GpsEdge>)> = entries
-        .iter()
-        .map(|e| {
-            let record = SiteRecord::decode(&e.payload)
-                .with_context(|| format!("record {} ({})", e.sequence, e.id))?;
-            let fixes = record.pass_fixes()?;
-            Ok((e.sequence, record, fixes))
-        })
-        .collect::<Result<_>>()?;
-    let batches: Vec<_> = records
-        .iter()
-        .map(|(sequence, record, fixes)| {
-            let mut batch = record.as_batch(site, *sequence);
-            batch.pass_fixes = fixes;
-            batch
-        })
-        .collect();
+/// A record of the log as this host stores it.
+enum Read {
+    /// A batch, at its sequence, with its passes' GPS fixes.
+    Batch(u64, SiteRecord, Vec<slam::GpsEdge>),
+    /// A change, at its sequence, with an added version's file (`None`: deleted since).
+    Change(u64, SiteChange, Option<Vec<u8>>),
+}
+
+/// The log's `entries` of `site` decoded, with the files of the versions they add.
+async fn read_records(host: &Host, site: &str, entries: &[sitelog::Entry]) -> Result<Vec<Read>> {
+    let mut records = Vec::with_capacity(entries.len());
+    for e in entries {
+        let what = || format!("record {} ({})", e.sequence, e.id);
+        records.push(match LogRecord::decode(&e.payload).with_context(what)? {
+            LogRecord::Batch(record) => {
+                let fixes = record.pass_fixes().with_context(what)?;
+                Read::Batch(e.sequence, record, fixes)
+            }
+            LogRecord::Change(change) => {
+                let file = match &change {
+                    SiteChange::VersionAdded { number, .. } => host
+                        .version_files
+                        .get(site, *number)
+                        .await
+                        .with_context(what)?,
+                    _ => None,
+                };
+                Read::Change(e.sequence, change, file)
+            }
+        });
+    }
+    Ok(records)
+}
+
+/// Stores the log's `records` of `site` as the worker would have: each run of batches in one
+/// commit, each change in its order.
+fn commit_records(store: &Store, site: &str, records: Vec<Read>) -> Result<()> {
+    let mut batches = Vec::new();
+    for record in &records {
+        match record {
+            Read::Batch(sequence, record, fixes) => {
+                let mut batch = record.as_batch(site, *sequence);
+                batch.pass_fixes = fixes;
+                batches.push(batch);
+            }
+            Read::Change(sequence, change, file) => {
+                if !batches.is_empty() {
+                    store.commit(&std::mem::take(&mut batches))?;
+                }
+                store.apply_site_change(site, *sequence, change, file.clone())?;
+            }
+        }
+    }
     store.commit(&batches)?;
     Ok(())
 }
@@ -422,6 +457,24 @@ async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
         })
     })
     .await??;
+    // Its robots' modes as its log left them, with their versions' maps (built here, off
+    // the worker), handed over before its nodes.
+    let (store, maps, name) = (host.store.clone(), host.maps.clone(), site.clone());
+    let (modes, maps) = tokio::task::spawn_blocking(move || -> Result<_> {
+        let stored = store.modes()?.into_iter().find(|(fleet, _)| *fleet == name);
+        let stored = stored.map(|(_, modes)| modes).unwrap_or_default();
+        Ok(crate::localization::with_maps(
+            &store, &maps, &name, &stored,
+        ))
+    })
+    .await??;
+    let (reply, modes_set) = tokio::sync::oneshot::channel();
+    let set = Work::SetModes {
+        fleet: site.clone(),
+        modes,
+        maps,
+        reply,
+    };
     let (reply, adopted) = tokio::sync::oneshot::channel();
     let adopt = Work::Adopt {
         site,
@@ -431,9 +484,10 @@ async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
         reply,
     };
     let work = host.work.clone();
-    tokio::task::spawn_blocking(move || work.send(adopt))
+    tokio::task::spawn_blocking(move || work.send(set).and_then(|()| work.send(adopt)))
         .await?
         .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
+    let _ = modes_set.await;
     adopted
         .await
         .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;

@@ -2,16 +2,61 @@
 //! [`FleetBatch`]), split into records small enough for JetStream (1 MiB a message by
 //! default), each named for deduplication by its first node's robot/chain/seq.
 //!
+//! Between batches, a record may be a change of the site's versions or modes
+//! ([`SiteChange`]), appended by the owner when an operator makes it.
+//!
 //! A record is one format byte, then the record in postcard. Postcard is not
 //! self-describing: a change of [`SiteRecord`]'s fields is a new format number, and every
 //! later release reads every format it ever wrote (a log outlives the release that wrote it).
 
-use crate::store::{FleetBatch, SolvePoint};
+use crate::store::{FleetBatch, SiteChange, SolvePoint};
 use serde::{Deserialize, Serialize};
 use sitelog::RecordId;
 
-/// The record format this build writes.
+/// The format of a batch record this build writes.
 pub const RECORD_FORMAT: u8 = 1;
+/// The format of a change record ([`SiteChange`]).
+pub const CHANGE_FORMAT: u8 = 2;
+
+/// A record of a site's log, read back.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LogRecord {
+    /// A batch, or a part of one.
+    Batch(SiteRecord),
+    /// A change of the site's versions or modes.
+    Change(SiteChange),
+}
+
+impl LogRecord {
+    /// A record read back from the log.
+    pub fn decode(bytes: &[u8]) -> Result<LogRecord, RecordError> {
+        match bytes.split_first() {
+            Some((&RECORD_FORMAT, _)) => SiteRecord::decode(bytes).map(LogRecord::Batch),
+            Some((&CHANGE_FORMAT, rest)) => postcard::from_bytes(rest)
+                .map(LogRecord::Change)
+                .map_err(|e| RecordError::Damaged(e.to_string())),
+            Some((&other, _)) => Err(RecordError::Format(other)),
+            None => Err(RecordError::Damaged("empty".into())),
+        }
+    }
+}
+
+/// A change's bytes in the log.
+pub fn encode_change(change: &SiteChange) -> Vec<u8> {
+    let mut bytes = vec![CHANGE_FORMAT];
+    bytes.extend(postcard::to_stdvec(change).expect("a change serializes"));
+    bytes
+}
+
+/// A change's id in the log: a version's number is given once; a change of modes is named
+/// by when the operator asked (`asked_ns`), so only its retries are one.
+pub fn change_id(change: &SiteChange, asked_ns: u64) -> RecordId {
+    RecordId::named(match change {
+        SiteChange::VersionAdded { number, .. } => format!("version/{number}/added"),
+        SiteChange::VersionDeleted { number } => format!("version/{number}/deleted"),
+        SiteChange::ModesSet { .. } => format!("modes/{asked_ns}"),
+    })
+}
 
 /// Most node bytes in one record: well under JetStream's 1 MiB message limit, with room for
 /// the batch's edges, which ride in its last record.
@@ -83,7 +128,7 @@ impl From<&RecordSpan> for fleetmap::LocalizedSpan {
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
     /// Written by a later release.
-    #[error("record format {0}: this build reads formats up to {RECORD_FORMAT}")]
+    #[error("record format {0}: this build reads formats up to {CHANGE_FORMAT}")]
     Format(u8),
     /// Bytes that are no record.
     #[error("record: {0}")]
@@ -221,6 +266,28 @@ mod tests {
             }],
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn a_change_reads_back_as_written_and_a_later_format_is_refused() {
+        let change = SiteChange::ModesSet {
+            robots: Some(vec!["r1".into(), "r2".into()]),
+            version: 3,
+        };
+        let bytes = encode_change(&change);
+        assert_eq!(
+            LogRecord::decode(&bytes).unwrap(),
+            LogRecord::Change(change)
+        );
+        let batch = SiteRecord::default().encode();
+        assert!(matches!(LogRecord::decode(&batch), Ok(LogRecord::Batch(_))));
+        let mut later = bytes.clone();
+        later[0] = CHANGE_FORMAT + 1;
+        assert!(matches!(
+            LogRecord::decode(&later),
+            Err(RecordError::Format(3))
+        ));
+        assert!(LogRecord::decode(&bytes[..bytes.len() - 1]).is_err());
     }
 
     #[test]

@@ -81,6 +81,29 @@ pub(super) fn write_spans(
     Ok(())
 }
 
+/// Sets `robots` of `fleet` (every robot with `None`: the fleet's setting, each robot's own
+/// removed) to `version` (0: map).
+pub(super) fn write_modes(
+    txn: &WriteTransaction,
+    fleet: &str,
+    robots: Option<&[String]>,
+    version: u64,
+) -> Result<(), StoreError> {
+    let mut table = txn.open_table(MODES)?;
+    match robots {
+        None => {
+            table.retain_in((fleet, "")..=(fleet, "\u{10ffff}"), |_, _| false)?;
+            table.insert((fleet, ""), version)?;
+        }
+        Some(robots) => {
+            for robot in robots {
+                table.insert((fleet, robot.as_str()), version)?;
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A fleet's spans.
 pub(super) fn read_spans(
     txn: &ReadTransaction,
@@ -145,20 +168,7 @@ impl Store {
         }
         self.write(|db| {
             let txn = db.begin_write()?;
-            {
-                let mut table = txn.open_table(MODES)?;
-                match robots {
-                    None => {
-                        table.retain_in((fleet, "")..=(fleet, "\u{10ffff}"), |_, _| false)?;
-                        table.insert((fleet, ""), version)?;
-                    }
-                    Some(robots) => {
-                        for robot in robots {
-                            table.insert((fleet, robot.as_str()), version)?;
-                        }
-                    }
-                }
-            }
+            write_modes(&txn, fleet, robots, version)?;
             txn.commit()?;
             Ok(())
         })?;

@@ -3,7 +3,7 @@
 //! given twice, even after its version is deleted. A version is never changed once written.
 
 use super::{Store, StoreError};
-use redb::{Database, ReadTransaction, ReadableDatabase, TableDefinition};
+use redb::{Database, ReadTransaction, ReadableDatabase, ReadableTable, TableDefinition};
 
 /// (fleet, number) → the version's file (a `MapVersionFile`, encoded).
 const VERSIONS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("versions");
@@ -19,6 +19,37 @@ pub(super) fn open_tables(txn: &redb::WriteTransaction) -> Result<(), StoreError
     txn.open_table(VERSION_SUMMARIES)?;
     txn.open_table(VERSION_NUMBERS)?;
     Ok(())
+}
+
+/// Writes version `number` of `fleet` (its rows if given: a version whose file is gone
+/// keeps its number only) and makes it the last number given, unless a later one was.
+pub(super) fn put_version(
+    txn: &redb::WriteTransaction,
+    fleet: &str,
+    number: u64,
+    rows: Option<&VersionRows>,
+) -> Result<(), StoreError> {
+    if let Some(rows) = rows {
+        txn.open_table(VERSIONS)?
+            .insert((fleet, number), rows.file.as_slice())?;
+        txn.open_table(VERSION_SUMMARIES)?
+            .insert((fleet, number), rows.summary.as_slice())?;
+    }
+    let mut numbers = txn.open_table(VERSION_NUMBERS)?;
+    let last = numbers.get(fleet)?.map_or(0, |v| v.value());
+    numbers.insert(fleet, last.max(number))?;
+    Ok(())
+}
+
+/// Removes version `number` of `fleet`; whether it was there. Its number is not given again.
+pub(super) fn remove_version(
+    txn: &redb::WriteTransaction,
+    fleet: &str,
+    number: u64,
+) -> Result<bool, StoreError> {
+    let found = txn.open_table(VERSIONS)?.remove((fleet, number))?.is_some();
+    txn.open_table(VERSION_SUMMARIES)?.remove((fleet, number))?;
+    Ok(found)
 }
 
 /// What is stored of one version.
@@ -71,21 +102,32 @@ impl Store {
         let rows = make(number).map_err(AddVersionError::Make)?;
         self.write(|db| {
             let txn = db.begin_write()?;
-            txn.open_table(VERSIONS)?
-                .insert((fleet, number), rows.file.as_slice())?;
-            txn.open_table(VERSION_SUMMARIES)?
-                .insert((fleet, number), rows.summary.as_slice())?;
-            txn.open_table(VERSION_NUMBERS)?.insert(fleet, number)?;
+            put_version(&txn, fleet, number, Some(&rows))?;
             txn.commit()?;
             Ok(())
         })?;
         Ok(number)
     }
 
-    /// Deletes a version; false when there is none. Its number is not given again. Refused
-    /// while robots localize on it (`[super::ModeError::InUse]`).
-    pub fn delete_version(&self, fleet: &str, number: u64) -> Result<bool, super::ModeError> {
-        let _one_at_a_time = self.versions.lock().expect("versions lock");
+    /// The number `fleet`'s next version gets, unless it keeps `max` versions already.
+    pub fn next_version_number<E>(
+        &self,
+        fleet: &str,
+        max: usize,
+    ) -> Result<u64, AddVersionError<E>> {
+        let (kept, last) = self.version_count(fleet)?;
+        if kept >= max {
+            return Err(AddVersionError::Full {
+                fleet: fleet.to_owned(),
+                max,
+            });
+        }
+        Ok(last + 1)
+    }
+
+    /// Whether version `number` of `fleet` exists and may be deleted: refused while robots
+    /// localize on it.
+    pub fn deletable(&self, fleet: &str, number: u64) -> Result<bool, super::ModeError> {
         let users = self.version_users(fleet, number)?;
         if users > 0 {
             return Err(super::ModeError::InUse {
@@ -94,10 +136,17 @@ impl Store {
                 robots: users,
             });
         }
+        Ok(self.version_summary(fleet, number)?.is_some())
+    }
+
+    /// Deletes a version; false when there is none. Its number is not given again. Refused
+    /// while robots localize on it (`[super::ModeError::InUse]`).
+    pub fn delete_version(&self, fleet: &str, number: u64) -> Result<bool, super::ModeError> {
+        let _one_at_a_time = self.versions.lock().expect("versions lock");
+        self.deletable(fleet, number)?;
         Ok(self.write(|db| {
             let txn = db.begin_write()?;
-            let found = txn.open_table(VERSIONS)?.remove((fleet, number))?.is_some();
-            txn.open_table(VERSION_SUMMARIES)?.remove((fleet, number))?;
+            let found = remove_version(&txn, fleet, number)?;
             txn.commit()?;
             Ok(found)
         })?)

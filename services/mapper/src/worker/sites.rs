@@ -5,11 +5,13 @@
 //! lease is lost ([`Work::Drop`](super::Work::Drop)) or an append is fenced: it is dropped
 //! at once, with whatever of it was mapped and not acked.
 
+use super::ChangeError;
 use super::{Batch, Worker, commit::Unstored};
+use crate::store::SiteChange;
 use crate::store::{FleetBatch, StoreError};
 use crate::views::instruments::Instruments;
 use fleetmap::{FleetMap, SnapshotCovers};
-use sitelog::{Appended, LogError, SiteLog};
+use sitelog::{Appended, LogError, RecordId, SiteLog};
 use std::collections::HashMap;
 
 /// The logs of the sites this host owns, and how to reach them from the worker's thread.
@@ -79,21 +81,31 @@ impl SiteLogs {
 async fn append_batch(log: &mut SiteLog, batch: &FleetBatch<'_>) -> Result<u64, LogError> {
     let mut last = log.last_sequence();
     for (id, record) in crate::cluster::record::records_of(batch) {
-        let bytes = bytes::Bytes::from(record.encode());
-        last = match log.append(&id, bytes.clone()).await? {
-            Appended::New(sequence) => sequence,
-            Appended::Duplicate(sequence) => {
-                if log.get(sequence).await?.payload != bytes {
-                    return Err(LogError::Fenced {
-                        expected: log.last_sequence(),
-                        detail: format!("record {id} at {sequence} was written by another owner"),
-                    });
-                }
-                sequence
-            }
-        };
+        last = append_record(log, &id, bytes::Bytes::from(record.encode())).await?;
     }
     Ok(last)
+}
+
+/// Appends one record; its sequence. A record found stored already under its id must be this
+/// very record (a retry after a lost ack); anything else under its id was written by another
+/// owner this host did not see: a fence.
+async fn append_record(
+    log: &mut SiteLog,
+    id: &RecordId,
+    bytes: bytes::Bytes,
+) -> Result<u64, LogError> {
+    match log.append(id, bytes.clone()).await? {
+        Appended::New(sequence) => Ok(sequence),
+        Appended::Duplicate(sequence) => {
+            if log.get(sequence).await?.payload != bytes {
+                return Err(LogError::Fenced {
+                    expected: log.last_sequence(),
+                    detail: format!("record {id} at {sequence} was written by another owner"),
+                });
+            }
+            Ok(sequence)
+        }
+    }
 }
 
 impl Worker {
@@ -124,6 +136,45 @@ impl Worker {
         told.extend(fenced.iter().cloned());
         drop(told);
         Ok(fenced)
+    }
+
+    /// Appends `change` to `site`'s log, then stores it. A fenced append drops the site, as
+    /// a fenced batch does.
+    pub(super) fn change_site(
+        &mut self,
+        site: &str,
+        change: &SiteChange,
+        file: Option<Vec<u8>>,
+        asked_ns: u64,
+        batch: &mut Batch,
+    ) -> Result<(), ChangeError> {
+        let not_owner = || ChangeError::NotOwner(site.to_owned());
+        let Some(sites) = &mut self.sites else {
+            return Err(not_owner());
+        };
+        let Some(log) = sites.logs.get_mut(site) else {
+            return Err(not_owner());
+        };
+        let id = crate::cluster::record::change_id(change, asked_ns);
+        let bytes = bytes::Bytes::from(crate::cluster::record::encode_change(change));
+        match sites.runtime.block_on(append_record(log, &id, bytes)) {
+            Ok(sequence) => self
+                .store
+                .apply_site_change(site, sequence, change, file)
+                .map_err(|e| ChangeError::Store(e.to_string())),
+            Err(LogError::Fenced { expected, detail }) => {
+                tracing::warn!(site, expected, "change fenced: {detail}");
+                self.shared.instruments.appends_fenced.inc();
+                sites
+                    .fenced
+                    .lock()
+                    .expect("fenced lock")
+                    .insert(site.to_owned());
+                self.drop_site(site, "another host appended to its log", batch);
+                Err(not_owner())
+            }
+            Err(e) => Err(ChangeError::Log(format!("site {site}: {e}"))),
+        }
     }
 
     /// Takes over `site`: its map (restored from its log), how many nodes its snapshot
