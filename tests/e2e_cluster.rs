@@ -331,7 +331,9 @@ fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
 #[test]
 fn versions_and_modes_move_with_their_site() {
     let mut hosts = TwoHosts::start("cluster-versions");
-    let (edges, _) = hosts.robots_on_h1();
+    // Driving 30 s: robot1 still publishes once h2 has taken the site over.
+    let z2 = hosts.z2.clone();
+    let (edges, _) = hosts.robots_on_h1_via(&[&z2], 120.0);
     let (h1, h2) = (hosts.h1_http().to_owned(), hosts.h2().http.clone());
     let versions = "/api/v1/fleets/park/versions";
     let modes = "/api/v1/fleets/park/modes";
@@ -385,6 +387,12 @@ fn versions_and_modes_move_with_their_site() {
         serde_json::json!({"mode": "localize", "version": 1}),
         "{now}"
     );
+    // h2's worker was handed the modes with the site: it localizes robot1's nodes.
+    let localized = wait_for(Duration::from_secs(30), || {
+        let answer = http_get(&h2, "/api/v1/fleets/park/robots/robot1/localization")?;
+        (answer.0 == 200).then_some(answer.1)
+    });
+    assert!(localized.is_some(), "h2 localizes robot1 on version 1");
     // h2, the owner now, changes them on: robot1 in use of 1 until it maps again.
     let (status, ..) = call(&h2, "DELETE", &format!("{versions}/1"), TOKEN, b"");
     assert_eq!(status, 409, "version 1 is in use by robot1");
