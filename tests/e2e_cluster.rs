@@ -152,10 +152,20 @@ impl TwoHosts {
         routers: &[&str],
         duration_s: f64,
     ) -> (Vec<std::process::Child>, Vec<Vec<u64>>) {
+        self.robots_on_h1_with(routers, duration_s, "")
+    }
+
+    /// [`TwoHosts::robots_on_h1_via`], with `extra` in the robots' configs.
+    fn robots_on_h1_with(
+        &self,
+        routers: &[&str],
+        duration_s: f64,
+        extra: &str,
+    ) -> (Vec<std::process::Child>, Vec<Vec<u64>>) {
         let source = format!("[source.sim]\nduration_s = {duration_s:.1}\n");
         let edges: Vec<_> = (0..ROBOTS)
             .map(|r| {
-                let source = format!("{source}loop_index = {r}\n");
+                let source = format!("{source}loop_index = {r}\n{extra}");
                 edge_command_to(&self.dir, r, routers, 4.0, &source)
                     .spawn()
                     .expect("levelmap edge starts")
@@ -327,13 +337,13 @@ fn a_host_killed_under_load_loses_no_acked_node_and_its_site_moves() {
 
 /// Map versions and robots' modes are records of the site's log: made on h1, they are on
 /// h2 after h1's kill as h1 left them, and h2 goes on changing them; a version's number is
-/// never given twice, even across hosts.
+/// never given twice, even across hosts. The nodes' clouds, kept apart, are there too.
 #[test]
-fn versions_and_modes_move_with_their_site() {
+fn versions_modes_and_clouds_move_with_their_site() {
     let mut hosts = TwoHosts::start("cluster-versions");
-    // Driving 30 s: robot1 still publishes once h2 has taken the site over.
+    // Driving 30 s, with clouds: robot1 still publishes once h2 has taken the site over.
     let z2 = hosts.z2.clone();
-    let (edges, _) = hosts.robots_on_h1_via(&[&z2], 120.0);
+    let (edges, _) = hosts.robots_on_h1_with(&[&z2], 120.0, "[cloud]\nkeep = true\n");
     let (h1, h2) = (hosts.h1_http().to_owned(), hosts.h2().http.clone());
     let versions = "/api/v1/fleets/park/versions";
     let modes = "/api/v1/fleets/park/modes";
@@ -359,6 +369,16 @@ fn versions_and_modes_move_with_their_site() {
         "a change of modes on a host that does not own the site"
     );
 
+    // Node 1's cloud, once h1 has shared it.
+    let cloud = "/api/v1/fleets/park/nodes/1/cloud";
+    wait_for(Duration::from_secs(30), || {
+        let metrics = http_get(&h1, "/metrics")?.1;
+        (metric(&metrics, "levelmap_clouds_shared_total") > 1).then_some(())
+    })
+    .expect("h1 shares its nodes' clouds");
+    let (status, cloud_on_h1, _) = call(&h1, "GET", cloud, TOKEN, b"");
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&cloud_on_h1));
+
     let killed = Instant::now();
     hosts.h1.take().expect("h1 runs").kill();
     let taken = hosts.h2_takes_over(killed);
@@ -366,6 +386,9 @@ fn versions_and_modes_move_with_their_site() {
         "versions: h2 serves the site {:.1} s after h1's kill",
         taken.as_secs_f64()
     );
+    let (status, cloud_on_h2, _) = call(&h2, "GET", cloud, TOKEN, b"");
+    assert_eq!(status, 200, "h2 serves node 1's cloud, mapped on h1");
+    assert!(cloud_on_h2 == cloud_on_h1, "node 1's cloud on h2 is h1's");
     let (_, body, _) = call(&h2, "GET", versions, TOKEN, b"");
     let listed: Vec<u64> = json(&body)["versions"]
         .as_array()

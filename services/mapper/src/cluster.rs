@@ -27,7 +27,7 @@ use crate::views::Shared;
 use crate::worker::{Fenced, Work};
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
-use sitelog::{Lease, Leases, NatsAccess, Snapshots, VersionFiles};
+use sitelog::{CloudRetention, Clouds, Lease, Leases, NatsAccess, Snapshots, VersionFiles};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::Duration;
@@ -142,12 +142,23 @@ struct Host {
     snapshots: Snapshots,
     /// The files of the versions the sites' logs name.
     version_files: VersionFiles,
+    /// The nodes' clouds.
+    clouds: Clouds,
     /// The versions' localization maps (shared with the worker and the API).
     maps: Arc<crate::localization::MapCache>,
     /// Declares the feeds of each site this host owns.
     feeds: crate::bus::feeds::Feeds,
     /// The log sequence of each site's shared snapshot last looked at (`shelf::take_in`).
     snapshots_seen: Mutex<HashMap<String, u64>>,
+}
+
+/// The clouds' stream keeps what `[clouds]` asks a host's store to keep (its byte bound
+/// for every site together).
+pub fn cloud_retention(clouds: &crate::config::CloudsConfig) -> CloudRetention {
+    CloudRetention {
+        max_age: (clouds.max_age_s > 0).then(|| Duration::from_secs(clouds.max_age_s)),
+        max_bytes: (clouds.max_bytes > 0).then_some(clouds.max_bytes),
+    }
 }
 
 /// Connects to NATS (retried in the background until the servers answer).
@@ -205,6 +216,11 @@ impl Cluster {
             VersionFiles::open(&js, VERSION_FILES_BUCKET, cluster.replicas)
         })
         .await;
+        let retention = cloud_retention(&config.clouds);
+        let clouds = when_reachable("the clouds' stream", || {
+            Clouds::open(js.clone(), cluster.replicas, retention)
+        })
+        .await;
         let held = Held::default();
         let host = Arc::new(Host {
             cluster,
@@ -219,6 +235,7 @@ impl Cluster {
             presence: presence::Presence::default(),
             snapshots,
             version_files,
+            clouds,
             maps,
             feeds,
             snapshots_seen: Mutex::default(),

@@ -156,11 +156,20 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             config.fleets.clone(),
         );
     }
-    // Changes of versions and modes go through the site's log in cluster mode.
-    let site_changes = nats
+    // In cluster mode the API reaches the cluster's stores: version files, clouds.
+    let in_cluster = nats
         .as_ref()
         .zip(config.cluster.as_ref())
-        .map(|(js, cluster)| Arc::new(crate::api::SiteChanges::new(js.clone(), cluster.replicas)));
+        .map(|(js, cluster)| {
+            let retention = crate::cluster::cloud_retention(&config.clouds);
+            let stores = crate::api::ClusterStores::new(
+                &cluster.host,
+                js.clone(),
+                cluster.replicas,
+                retention,
+            );
+            Arc::new(stores)
+        });
     let cluster = match nats {
         Some(js) => Some(
             crate::cluster::Cluster::start(
@@ -189,7 +198,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         work_tx.clone(),
         store,
         maps,
-        site_changes,
+        in_cluster,
         &config,
     );
     let http = serve_until_stopped(listener, app, shared.stopping.subscribe());

@@ -109,8 +109,8 @@ pub enum Work {
     Change {
         /// The site.
         site: String,
-        /// The change.
-        change: crate::store::SiteChange,
+        /// The change (boxed: it is the largest of the work).
+        change: Box<crate::store::SiteChange>,
         /// An added version's file (in the version files already).
         file: Option<Vec<u8>>,
         /// When the operator asked (names a change of modes in the log).

@@ -16,6 +16,7 @@
 //! stream leader lost: a new one takes 4–9 s), it is retried with a backoff up to a deadline.
 
 mod access;
+mod clouds;
 mod lease;
 pub mod local;
 mod placement;
@@ -25,6 +26,7 @@ mod versions;
 pub use access::NatsAccess;
 /// A JetStream client, as [`NatsAccess::jetstream`] opens it.
 pub use async_nats::jetstream::Context as JetStream;
+pub use clouds::{CLOUDS_STREAM, CloudRetention, Clouds};
 pub use lease::{Lease, Leases};
 pub use placement::host_order;
 pub use snapshots::{SnapshotTag, Snapshots};

@@ -3,14 +3,19 @@
 //! SIGKILL in the middle of appends loses no acked record and stores none twice; a second
 //! writer fences the first; a retried append is recognised as a duplicate; a site's lease
 //! is held by one host at a time, lapses when not renewed, and its old holder learns so; a
-//! map snapshot put by one host is read whole by another, and replaced by the next.
+//! map snapshot put by one host is read whole by another, and replaced by the next; so is a
+//! map version's file, until deleted; a node's cloud is read by any host, put once, and the
+//! oldest dropped past the stream's bound.
 
 mod common;
 
 use async_nats::jetstream;
 use bytes::Bytes;
-use common::{Cluster, open_when_ready};
-use sitelog::{Appended, Leases, LogError, RecordId, RetryPolicy, SiteLog, SnapshotTag, Snapshots};
+use common::{Cluster, open_when_ready, when_ready};
+use sitelog::{
+    Appended, CloudRetention, Clouds, Leases, LogError, RecordId, RetryPolicy, SiteLog,
+    SnapshotTag, Snapshots, VersionFiles,
+};
 use std::time::{Duration, Instant};
 
 async fn stream_leader(js: &jetstream::Context, site: &str) -> String {
@@ -212,17 +217,8 @@ async fn a_snapshot_put_by_one_host_is_read_whole_by_another_and_replaced_by_the
     let cluster = Cluster::start("snapshots", None);
     let js_a = jetstream::new(cluster.client().await);
     let js_b = jetstream::new(cluster.client().await);
+    let owner = when_ready(|| Snapshots::open(&js_a, "levelmap_snapshots", 3)).await;
     let started = Instant::now();
-    let owner = loop {
-        match Snapshots::open(&js_a, "levelmap_snapshots", 3).await {
-            Ok(snapshots) => break snapshots,
-            Err(e) if started.elapsed() < Duration::from_secs(60) => {
-                eprintln!("waiting for the cluster: {e}");
-                tokio::time::sleep(Duration::from_millis(500)).await;
-            }
-            Err(e) => panic!("the cluster never took the bucket: {e}"),
-        }
-    };
     let standby = Snapshots::open(&js_b, "levelmap_snapshots", 3)
         .await
         .unwrap();
@@ -266,4 +262,79 @@ async fn a_snapshot_put_by_one_host_is_read_whole_by_another_and_replaced_by_the
     assert!(read.1 == second, "the newer snapshot, whole");
     assert_eq!(standby.tag("park").await.unwrap(), Some(tag(90, 70)));
     assert_eq!(standby.tag("yard").await.unwrap(), None, "another site's");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clouds_are_read_by_any_host_put_once_and_the_oldest_dropped_past_the_bound() {
+    let cluster = Cluster::start("clouds", None);
+    let js_a = jetstream::new(cluster.client().await);
+    let js_b = jetstream::new(cluster.client().await);
+    let retention = CloudRetention {
+        max_age: None,
+        max_bytes: Some(400_000),
+    };
+    let owner = when_ready(|| Clouds::open(js_a.clone(), 3, retention)).await;
+    let other = Clouds::open(js_b.clone(), 3, retention).await.unwrap();
+    let cloud = |node: u64| bytes::Bytes::from(vec![node as u8 + 1; 60_000]);
+    for node in 0..10 {
+        owner.put("park", node, cloud(node)).await.unwrap();
+    }
+    // Put again (a retried put): stored once.
+    owner.put("park", 9, cloud(9)).await.unwrap();
+    let mut stream = js_b.get_stream(sitelog::CLOUDS_STREAM).await.unwrap();
+    let state = stream.info().await.unwrap().state.clone();
+    assert_eq!(state.last_sequence, 10, "ten clouds, the retry dropped");
+    assert!(
+        state.bytes <= 400_000,
+        "within the bound: {} bytes",
+        state.bytes
+    );
+    assert_eq!(other.get("park", 9).await.unwrap(), Some(cloud(9)));
+    assert_eq!(
+        other.get("park", 0).await.unwrap(),
+        None,
+        "the oldest dropped"
+    );
+    assert_eq!(other.get("yard", 9).await.unwrap(), None, "another site's");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_version_file_put_by_one_host_is_read_whole_by_another_until_deleted() {
+    let cluster = Cluster::start("version-files", None);
+    let js_a = jetstream::new(cluster.client().await);
+    let js_b = jetstream::new(cluster.client().await);
+    let owner = when_ready(|| VersionFiles::open(&js_a, "levelmap_versions", 3)).await;
+    let other = VersionFiles::open(&js_b, "levelmap_versions", 3)
+        .await
+        .unwrap();
+    // Over JetStream's 1 MiB message: the object store cuts it in chunks.
+    let file: Vec<u8> = (0..2_500_000u32)
+        .map(|i| (i * 13 + i / 509) as u8)
+        .collect();
+    owner.put("park", 1, "h1", &file).await.unwrap();
+    // Another host that believed it owned the site put one too: it replaces nothing.
+    owner.put("park", 1, "h2", b"another").await.unwrap();
+    let started = Instant::now();
+    let read = loop {
+        // The other host's reads may reach a replica a moment behind.
+        if let Some(read) = other.get("park", 1, "h1").await.unwrap() {
+            break read;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60), "never seen");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    assert!(read == file, "the file read back whole");
+    assert_eq!(other.get("park", 2, "h1").await.unwrap(), None);
+    assert_eq!(
+        other.get("yard", 1, "h1").await.unwrap(),
+        None,
+        "another site's"
+    );
+    owner.put("park", 10, "h1", b"ten").await.unwrap();
+    owner.delete("park", 1).await.unwrap();
+    owner.delete("park", 1).await.unwrap();
+    assert_eq!(owner.get("park", 1, "h1").await.unwrap(), None, "deleted");
+    assert_eq!(owner.get("park", 1, "h2").await.unwrap(), None, "both");
+    let ten = owner.get("park", 10, "h1").await.unwrap();
+    assert_eq!(ten.as_deref(), Some(&b"ten"[..]), "1's delete leaves 10");
 }

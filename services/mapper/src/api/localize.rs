@@ -103,7 +103,7 @@ pub(super) async fn set_modes(
                         .get(&api.store, &fleet, version)
                         .map_err(|e| map_error(&api, e))?;
                 }
-                match &api.site_changes {
+                match &api.in_cluster {
                     None => api
                         .store
                         .set_modes(&fleet, change.robots.as_deref(), version)

@@ -6,6 +6,7 @@
 //! work through `limits`; `access` holds the tokens and CORS.
 
 mod access;
+mod cluster;
 mod events;
 mod faults;
 mod fleets;
@@ -17,7 +18,6 @@ mod localize;
 mod map;
 mod nodes;
 mod service;
-mod site_changes;
 mod versions;
 mod web;
 mod window;
@@ -36,8 +36,8 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+pub use cluster::ClusterStores;
 pub use faults::Degraded;
-pub use site_changes::SiteChanges;
 pub use web::WEB_DIR_ENV;
 
 /// What every handler shares.
@@ -67,8 +67,9 @@ struct Api {
     modes_lock: Arc<tokio::sync::Mutex<()>>,
     /// The base map the dashboard may draw (`[http.base_map]`).
     base_map: Option<Arc<crate::config::BaseMap>>,
-    /// Cluster mode (`[cluster]`): changes of versions and modes go through the site's log.
-    site_changes: Option<Arc<SiteChanges>>,
+    /// Cluster mode (`[cluster]`): changes of versions and modes go through the site's log;
+    /// clouds this store lacks come from the cluster's.
+    in_cluster: Option<Arc<ClusterStores>>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -300,7 +301,7 @@ pub fn router(
     work: mpsc::SyncSender<Work>,
     store: Arc<Store>,
     maps: Arc<crate::localization::MapCache>,
-    site_changes: Option<Arc<SiteChanges>>,
+    in_cluster: Option<Arc<ClusterStores>>,
     config: &MapperConfig,
 ) -> Router {
     let api = Api {
@@ -314,7 +315,7 @@ pub fn router(
         tiles: Arc::default(),
         served: config.fleets.clone().into(),
         max_versions: config.versions.max_versions.get(),
-        site_changes,
+        in_cluster,
         maps,
         modes_lock: Arc::default(),
         base_map: config.http.base_map.clone().map(Arc::new),

@@ -135,17 +135,24 @@ pub(super) async fn node_detail(
     }))
 }
 
-/// A node's encoded cloud from the store (a disk read: heavy work).
+/// A node's encoded cloud from the store (a disk read: heavy work); in cluster mode, one
+/// the store lacks from the cluster's clouds.
 async fn stored_cloud(api: &Api, fleet: &str, node: usize) -> Reply<Option<Vec<u8>>> {
     // 503 for as long as commits fail, whether or not the file is open between attempts.
     if let Some(fault) = api.shared.store_fault() {
         return Err(super::Degraded::store(fault));
     }
-    let (store, fleet) = (api.store.clone(), fleet.to_owned());
-    api.limits
-        .heavy(move || Ok(store.cloud(&fleet, node as u64)))
+    let (store, name) = (api.store.clone(), fleet.to_owned());
+    let stored = api
+        .limits
+        .heavy(move || Ok(store.cloud(&name, node as u64)))
         .await?
-        .map_err(|e| api.store_error(e))
+        .map_err(|e| api.store_error(e))?;
+    match (stored, &api.in_cluster) {
+        // A node mapped on another host before this one took the site over.
+        (None, Some(cluster)) => cluster.cloud(fleet, node as u64).await,
+        (stored, _) => Ok(stored),
+    }
 }
 
 /// Points per class of a cloud.

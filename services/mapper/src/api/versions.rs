@@ -159,7 +159,7 @@ async fn store_new(
     fleet: String,
     make: impl FnOnce() -> Reply<wire::MapVersion> + Send + 'static,
 ) -> Reply {
-    if let Some(changes) = api.site_changes.clone() {
+    if let Some(changes) = api.in_cluster.clone() {
         return store_new_in_cluster(api, &changes, fleet, make).await;
     }
     let summary = api
@@ -185,7 +185,7 @@ async fn store_new(
 /// to the log and stored. One change at a time.
 async fn store_new_in_cluster(
     api: &Api,
-    changes: &super::SiteChanges,
+    changes: &super::ClusterStores,
     fleet: String,
     make: impl FnOnce() -> Reply<wire::MapVersion> + Send + 'static,
 ) -> Reply {
@@ -207,12 +207,13 @@ async fn store_new_in_cluster(
         })
         .await?;
     files
-        .put(&fleet, summary.version, &rows.file)
+        .put(&fleet, summary.version, &changes.host, &rows.file)
         .await
         .map_err(|e| ApiError::Unavailable(format!("the version's file was not stored: {e}")))?;
     let added = SiteChange::VersionAdded {
         number: summary.version,
         summary: rows.summary,
+        host: changes.host.clone(),
     };
     api.change_site(&fleet, added, Some(rows.file)).await?;
     Ok(created(summary))
@@ -339,7 +340,7 @@ pub(super) async fn version_delete(
 ) -> Reply<StatusCode> {
     authorized(&api, &headers)?;
     api.versions_of(&fleet)?;
-    let in_cluster = api.site_changes.clone();
+    let in_cluster = api.in_cluster.clone();
     let _one_at_a_time = match &in_cluster {
         Some(_) => Some(api.modes_lock.lock().await),
         None => None,
@@ -362,7 +363,7 @@ pub(super) async fn version_delete(
             }
         })
         .await?;
-    if let Some(changes) = &api.site_changes {
+    if let Some(changes) = &api.in_cluster {
         let deleted = SiteChange::VersionDeleted { number: version };
         api.change_site(&fleet, deleted, None).await?;
         // The record is the truth: a file left behind is only space (a host reading the

@@ -380,9 +380,11 @@ async fn read_records(host: &Host, site: &str, entries: &[sitelog::Entry]) -> Re
             }
             LogRecord::Change(change) => {
                 let file = match &change {
-                    SiteChange::VersionAdded { number, .. } => host
+                    SiteChange::VersionAdded {
+                        number, host: by, ..
+                    } => host
                         .version_files
-                        .get(site, *number)
+                        .get(site, *number, by)
                         .await
                         .with_context(what)?,
                     _ => None,

@@ -1,7 +1,10 @@
-//! Each site's newest map snapshot, shared through the object store (`sitelog::Snapshots`).
+//! Each site's newest map snapshot, shared through the object store (`sitelog::Snapshots`),
+//! and its nodes' clouds, through the clouds' stream (`sitelog::Clouds`).
 //! The owner's worker shelves every snapshot it stores and goes on; one task puts them, one
 //! at a time (a snapshot that finds the shelf full is not shared: the next one, as many nodes
-//! later, is). The site's standby takes the newest one into its own store as it follows the
+//! later, is). Clouds go the same way once their nodes are committed, on a shelf of their
+//! own ([`CLOUD_SHELF`]): a cloud that finds it full is not shared (counted), as a cloud is
+//! not the record. The site's standby takes the newest one into its own store as it follows the
 //! log, and a host taking a site over does so before it restores the map: the restore then
 //! starts from the snapshot and replays only the nodes after it.
 
@@ -18,6 +21,16 @@ pub const SNAPSHOTS_BUCKET: &str = "levelmap_site_snapshots";
 /// Snapshots waiting to be put, at most: each is a whole map (megabytes for a big site).
 const SHELF: usize = 2;
 
+/// Clouds waiting to be put, at most (about 60 KB each): a few seconds of a fleet's nodes.
+pub const CLOUD_SHELF: usize = 512;
+
+/// A node's cloud on its way to the clouds' stream.
+struct ShelvedCloud {
+    site: String,
+    node: u64,
+    cloud: bytes::Bytes,
+}
+
 /// A snapshot on its way to the object store.
 pub struct Shelved {
     /// The site it maps.
@@ -29,21 +42,44 @@ pub struct Shelved {
 }
 
 /// The worker's end of the shelf.
-pub struct Shelf(mpsc::Sender<Shelved>);
+pub struct Shelf {
+    snapshots: mpsc::Sender<Shelved>,
+    clouds: mpsc::Sender<ShelvedCloud>,
+}
 
 /// The sharing task's end of the shelf.
-pub struct Shelving(mpsc::Receiver<Shelved>);
+pub struct Shelving {
+    snapshots: mpsc::Receiver<Shelved>,
+    clouds: mpsc::Receiver<ShelvedCloud>,
+}
 
 /// A shelf, empty.
 pub fn shelf() -> (Shelf, Shelving) {
-    let (tx, rx) = mpsc::channel(SHELF);
-    (Shelf(tx), Shelving(rx))
+    let (snapshots, snapshots_in) = mpsc::channel(SHELF);
+    let (clouds, clouds_in) = mpsc::channel(CLOUD_SHELF);
+    let shelf = Shelf { snapshots, clouds };
+    let shelving = Shelving {
+        snapshots: snapshots_in,
+        clouds: clouds_in,
+    };
+    (shelf, shelving)
 }
 
 impl Shelf {
+    /// Hands node `node`'s cloud of `site` to the sharing task without waiting; false when
+    /// the shelf is full (the cloud is not shared).
+    pub fn shelve_cloud(&self, site: &str, node: u64, cloud: &[u8]) -> bool {
+        let shelved = ShelvedCloud {
+            site: site.to_owned(),
+            node,
+            cloud: bytes::Bytes::copy_from_slice(cloud),
+        };
+        self.clouds.try_send(shelved).is_ok()
+    }
+
     /// Hands `shelved` to the sharing task without waiting.
     pub fn shelve(&self, shelved: Shelved) {
-        if let Err(mpsc::error::TrySendError::Full(s)) = self.0.try_send(shelved) {
+        if let Err(mpsc::error::TrySendError::Full(s)) = self.snapshots.try_send(shelved) {
             tracing::warn!(
                 site = s.site,
                 nodes = s.tag.nodes,
@@ -53,9 +89,15 @@ impl Shelf {
     }
 }
 
-/// Puts the shelved snapshots in the object store until the worker stops shelving.
-pub(super) async fn share(host: Arc<Host>, mut shelving: Shelving) {
-    while let Some(s) = shelving.0.recv().await {
+/// Puts the shelved snapshots in the object store, and the clouds in their stream, until
+/// the worker stops shelving.
+pub(super) async fn share(host: Arc<Host>, shelving: Shelving) {
+    let Shelving {
+        mut snapshots,
+        clouds,
+    } = shelving;
+    let clouds = tokio::spawn(share_clouds(host.clone(), clouds));
+    while let Some(s) = snapshots.recv().await {
         let started = Instant::now();
         match host.snapshots.put(&s.site, &s.tag, &s.bytes).await {
             Ok(()) => {
@@ -71,6 +113,23 @@ pub(super) async fn share(host: Arc<Host>, mut shelving: Shelving) {
             }
             // The one before it stays usable; the next one comes as many nodes later.
             Err(e) => tracing::warn!(site = s.site, "snapshot not shared: {e}"),
+        }
+    }
+    let _ = clouds.await;
+}
+
+/// Puts the shelved clouds in the clouds' stream, one at a time.
+async fn share_clouds(host: Arc<Host>, mut clouds: mpsc::Receiver<ShelvedCloud>) {
+    let instruments = &host.shared.instruments;
+    while let Some(c) = clouds.recv().await {
+        match host.clouds.put(&c.site, c.node, c.cloud).await {
+            Ok(()) => {
+                instruments.clouds_shared.inc();
+            }
+            Err(e) => {
+                instruments.clouds_unshared.inc();
+                tracing::debug!(site = c.site, node = c.node, "cloud not shared: {e}");
+            }
         }
     }
 }

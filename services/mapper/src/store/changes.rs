@@ -16,6 +16,8 @@ pub enum SiteChange {
         number: u64,
         /// Its summary, as JSON.
         summary: Vec<u8>,
+        /// The host that put its file (`sitelog::VersionFiles` names files by it).
+        host: String,
     },
     /// Version `number` deleted.
     VersionDeleted {
@@ -46,7 +48,9 @@ impl Store {
         self.writing(|db| {
             let txn = db.begin_write()?;
             match change {
-                SiteChange::VersionAdded { number, summary } => {
+                SiteChange::VersionAdded {
+                    number, summary, ..
+                } => {
                     let rows = file.map(|file| VersionRows {
                         file,
                         summary: summary.clone(),
@@ -85,6 +89,7 @@ mod tests {
         let added = SiteChange::VersionAdded {
             number: 1,
             summary: b"{\"version\":1}".to_vec(),
+            host: "h1".into(),
         };
         for _ in 0..2 {
             store
@@ -115,6 +120,7 @@ mod tests {
         let gone = SiteChange::VersionAdded {
             number: 2,
             summary: b"{\"version\":2}".to_vec(),
+            host: "h1".into(),
         };
         store.apply_site_change("park", 8, &gone, None).unwrap();
         assert_eq!(store.version_summary("park", 2).unwrap(), None);

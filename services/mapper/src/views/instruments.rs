@@ -38,6 +38,10 @@ pub struct Instruments {
     /// Cluster mode: snapshots of other hosts' sites taken from the object store into this
     /// host's store.
     pub snapshots_taken_in: Counter,
+    /// Cluster mode: clouds of this host's nodes put in the clouds' stream.
+    pub clouds_shared: Counter,
+    /// Cluster mode: clouds not put (the queue full, or JetStream refused).
+    pub clouds_unshared: Counter,
     registry: Registry,
 }
 
@@ -59,6 +63,8 @@ impl Default for Instruments {
             records_taken_over: Counter::default(),
             snapshots_shared: Counter::default(),
             snapshots_taken_in: Counter::default(),
+            clouds_shared: Counter::default(),
+            clouds_unshared: Counter::default(),
             registry: Registry::default(),
         };
         let mut registry = Registry::default();
@@ -128,6 +134,16 @@ impl Default for Instruments {
                 "levelmap_snapshots_taken_in",
                 "Cluster mode: snapshots of other hosts' sites taken from the object store into this host's store.",
                 &i.snapshots_taken_in,
+            ),
+            (
+                "levelmap_clouds_shared",
+                "Cluster mode: clouds of this host's nodes put in the clouds' stream.",
+                &i.clouds_shared,
+            ),
+            (
+                "levelmap_clouds_unshared",
+                "Cluster mode: clouds not put in the clouds' stream (the queue full, or JetStream refused).",
+                &i.clouds_unshared,
             ),
         ];
         for (name, help, counter) in counted {

@@ -113,6 +113,7 @@ impl Worker {
             for b in &batches {
                 *self.edges_stored.entry(b.fleet.to_owned()).or_default() += b.edges.len();
             }
+            self.share_clouds(&batches);
         }
         drop(batches);
         self.note_store(&result, accepted.len() + localized.len());

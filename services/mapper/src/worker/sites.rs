@@ -138,6 +138,20 @@ impl Worker {
         Ok(fenced)
     }
 
+    /// In cluster mode, hands the committed batches' clouds to be shared: they are not the
+    /// record (their nodes are acked without waiting), and one that finds the shelf full is
+    /// counted and left.
+    pub(super) fn share_clouds(&self, batches: &[FleetBatch<'_>]) {
+        let Some(sites) = &self.sites else { return };
+        for batch in batches {
+            for &(node, cloud) in &batch.clouds {
+                if !sites.shelf.shelve_cloud(batch.fleet, node, cloud) {
+                    self.shared.instruments.clouds_unshared.inc();
+                }
+            }
+        }
+    }
+
     /// Appends `change` to `site`'s log, then stores it. A fenced append drops the site, as
     /// a fenced batch does.
     pub(super) fn change_site(

@@ -41,15 +41,23 @@ impl Cluster {
 
 /// The site's log opened once the cluster has elected its JetStream meta leader.
 pub async fn open_when_ready(js: jetstream::Context, site: &str) -> SiteLog {
+    when_ready(|| SiteLog::open(js.clone(), site, 3, RetryPolicy::default())).await
+}
+
+/// What `open` opens, once the cluster answers (a minute at most).
+pub async fn when_ready<T, F>(mut open: impl FnMut() -> F) -> T
+where
+    F: std::future::Future<Output = Result<T, sitelog::LogError>>,
+{
     let started = Instant::now();
     loop {
-        match SiteLog::open(js.clone(), site, 3, RetryPolicy::default()).await {
-            Ok(log) => return log,
+        match open().await {
+            Ok(opened) => return opened,
             Err(e) if started.elapsed() < Duration::from_secs(60) => {
                 eprintln!("waiting for the cluster: {e}");
                 tokio::time::sleep(Duration::from_millis(500)).await;
             }
-            Err(e) => panic!("the cluster never took the stream: {e}"),
+            Err(e) => panic!("the cluster never answered: {e}"),
         }
     }
 }
