@@ -73,7 +73,7 @@ pub(super) async fn modes(
         (status = 403, description = "Write routes are off, or the token only reads", body = String),
         (status = 404, description = "No such fleet or version", body = String),
         (status = 422, description = "The version's map cannot be localized on", body = String),
-        (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes; in cluster mode, this host does not hold the site now (a gateway finds its owner)", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn set_modes(

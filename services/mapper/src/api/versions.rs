@@ -92,7 +92,7 @@ fn created(summary: VersionSummary) -> Response {
         (status = 404, description = "No such fleet, or no node in it yet", body = String),
         (status = 409, description = "The fleet keeps max_versions versions already: delete one", body = String),
         (status = 422, description = "The map is too large for one version file", body = String),
-        (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes; in cluster mode, this host does not hold the site now (a gateway finds its owner)", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn version_freeze(
@@ -126,7 +126,7 @@ pub(super) async fn version_freeze(
         (status = 404, description = "A fleet this mapper does not serve", body = String),
         (status = 409, description = "The fleet keeps max_versions versions already: delete one", body = String),
         (status = 413, description = "A file over 256 MiB", body = String),
-        (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes; in cluster mode, this host does not hold the site now (a gateway finds its owner)", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn version_import(
@@ -179,7 +179,6 @@ async fn store_new(
     Ok(created(summary))
 }
 
-/// The fleet's versions, oldest first.
 /// [`store_new`] in cluster mode: numbered by this host's store (caught up with the site's
 /// log, which only its owner appends to), its file put in the version files, then appended
 /// to the log and stored. One change at a time.
@@ -219,6 +218,7 @@ async fn store_new_in_cluster(
     Ok(created(summary))
 }
 
+/// The fleet's versions, oldest first.
 #[utoipa::path(get, path = "/api/v1/fleets/{fleet}/versions", tag = "versions",
     params(("fleet" = String, Path, description = "Fleet id")),
     responses(
@@ -330,7 +330,7 @@ pub(super) async fn version_file(
         (status = 403, description = "Write routes are off, or the token only reads", body = String),
         (status = 404, description = "No such fleet or version", body = String),
         (status = 409, description = "Robots localize on the version (set them to map or to another version first)", body = String),
-        (status = 503, description = "Busy: as many heavy requests as the mapper takes", body = String,
+        (status = 503, description = "Busy: as many heavy requests as the mapper takes; in cluster mode, this host does not hold the site now (a gateway finds its owner)", body = String,
             headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))),
     ))]
 pub(super) async fn version_delete(
