@@ -385,5 +385,15 @@ fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
     Ok(())
 }
 
+/// A store in a fresh folder of its own under the temp dir (the folder, the store).
+#[cfg(test)]
+pub(crate) fn temp_store(name: &str) -> (std::path::PathBuf, Store) {
+    let dir = std::env::temp_dir().join(format!("levelmap-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let store = Store::open(&dir.join("mapper.redb")).expect("a store");
+    (dir, store)
+}
+
 #[cfg(test)]
 mod tests;

@@ -110,19 +110,9 @@ pub(super) async fn set_modes(
                         .map_err(|e| mode_error(&api, e))?,
                     Some(_) => {
                         // Checked here, on the owner, which alone appends to the site's log.
-                        let known = version == 0
-                            || api
-                                .store
-                                .version_summary(&fleet, version)
-                                .map_err(|e| api.store_error(e))?
-                                .is_some();
-                        if !known {
-                            let e = ModeError::NoVersion {
-                                fleet: fleet.clone(),
-                                version,
-                            };
-                            return Err(mode_error(&api, e));
-                        }
+                        api.store
+                            .mode_version_exists(&fleet, version)
+                            .map_err(|e| mode_error(&api, e))?;
                         let set = SiteChange::ModesSet {
                             robots: change.robots.clone(),
                             version,

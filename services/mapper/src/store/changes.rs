@@ -81,11 +81,7 @@ mod tests {
 
     #[test]
     fn changes_stored_twice_are_stored_once_and_a_deleted_versions_number_stays_given() {
-        let dir = std::env::temp_dir().join(format!("levelmap-changes-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("changes.redb");
-        let _ = std::fs::remove_file(&path);
-        let store = Store::open(&path).unwrap();
+        let (dir, store) = crate::store::temp_store("changes");
         let added = SiteChange::VersionAdded {
             number: 1,
             summary: b"{\"version\":1}".to_vec(),

@@ -160,18 +160,24 @@ impl Store {
         version: u64,
     ) -> Result<(), ModeError> {
         let _one_at_a_time = self.versions.lock().expect("versions lock");
-        if version != 0 && self.version_summary(fleet, version)?.is_none() {
-            return Err(ModeError::NoVersion {
-                fleet: fleet.to_owned(),
-                version,
-            });
-        }
+        self.mode_version_exists(fleet, version)?;
         self.write(|db| {
             let txn = db.begin_write()?;
             write_modes(&txn, fleet, robots, version)?;
             txn.commit()?;
             Ok(())
         })?;
+        Ok(())
+    }
+
+    /// Refuses a mode on a version `fleet` does not have (0, to map, always exists).
+    pub fn mode_version_exists(&self, fleet: &str, version: u64) -> Result<(), ModeError> {
+        if version != 0 && self.version_summary(fleet, version)?.is_none() {
+            return Err(ModeError::NoVersion {
+                fleet: fleet.to_owned(),
+                version,
+            });
+        }
         Ok(())
     }
 

@@ -3,7 +3,7 @@
 //! nodes after it, against a full replay of its nodes.
 
 use super::*;
-use crate::store::{FleetBatch, encode_edges};
+use crate::store::{FleetBatch, encode_edges, temp_store};
 use leveling::nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use leveling::{Beam, LeveledScan, TimedPose};
 use slam::Pose2;
@@ -223,17 +223,9 @@ fn apply_and_commit(
     }
 }
 
-fn temp_store(name: &str) -> (std::path::PathBuf, Store) {
-    let dir = std::env::temp_dir().join(format!("levelmap-restore-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let store = Store::open(&dir.join("mapper.redb")).unwrap();
-    (dir, store)
-}
-
 #[test]
 fn a_snapshot_and_the_nodes_after_it_restore_what_a_full_replay_maps() {
-    let (dir, store) = temp_store("tail");
+    let (dir, store) = temp_store("restore-tail");
     let config = config(&dir);
     let nodes = nodes(110);
     let live = map_as_the_worker(&store, &config, &nodes, 179);
@@ -284,7 +276,7 @@ fn a_snapshot_and_the_nodes_after_it_restore_what_a_full_replay_maps() {
 
 #[test]
 fn passes_over_covered_ground_restore_from_a_snapshot_as_in_a_full_replay() {
-    let (scratch, store) = temp_store("passes-count");
+    let (scratch, store) = temp_store("restore-passes-count");
     let config = coverage_config(&scratch);
     let nodes = nodes(110);
     // How many nodes are mapped (the rest pass), then a snapshot about half-way, between
