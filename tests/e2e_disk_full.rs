@@ -6,55 +6,12 @@
 //! and the store did not diverge). Needs root for `mount` (CI runs as root); fails otherwise.
 
 mod common;
+#[path = "../services/sitelog/tests/common/tmpfs.rs"]
+mod tmpfs;
 
 use common::*;
-use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::{Duration, Instant};
-
-/// A tmpfs mounted for the test, unmounted when dropped (after the mapper that uses it).
-struct Tmpfs(PathBuf);
-
-impl Tmpfs {
-    fn mount(at: &Path, size: &str) -> Tmpfs {
-        std::fs::create_dir_all(at).expect("mount point");
-        let out = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
-            .arg(at)
-            .output()
-            .expect("mount runs");
-        assert!(
-            out.status.success(),
-            "mount -t tmpfs failed (this test needs root, as CI has): {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        Tmpfs(at.to_owned())
-    }
-}
-
-impl Drop for Tmpfs {
-    fn drop(&mut self) {
-        let _ = Command::new("umount").arg(&self.0).status();
-    }
-}
-
-/// Writes zeros to `path` until the file system has no room left; returns the bytes written.
-fn fill(path: &Path) -> u64 {
-    let mut file = std::fs::File::create(path).expect("filler");
-    let chunk = vec![0u8; 64 * 1024];
-    let mut written = 0;
-    loop {
-        match file.write(&chunk) {
-            Ok(0) => break,
-            Ok(n) => written += n as u64,
-            Err(e) if e.raw_os_error() == Some(28) => break, // ENOSPC
-            Err(e) => panic!("filler: {e}"),
-        }
-    }
-    let _ = file.sync_all();
-    written
-}
+use tmpfs::{Tmpfs, fill};
 
 fn counter(http: &str, series: &str) -> u64 {
     metric(&http_get(http, "/metrics").expect("metrics").1, series)

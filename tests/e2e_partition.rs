@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::netns::{Netns, require_root_and_tools, run};
+use common::netns::{Namespace, Netns, require_root_and_tools, run};
 use common::*;
 use serde_json::json;
 use std::path::Path;

@@ -35,7 +35,7 @@ fn a_mapper_killed_after_its_snapshot_restarts_to_what_a_full_replay_maps() {
         .collect();
     nodes_in_map(&mapper.http, 3);
     let ports = mapper.stop();
-    let (code, stopped) = verify_store(&ports.2);
+    let (code, stopped) = verify_store(&ports.config);
     assert_eq!(code, Some(0), "{stopped}");
     let snapshot_nodes = stopped["fleets"][0]["snapshot"]["covers"].as_u64().unwrap();
     assert_eq!(
@@ -48,7 +48,7 @@ fn a_mapper_killed_after_its_snapshot_restarts_to_what_a_full_replay_maps() {
     let mapper = MapperProcess::restart(ports);
     let before = nodes_in_map(&mapper.http, 3 + snapshot_nodes as usize / ROBOTS + 3);
     let ports = mapper.kill();
-    let (code, killed) = verify_store(&ports.2);
+    let (code, killed) = verify_store(&ports.config);
     let fleet = &killed["fleets"][0];
     assert_eq!(code, Some(0), "{killed}");
     assert_eq!(fleet["snapshot"]["covers"].as_u64(), Some(snapshot_nodes));
@@ -73,7 +73,7 @@ fn a_mapper_killed_after_its_snapshot_restarts_to_what_a_full_replay_maps() {
     }
     // The last restart's map, taken from the snapshot, and a full replay agree on the store.
     let ports = mapper.kill();
-    let (code, last) = verify_store(&ports.2);
+    let (code, last) = verify_store(&ports.config);
     assert_eq!(code, Some(0), "{last}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -20,12 +20,18 @@ const FLEET: &str = "park";
 /// make-certs.sh's CA, mapper and robot0/robot1 files in `dir/name`; fails the test, with
 /// the script's words, when it cannot run (openssl missing).
 fn make_certs(dir: &Path, name: &str) -> PathBuf {
+    make_certs_for(dir, name, &["robot0", "robot1"])
+}
+
+/// make-certs.sh's files for `robots` (of fleet park, or `fleet/robot`) in `dir/name`.
+fn make_certs_for(dir: &Path, name: &str, robots: &[&str]) -> PathBuf {
     let out = dir.join(name);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/zenoh/make-certs.sh");
     let run = Command::new("bash")
         .arg(&script)
         .arg(&out)
-        .args([FLEET, "robot0", "robot1"])
+        .arg(FLEET)
+        .args(robots)
         .output()
         .expect("bash runs make-certs.sh");
     assert!(
@@ -380,5 +386,77 @@ fn a_bad_tls_setting_stops_a_service_at_start_in_one_line() {
         e.contains("[zenoh.tls] key: ") && e.contains("robot7.pem"),
         "{e}"
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A mapper host's router as make-certs.sh's router.json5 makes it, listening on a free
+/// port of loopback and connected to `others` (the other hosts' routers).
+fn host_router(certs: &Path, others: &[String]) -> (zenoh::Session, String) {
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let config = SessionConfig {
+        listen: Some(vec![endpoint.clone()]),
+        connect: Some(others.to_vec()),
+        config_file: Some(certs.join("router.json5")),
+        ..SessionConfig::default()
+    }
+    .to_zenoh(Role::Router)
+    .expect("router config");
+    let session = zenoh::open(config).wait().expect("the router opens");
+    (session, endpoint)
+}
+
+/// Puts on `from` until `to` hears it (at most 20 s): whether it did.
+fn carried(from: &zenoh::Session, to: &zenoh::Session, key: &str) -> bool {
+    let heard = to.declare_subscriber(key).wait().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while Instant::now() < deadline {
+        from.put(key, "sample").wait().unwrap();
+        std::thread::sleep(Duration::from_millis(200));
+        if heard.try_recv().ok().flatten().is_some() {
+            return true;
+        }
+    }
+    false
+}
+
+#[test]
+fn mapper_hosts_routers_carry_each_fleets_robots_between_them_over_tls_and_the_list() {
+    let dir = temp_dir("security-mesh");
+    let certs = make_certs_for(&dir, "certs", &["robot0", "yard/robot2"]);
+    let (first, first_endpoint) = host_router(&certs, &[]);
+    let (second, _) = host_router(&certs, std::slice::from_ref(&first_endpoint));
+    let dial = |robot| {
+        session(&first_endpoint, robot_tls(&certs, Some((&certs, robot)))).expect("robot link")
+    };
+    let (robot0, robot2) = (dial("robot0"), dial("robot2"));
+    for (robot, own) in [
+        (&robot0, "levelmap/park/robots/robot0"),
+        (&robot2, "levelmap/yard/robots/robot2"),
+    ] {
+        assert!(
+            carried(robot, &second, &format!("{own}/node")),
+            "{own}/node, put on the first host's router, reached the second host"
+        );
+        assert!(
+            carried(&second, robot, &format!("{own}/ack")),
+            "the second host's ack on {own}/ack reached its robot through the first router"
+        );
+    }
+    // The list still holds across the mesh: robot2, of yard, cannot put as park's robot0.
+    let forged = "levelmap/park/robots/robot0/node";
+    let heard = second.declare_subscriber(forged).wait().unwrap();
+    for _ in 0..10 {
+        robot2.put(forged, "forged").wait().unwrap();
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(
+        heard.try_recv().ok().flatten().is_none(),
+        "robot2 put on robot0's node key, and the other host heard it"
+    );
+    assert!(
+        carried(&robot0, &second, forged),
+        "robot0 itself gets through"
+    );
+    drop((robot0, robot2, first, second));
     std::fs::remove_dir_all(&dir).ok();
 }

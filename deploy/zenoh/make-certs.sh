@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # deploy/zenoh/make-certs.sh OUT_DIR FLEET ROBOT...
 #
-# The certificates of one fleet's Zenoh link (TLS, both sides authenticated) and the mapper's
+# Each ROBOT is a robot of FLEET, or OTHER_FLEET/ROBOT for a robot of another fleet (a cluster's
+# routers serve every site; robot ids are unique over them all, being certificates' names).
+#
+# The certificates of a deployment's Zenoh links (TLS, both sides authenticated) and the mapper's
 # Zenoh configuration, with an access-control list by certificate common name:
 #
 #   OUT_DIR/ca.pem, ca.key          the certificate authority (ca.key stays off the robots)
@@ -9,13 +12,16 @@
 #   OUT_DIR/ROBOT.pem, ROBOT.key    one per robot; common name = the robot id
 #   OUT_DIR/router.json5            the mapper's [zenoh] config_file: a router on
 #                                   tls/0.0.0.0:7447 requiring client certificates from this
-#                                   CA, and the access-control list for FLEET's ROBOTs
+#                                   CA, and the access-control list for the ROBOTs; on a
+#                                   cluster, every mapper host's router (the routers connect
+#                                   to each other with the same mapper certificate)
 #
-# Robot R may put only on levelmap/FLEET/robots/R/{node,odom,scan}, and receive only its own
-# levelmap/FLEET/robots/R/{ack,localization} and levelmap/FLEET/map/** (and query the latter);
+# Robot R of fleet F may put only on levelmap/F/robots/R/{node,odom,scan}, and receive only its own
+# levelmap/F/robots/R/{ack,localization} and levelmap/F/map/** (and query the latter);
 # the mapper's own session is the router, so acks, localizations and map data can come from
-# nowhere else. Everything
-# else is denied, to anyone (a certificate of this CA with another common name included).
+# nowhere else, or from another mapper host's router (the mapper certificate, which may pass
+# anything under levelmap/). Everything else is denied, to anyone (a certificate of this CA
+# with another common name included).
 #
 # Environment:
 #   LEVELMAP_MAPPER_NAMES  comma-separated DNS names and IP addresses robots use to reach the
@@ -43,10 +49,17 @@ command -v openssl >/dev/null || {
 }
 out="$1" fleet="$2"
 shift 2
-robots=("$@")
+robots=() robot_fleets=()
+for arg in "$@"; do
+  if [[ "$arg" == */* ]]; then
+    robot_fleets+=("${arg%%/*}") robots+=("${arg#*/}")
+  else
+    robot_fleets+=("$fleet") robots+=("$arg")
+  fi
+done
 
 # Ids as the wire allows them (wire::validate_id): nothing that adds a key chunk or wildcard.
-for id in "$fleet" "${robots[@]}"; do
+for id in "$fleet" "${robot_fleets[@]}" "${robots[@]}"; do
   [[ "$id" =~ ^[A-Za-z0-9_-]+$ ]] || {
     echo "$0: '$id': ids are [A-Za-z0-9_-]+" >&2
     exit 2
@@ -128,9 +141,10 @@ done
 # router sends it (egress). Zenoh's rules cannot name the certificate's common name in a key,
 # so each robot has its own.
 rules="" subjects="" policies=""
-for robot in "${robots[@]}"; do
-  own="levelmap/$fleet/robots/$robot"
-  map="levelmap/$fleet/map/**"
+for k in "${!robots[@]}"; do
+  robot="${robots[$k]}" robot_fleet="${robot_fleets[$k]}"
+  own="levelmap/$robot_fleet/robots/$robot"
+  map="levelmap/$robot_fleet/map/**"
   rules+="
       { id: \"$robot-puts\", permission: \"allow\", flows: [\"ingress\"], messages: [\"put\"],
         key_exprs: [\"$own/node\", \"$own/odom\", \"$own/scan\"] },
@@ -151,8 +165,8 @@ for robot in "${robots[@]}"; do
 done
 
 cat >"$out/router.json5" <<EOF
-// The levelmap mapper's Zenoh configuration for fleet "$fleet", written by
-// deploy/zenoh/make-certs.sh: mapper.toml's [zenoh] config_file. Robots: ${robots[*]}.
+// The levelmap mapper's Zenoh configuration (fleet "$fleet" and the robots below), written by
+// deploy/zenoh/make-certs.sh: mapper.toml's [zenoh] config_file. Robots: $*.
 {
   mode: "router",
   listen: { endpoints: ["$listen"] },
@@ -162,6 +176,9 @@ cat >"$out/router.json5" <<EOF
         root_ca_certificate: "$cert_dir/ca.pem",
         listen_certificate: "$cert_dir/mapper.pem",
         listen_private_key: "$cert_dir/mapper.key",
+        // The same certificate when this router connects to another mapper host's.
+        connect_certificate: "$cert_dir/mapper.pem",
+        connect_private_key: "$cert_dir/mapper.key",
         // Every client must present a certificate signed by ca.pem: its common name is the
         // subject of the access-control list.
         enable_mtls: true,
@@ -178,13 +195,21 @@ cat >"$out/router.json5" <<EOF
       // queryable (levelmap/*/map/*) to a robot's querier.
       { id: "mapper-declarations", permission: "allow", flows: ["egress"],
         messages: ["declare_subscriber", "declare_queryable"],
-        key_exprs: ["levelmap/*/robots/*/node", "levelmap/*/robots/*/odom", "levelmap/*/robots/*/scan", "levelmap/*/map/**"] },$rules
+        key_exprs: ["levelmap/*/robots/*/node", "levelmap/*/robots/*/odom", "levelmap/*/robots/*/scan", "levelmap/*/map/**"] },
+      // Another mapper host's router (the mapper certificate, which no robot holds): a
+      // robot's messages reach its site's owner through whichever router it dialled.
+      { id: "mapper-mesh", permission: "allow", flows: ["ingress", "egress"],
+        messages: ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
+                   "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"],
+        key_exprs: ["levelmap/**"] },$rules
     ],
-    subjects: [$subjects
+    subjects: [
+      { id: "mapper-hosts", cert_common_names: ["levelmap-mapper"] },$subjects
     ],
-    policies: [$policies
+    policies: [
+      { rules: ["mapper-mesh"], subjects: ["mapper-hosts"] },$policies
     ],
   },
 }
 EOF
-echo "wrote $out/router.json5 (fleet $fleet: ${robots[*]})"
+echo "wrote $out/router.json5 (robots: $*)"

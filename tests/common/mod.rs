@@ -217,7 +217,17 @@ pub struct MapperProcess {
     pub http: String,
     pub zenoh: String,
     pub config: PathBuf,
+    /// The network namespace it runs in, if not the test's.
+    ns: Option<String>,
     child: Child,
+}
+
+/// A mapper stopped or killed: what starts it again as it was.
+pub struct Stopped {
+    pub http: String,
+    pub zenoh: String,
+    pub config: PathBuf,
+    ns: Option<String>,
 }
 
 impl MapperProcess {
@@ -281,7 +291,7 @@ impl MapperProcess {
     /// A mapper with its config file `config` written already, inside `net` if given; `http`
     /// is where the test reaches its HTTP API.
     pub fn spawn_in(
-        net: Option<&netns::Netns>,
+        net: Option<&dyn netns::Namespace>,
         http: String,
         zenoh: String,
         config: PathBuf,
@@ -298,6 +308,7 @@ impl MapperProcess {
         if let Some(net) = net {
             command = net.wrap(&command);
         }
+        let ns = net.map(|net| net.ns().to_owned());
         let mut child = command
             .stdout(Stdio::null())
             .stderr(log)
@@ -318,6 +329,7 @@ impl MapperProcess {
             http,
             zenoh,
             config,
+            ns,
             child,
         }
     }
@@ -333,23 +345,33 @@ impl MapperProcess {
     }
 
     /// SIGTERM, waited for: a graceful stop (exit code 0; the snapshots written).
-    pub fn stop(mut self) -> (String, String, PathBuf) {
+    pub fn stop(mut self) -> Stopped {
         sigterm(&self.child);
         let status = self.child.wait().expect("stops");
         assert_eq!(status.code(), Some(0), "a graceful stop");
-        (self.http.clone(), self.zenoh.clone(), self.config.clone())
+        self.stopped()
     }
 
     /// SIGKILL: no chance to flush or close anything.
-    pub fn kill(mut self) -> (String, String, PathBuf) {
+    pub fn kill(mut self) -> Stopped {
         self.child.kill().expect("SIGKILL");
         self.child.wait().expect("reaped");
-        (self.http.clone(), self.zenoh.clone(), self.config.clone())
+        self.stopped()
     }
 
-    /// The same mapper (ports, store) started again.
-    pub fn restart((http, zenoh, config): (String, String, PathBuf)) -> MapperProcess {
-        Self::spawn(http, zenoh, config)
+    fn stopped(&self) -> Stopped {
+        Stopped {
+            http: self.http.clone(),
+            zenoh: self.zenoh.clone(),
+            config: self.config.clone(),
+            ns: self.ns.clone(),
+        }
+    }
+
+    /// The same mapper (ports, store, namespace) started again.
+    pub fn restart(stopped: Stopped) -> MapperProcess {
+        let net = stopped.ns.as_ref().map(|ns| ns as &dyn netns::Namespace);
+        Self::spawn_in(net, stopped.http, stopped.zenoh, stopped.config)
     }
 }
 

@@ -193,8 +193,9 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
             let _ = stop.wait_for(|s| *s).await;
         })));
     }
+    let stop = runtime::session::shutdown_signal();
     let ctrl_c = tokio::spawn(async move {
-        runtime::session::shutdown_signal().await;
+        stop.await;
         let _ = stop_tx.send(true);
     });
     // With --laps: the map as it was when the first robot finished its first lap.

@@ -83,6 +83,7 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
     let zenoh = config.zenoh.to_zenoh(runtime::session::Role::Router)?;
     let listen = zenoh.get_json("listen/endpoints").unwrap_or_default();
     runtime()?.block_on(async {
+        let stop = runtime::session::shutdown_signal();
         let running = mapper::start(config.clone()).await?;
         tracing::info!(
             "mapper: Zenoh {listen}, HTTP http://{}/api/v1, store {}",
@@ -114,7 +115,7 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
                 return fed.map(|_| ());
             }
         }
-        runtime::session::shutdown_signal().await;
+        stop.await;
         tracing::info!("stopping");
         running.stop().await
     })
@@ -125,13 +126,14 @@ pub fn run_gateway(args: &GatewayArgs) -> Result<()> {
     init_logging();
     let config = mapper::gateway::GatewayConfig::load(args.config.as_deref())?;
     runtime()?.block_on(async {
+        let stop = runtime::session::shutdown_signal();
         let running = mapper::gateway::start(config.clone()).await?;
         tracing::info!(
             "gateway: HTTP http://{}/api/v1 for hosts {:?}",
             running.http_addr,
             config.hosts.keys().collect::<Vec<_>>()
         );
-        runtime::session::shutdown_signal().await;
+        stop.await;
         tracing::info!("stopping");
         running.stop().await
     })
@@ -203,8 +205,9 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
     // stop the service instead.
     config.zenoh.to_zenoh(runtime::session::Role::Client)?;
     let report = runtime()?.block_on(async {
+        let stop = runtime::session::shutdown_signal();
         let source = edge::open_source(&config, runtime::session::now_ns())?;
-        edge::run(config, source, runtime::session::shutdown_signal()).await
+        edge::run(config, source, stop).await
     })?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

@@ -4,20 +4,25 @@
 //!
 //! Each site has a keeper task on every host (`cluster/keeper.rs`): while the site's lease
 //! is free it claims it (the hosts in the site's rendezvous order, each waiting its rank's
-//! stagger), then takes the site over: the log after what this host's store holds is read
+//! stagger), and the site's standby takes it from a holder whose Zenoh liveliness token went
+//! (`cluster/tokens.rs`: its process is gone); then it takes the site over: the log after what this host's store holds is read
 //! into the store (the store is the host's cache of the logs), the newest shared snapshot
 //! taken in (`cluster/shelf.rs`), the map restored from them as a start restores a fleet,
 //! and handed to the worker ([`Work::Adopt`]), which from then on appends each of the
 //! site's batches to the log before its commit and ack; the keeper then declares the site's
 //! feeds (`crate::bus::feeds`), held while it owns the site. The keeper renews the
-//! lease every third of its time to live; a lease lost (or not renewed for two thirds of
-//! it) drops the site at once ([`Work::Drop`]), as does a fenced append in the worker.
+//! lease every third of its time to live; a lease claimed by another host (or not renewed
+//! for the lease and `renewal_grace_ms`) drops the site at once ([`Work::Drop`]), as does a
+//! fenced append in the worker. A lease that lapsed while the bucket did not answer, and
+//! that nobody claimed, is claimed again and the site kept.
 
 pub mod record;
 
+mod copies;
 mod keeper;
 mod presence;
 mod shelf;
+mod tokens;
 
 pub use shelf::{Shelf, Shelved, Shelving, shelf};
 
@@ -30,7 +35,7 @@ use serde::{Deserialize, Serialize};
 use sitelog::{CloudRetention, Clouds, Lease, Leases, NatsAccess, Snapshots, VersionFiles};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, mpsc};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// The `[store] snapshot_every_nodes` a cluster host is deployed with
 /// (deploy/cluster/mapper-host.toml): a takeover restores from the newest shared snapshot and
@@ -59,6 +64,12 @@ pub struct ClusterConfig {
     /// A lease lapses this long after its last renewal (ms): the longest a dead host keeps
     /// its sites. Renewed every third of it.
     pub lease_ttl_ms: u64,
+    /// A host whose renewals go unanswered keeps its sites this long past the lease's time
+    /// (ms) before it drops them: the leases' bucket electing a leader (4–9 s) does not
+    /// drop every site, and a lease that lapsed meanwhile is claimed again, its map kept.
+    /// The site's log is what keeps two writers apart (its appends are fenced), so this
+    /// costs no acked node; a host cut from NATS acks nothing meanwhile (its appends fail).
+    pub renewal_grace_ms: u64,
     /// A free site is claimed by the host of rank r in its order after r times this (ms):
     /// the first host in the order wins unless it is down.
     pub claim_stagger_ms: u64,
@@ -76,6 +87,7 @@ impl Default for ClusterConfig {
             nats: NatsAccess::default(),
             replicas: 3,
             lease_ttl_ms: 3000,
+            renewal_grace_ms: 10_000,
             claim_stagger_ms: 500,
             hand_back_after_ms: 10_000,
         }
@@ -110,6 +122,11 @@ impl ClusterConfig {
     fn ttl(&self) -> Duration {
         Duration::from_millis(self.lease_ttl_ms)
     }
+
+    /// How long a host keeps a site without a renewal answered: the lease and the grace.
+    fn unrenewed_limit(&self) -> Duration {
+        Duration::from_millis(self.lease_ttl_ms + self.renewal_grace_ms)
+    }
 }
 
 /// The cluster side of a running mapper: the keepers and the leases they hold.
@@ -123,6 +140,10 @@ pub struct Cluster {
 /// How long a graceful stop waits for the last snapshots to be shared before it releases
 /// the leases (the next owners restore from them).
 const LAST_SNAPSHOTS: Duration = Duration::from_secs(3);
+
+/// A bucket or stream that stays out of reach is logged again this often (it is tried every
+/// second).
+const REPEAT_WARNING: Duration = Duration::from_secs(30);
 
 /// The leases this host holds, by site.
 type Held = Arc<Mutex<HashMap<String, Lease>>>;
@@ -139,6 +160,8 @@ struct Host {
     shared: Arc<Shared>,
     work: mpsc::SyncSender<Work>,
     presence: presence::Presence,
+    /// The hosts' Zenoh liveliness tokens: which hosts' processes are gone.
+    tokens: tokens::Tokens,
     snapshots: Snapshots,
     /// The files of the versions the sites' logs name.
     version_files: VersionFiles,
@@ -221,6 +244,7 @@ impl Cluster {
             Clouds::open(js.clone(), cluster.replicas, retention)
         })
         .await;
+        let tokens = tokens::Tokens::declare(feeds.session(), &cluster.host).await?;
         let held = Held::default();
         let host = Arc::new(Host {
             cluster,
@@ -233,6 +257,7 @@ impl Cluster {
             shared,
             work,
             presence: presence::Presence::default(),
+            tokens,
             snapshots,
             version_files,
             clouds,
@@ -246,6 +271,7 @@ impl Cluster {
             .map(|site| tokio::spawn(keeper::keep(host.clone(), site.clone())))
             .collect();
         keepers.push(tokio::spawn(presence::keep_presence(host.clone())));
+        keepers.push(tokio::spawn(copies::watch(host.clone())));
         let sharing = tokio::spawn(shelf::share(host, shelving));
         Ok(Cluster {
             leases,
@@ -285,17 +311,26 @@ impl Cluster {
     }
 }
 
-/// `open` tried every second until NATS answers.
+/// `open` tried every second until NATS answers; a failure logged when it changes, and
+/// every [`REPEAT_WARNING`] while it lasts.
 async fn when_reachable<T, F, Opening>(what: &str, open: F) -> T
 where
     F: Fn() -> Opening,
     Opening: std::future::Future<Output = Result<T, sitelog::LogError>>,
 {
+    let mut warned: Option<(String, Instant)> = None;
     loop {
         match open().await {
             Ok(opened) => return opened,
             Err(e) => {
-                tracing::warn!("cluster: {what} is not reachable yet: {e}");
+                let why = e.to_string();
+                if warned
+                    .as_ref()
+                    .is_none_or(|(last, at)| *last != why || at.elapsed() >= REPEAT_WARNING)
+                {
+                    tracing::warn!("cluster: {what} is not reachable yet: {why}");
+                    warned = Some((why, Instant::now()));
+                }
                 tokio::time::sleep(Duration::from_secs(1)).await;
             }
         }

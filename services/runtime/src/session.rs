@@ -332,25 +332,39 @@ fn one_line(e: impl std::fmt::Display) -> String {
 
 /// Resolves when the process is asked to stop: Ctrl-C (SIGINT) or SIGTERM (`systemctl stop`,
 /// `docker stop`, `kill`), so that the services stop the same way under a supervisor as in a
-/// terminal.
-pub async fn shutdown_signal() {
-    let terminate = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut term) => {
-                term.recv().await;
-            }
-            Err(e) => {
+/// terminal. The signals are caught from this call on, not from the first poll: a service
+/// calls it before it starts serving, so a stop that comes while it starts is graceful too
+/// (caught only once awaited, a SIGTERM right after the HTTP API answered killed the mapper
+/// in a CI run). Call it within the Tokio runtime.
+pub fn shutdown_signal() -> impl std::future::Future<Output = ()> + Send + 'static {
+    use tokio::signal::unix::{SignalKind, signal};
+    let caught = |kind: SignalKind, name: &str| {
+        signal(kind)
+            .inspect_err(|e| {
                 // runtime has no logger; this happens at start, where stderr is read.
-                eprintln!(
-                    "levelmap: SIGTERM cannot be handled ({e}); only Ctrl-C stops gracefully"
-                );
-                std::future::pending::<()>().await;
-            }
-        }
+                eprintln!("levelmap: {name} cannot be handled ({e}); it stops the process at once");
+            })
+            .ok()
     };
-    tokio::select! {
-        _ = tokio::signal::ctrl_c() => {}
-        _ = terminate => {}
+    let (mut term, mut interrupt) = (
+        caught(SignalKind::terminate(), "SIGTERM"),
+        caught(SignalKind::interrupt(), "SIGINT"),
+    );
+    async move {
+        tokio::select! {
+            _ = received(&mut term) => {}
+            _ = received(&mut interrupt) => {}
+        }
+    }
+}
+
+/// Resolves when `signal` comes; never if it could not be caught.
+async fn received(signal: &mut Option<tokio::signal::unix::Signal>) {
+    match signal {
+        Some(signal) => {
+            signal.recv().await;
+        }
+        None => std::future::pending().await,
     }
 }
 

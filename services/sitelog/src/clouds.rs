@@ -56,10 +56,19 @@ impl Clouds {
         if let Some(bytes) = retention.max_bytes {
             config.max_bytes = i64::try_from(bytes).unwrap_or(i64::MAX);
         }
-        let stream = js
-            .get_or_create_stream(config)
-            .await
-            .map_err(LogError::jetstream)?;
+        let reserved = config.max_bytes;
+        let stream = js.get_or_create_stream(config).await.map_err(|e| {
+            let refused = e.to_string();
+            if !refused.contains("insufficient storage") {
+                return LogError::jetstream(refused);
+            }
+            LogError::JetStream(format!(
+                "{refused}: the clouds' stream reserves {reserved} bytes on each of {replicas} \
+                 servers, more than their JetStream file storage has free; raise each \
+                 server's `jetstream {{ max_file_store }}` (its default follows the disk's \
+                 free space), or lower the hosts' `[clouds] max_bytes`"
+            ))
+        })?;
         Ok(Clouds { js, stream })
     }
 

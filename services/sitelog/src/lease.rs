@@ -23,6 +23,7 @@ pub struct Leases {
 enum Latest {
     Held {
         host: String,
+        revision: u64,
     },
     /// Deleted (a graceful release); claimed again by an update at this revision.
     Released {
@@ -90,13 +91,71 @@ impl Leases {
 
     /// Claims `site` for `host`: the lease, or `None` while another host holds it.
     pub async fn claim(&self, site: &str, host: &str) -> Result<Option<Lease>, LogError> {
+        let latest = self.latest(site).await?;
+        self.claim_if_free(site, host, latest).await
+    }
+
+    /// Writes `host` in `site`'s lease if `latest` says the site is free: never written, its
+    /// last entry lapsed (revision 0), or released (at the release's revision).
+    async fn claim_if_free(
+        &self,
+        site: &str,
+        host: &str,
+        latest: Option<Latest>,
+    ) -> Result<Option<Lease>, LogError> {
+        match latest {
+            None => self.write_claim(site, host, 0).await,
+            Some(Latest::Released { revision }) => self.write_claim(site, host, revision).await,
+            Some(Latest::Held { .. }) => Ok(None),
+        }
+    }
+
+    /// Claims `site` again for `host`, which held it and whose renewals went unanswered: as
+    /// [`Leases::claim`], and also when the lease is held in `host`'s name at a revision
+    /// `host` did not hear of (a renewal applied whose answer was lost). `None` while another
+    /// host holds it.
+    pub async fn claim_again(&self, site: &str, host: &str) -> Result<Option<Lease>, LogError> {
+        match self.latest(site).await? {
+            Some(Latest::Held {
+                host: holder,
+                revision,
+            }) if holder == host => Ok(Some(Lease {
+                site: site.to_owned(),
+                host: host.to_owned(),
+                revision,
+            })),
+            latest => self.claim_if_free(site, host, latest).await,
+        }
+    }
+
+    /// Claims `site` for `host` from `gone`, a holder known to be dead, without waiting for
+    /// its lease to lapse: written over `gone`'s entry at its revision, so one host at most
+    /// succeeds, and only while `gone` still holds it (or the site is free). `None` while
+    /// another host holds it. If `gone` was alive after all, its next renewal is refused and
+    /// its next append fenced: it drops the site.
+    pub async fn claim_from(
+        &self,
+        site: &str,
+        host: &str,
+        gone: &str,
+    ) -> Result<Option<Lease>, LogError> {
+        match self.latest(site).await? {
+            Some(Latest::Held {
+                host: holder,
+                revision,
+            }) if holder == gone => self.write_claim(site, host, revision).await,
+            latest => self.claim_if_free(site, host, latest).await,
+        }
+    }
+
+    /// Writes `host` in `site`'s lease at `expected`, the revision of the key's last entry.
+    async fn write_claim(
+        &self,
+        site: &str,
+        host: &str,
+        expected: u64,
+    ) -> Result<Option<Lease>, LogError> {
         let value = Bytes::from(host.to_owned());
-        // Revision 0: the key was never written or its last entry lapsed.
-        let expected = match self.latest(site).await? {
-            None => 0,
-            Some(Latest::Released { revision }) => revision,
-            Some(Latest::Held { .. }) => return Ok(None),
-        };
         match self.store.update(site, value, expected).await {
             Ok(revision) => Ok(Some(Lease {
                 site: site.to_owned(),
@@ -112,7 +171,7 @@ impl Leases {
     /// The host holding `site`, if any.
     pub async fn holder(&self, site: &str) -> Result<Option<String>, LogError> {
         Ok(match self.latest(site).await? {
-            Some(Latest::Held { host }) => Some(host),
+            Some(Latest::Held { host, .. }) => Some(host),
             _ => None,
         })
     }
@@ -143,6 +202,7 @@ impl Leases {
         } else {
             Latest::Held {
                 host: String::from_utf8_lossy(&message.payload).into_owned(),
+                revision: message.sequence,
             }
         }))
     }

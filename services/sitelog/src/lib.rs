@@ -147,6 +147,18 @@ impl LogError {
     }
 }
 
+/// `request`, given `limit` at most: past it, [`LogError::Unavailable`]. A request sent while
+/// a stream elects its leader is lost and would wait for the client's own timeout (5 s and
+/// more); the lease's work needs to hear sooner.
+pub async fn within<T>(
+    limit: Duration,
+    request: impl std::future::Future<Output = Result<T, LogError>>,
+) -> Result<T, LogError> {
+    tokio::time::timeout(limit, request)
+        .await
+        .unwrap_or_else(|_| Err(LogError::Unavailable(limit, "timed out".into())))
+}
+
 /// A site's log, as one writer (the site's owner) sees it.
 pub struct SiteLog {
     js: Context,
@@ -255,15 +267,14 @@ impl SiteLog {
     }
 
     /// Every record from sequence `from` (1: the whole log) to the last, in order.
-    pub async fn read_from(&mut self, from: u64) -> Result<Vec<Entry>, LogError> {
+    pub async fn read_from(&self, from: u64) -> Result<Vec<Entry>, LogError> {
         self.read_some(from, usize::MAX).await
     }
 
     /// The records from sequence `from` on, in order, at most `max` of them: fewer than
     /// `max` when the log ends.
-    pub async fn read_some(&mut self, from: u64, max: usize) -> Result<Vec<Entry>, LogError> {
-        let info = self.stream.info().await.map_err(LogError::jetstream)?;
-        let (first, last) = (info.state.first_sequence, info.state.last_sequence);
+    pub async fn read_some(&self, from: u64, max: usize) -> Result<Vec<Entry>, LogError> {
+        let (first, last) = self.stream_bounds().await?;
         let mut entries = Vec::new();
         for sequence in (from.max(first)..=last).take(max) {
             entries.push(self.get(sequence).await?);
@@ -272,24 +283,67 @@ impl SiteLog {
     }
 
     /// The last sequence in the stream, as the server says now.
-    pub async fn stream_last_sequence(&mut self) -> Result<u64, LogError> {
-        let info = self.stream.info().await.map_err(LogError::jetstream)?;
-        Ok(info.state.last_sequence)
+    pub async fn stream_last_sequence(&self) -> Result<u64, LogError> {
+        Ok(self.stream_bounds().await?.1)
+    }
+
+    /// The stream's first and last sequence, as the server says now.
+    async fn stream_bounds(&self) -> Result<(u64, u64), LogError> {
+        let info = self
+            .read_retrying(|| async { self.stream.get_info().await.map_err(|e| e.to_string()) })
+            .await?;
+        Ok((info.state.first_sequence, info.state.last_sequence))
     }
 
     /// The record at `sequence`.
     pub async fn get(&self, sequence: u64) -> Result<Entry, LogError> {
         let message = self
-            .stream
-            .get_raw_message(sequence)
-            .await
-            .map_err(|e| LogError::JetStream(format!("sequence {sequence}: {e}")))?;
+            .read_retrying(|| async {
+                self.stream
+                    .get_raw_message(sequence)
+                    .await
+                    .map_err(|e| format!("sequence {sequence}: {e}"))
+            })
+            .await?;
         Ok(Entry {
             sequence,
             id: message_id(&message.headers).unwrap_or_default(),
             payload: message.payload,
         })
     }
+
+    /// `read`, tried again while it fails as reads do during a leader's election, up to the
+    /// retry deadline.
+    async fn read_retrying<T, F, Fut>(&self, read: F) -> Result<T, LogError>
+    where
+        F: Fn() -> Fut,
+        Fut: std::future::Future<Output = Result<T, String>>,
+    {
+        let started = Instant::now();
+        let mut backoff = self.retry.first_backoff;
+        loop {
+            let detail = match read().await {
+                Ok(value) => return Ok(value),
+                Err(detail) => detail,
+            };
+            if !read_may_pass(&detail) {
+                return Err(LogError::JetStream(detail));
+            }
+            if started.elapsed() >= self.retry.deadline {
+                return Err(LogError::Unavailable(self.retry.deadline, detail));
+            }
+            tokio::time::sleep(backoff).await;
+            backoff = (backoff * 2).min(self.retry.max_backoff);
+        }
+    }
+}
+
+/// Whether a read failed only for the while a stream elects its leader: JetStream answers
+/// 503 (error code 10008, "temporarily unavailable"), or nobody answers in time.
+fn read_may_pass(detail: &str) -> bool {
+    ["code 503", "timed out", "no responders", "unavailable"]
+        .iter()
+        .any(|words| detail.contains(words))
 }
 
 /// The stream of site `site`'s log.
@@ -312,6 +366,25 @@ pub async fn log_exists(js: &Context, site: &str) -> Result<bool, LogError> {
             _ => Err(LogError::JetStream(e.to_string())),
         },
     }
+}
+
+/// How many of site `site`'s log's copies are current (its leader and the followers that
+/// are caught up and online), and how many it has: fewer current than copies means a
+/// server is down, behind, or its JetStream disabled (a full disk), and one more loss may
+/// stop the log. Reads, creates nothing.
+pub async fn log_copies(js: &Context, site: &str) -> Result<(usize, usize), LogError> {
+    let mut stream = js
+        .get_stream(stream_name(site))
+        .await
+        .map_err(LogError::jetstream)?;
+    let info = stream.info().await.map_err(LogError::jetstream)?;
+    let Some(cluster) = &info.cluster else {
+        return Ok((1, 1));
+    };
+    let followers = &cluster.replicas;
+    let led = usize::from(cluster.leader.is_some());
+    let current = followers.iter().filter(|p| p.current && !p.offline).count();
+    Ok((led + current, 1 + followers.len()))
 }
 
 /// A publish's failure, by what the writer does about it.
@@ -383,6 +456,19 @@ mod tests {
             classify(PublishErrorKind::MaxPayloadExceeded, "too big"),
             Failure::Fatal
         );
+    }
+
+    #[test]
+    fn a_read_refused_during_an_election_is_retried_and_a_missing_record_is_not() {
+        let electing = "sequence 74: JetStream error: JetStream system temporarily unavailable \
+                        (code 503, error code 10008)";
+        assert!(read_may_pass(electing));
+        assert!(read_may_pass(
+            "sequence 3: timed out: did not receive any response"
+        ));
+        assert!(!read_may_pass(
+            "sequence 9: JetStream error: no message found (code 404, error code 10037)"
+        ));
     }
 
     #[test]

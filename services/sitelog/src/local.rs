@@ -1,7 +1,7 @@
 //! Three real nats-servers on this machine, one JetStream cluster, each fsyncing every
-//! write, optionally secured as `deploy/cluster/make-nats-certs.sh` makes them: their routes
-//! on loopback, their clients on every interface (a mapper host in a network namespace
-//! reaches them over its veth pair). Processes only, no client: the cluster tests, the
+//! write, optionally secured as `deploy/cluster/make-nats-certs.sh` makes them: on loopback,
+//! or each at an address in a network namespace of its own ([`Placement`], the drills' hosts),
+//! their clients on every interface (a mapper host in a network namespace reaches them). Processes only, no client: the cluster tests, the
 //! drills (`tests/e2e_cluster.rs`) and `levelmap bench-cluster` start them through this.
 
 use std::io;
@@ -13,12 +13,72 @@ use std::sync::atomic::{AtomicU32, Ordering};
 /// The servers' names, in the order of their ports.
 const NAMES: [&str; 3] = ["n1", "n2", "n3"];
 
+/// Each local server's JetStream file storage, named rather than left to nats-server, whose
+/// default is taken from the disk's free space when it starts (973 MB in a CI run on a
+/// nearly full disk): the clouds' stream reserves `[clouds] max_bytes` (2 GiB) on every server,
+/// and a test that writes megabytes must not depend on what else the disk holds.
+const LOCAL_FILE_STORE: &str = "8G";
+
+/// Where a server runs: the address its routes and monitoring listen on, and the network
+/// namespace it runs in (through `ip netns exec`, which needs root), if not this process's.
+#[derive(Clone, Debug)]
+pub struct Placement {
+    /// An address of this machine, or of the namespace.
+    pub address: String,
+    /// The namespace's name (`ip netns`).
+    pub netns: Option<String>,
+}
+
+impl Placement {
+    fn loopback() -> Placement {
+        Placement {
+            address: "127.0.0.1".into(),
+            netns: None,
+        }
+    }
+}
+
 /// Three nats-servers running; killed when dropped.
 pub struct LocalCluster {
+    addresses: Vec<String>,
     client_ports: Vec<u16>,
     monitor_ports: Vec<u16>,
     servers: Vec<Option<Child>>,
     names: Vec<String>,
+    /// How each server was started, to start it again.
+    launches: Vec<Launch>,
+}
+
+/// How one server is started: its binary, config and log, and its namespace.
+struct Launch {
+    binary: PathBuf,
+    config: PathBuf,
+    log: PathBuf,
+    netns: Option<String>,
+}
+
+impl Launch {
+    /// Starts the server, its log appended to.
+    fn spawn(&self) -> io::Result<Child> {
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&self.log)?;
+        let mut command = match &self.netns {
+            None => Command::new(&self.binary),
+            Some(ns) => {
+                let mut inside = Command::new("ip");
+                inside.args(["netns", "exec", ns]).arg(&self.binary);
+                inside
+            }
+        };
+        command
+            .arg("-c")
+            .arg(&self.config)
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+    }
 }
 
 impl LocalCluster {
@@ -27,6 +87,17 @@ impl LocalCluster {
     /// folder `make-nats-certs.sh` fills). Returns once the processes are spawned: clients
     /// retry until the cluster answers.
     pub fn start(binary: &Path, dir: &Path, secured: Option<&Path>) -> io::Result<LocalCluster> {
+        let loopback = [(); 3].map(|_| Placement::loopback());
+        Self::start_placed(binary, dir, secured, &loopback)
+    }
+
+    /// [`LocalCluster::start`] with each server where `places` puts it.
+    pub fn start_placed(
+        binary: &Path,
+        dir: &Path,
+        secured: Option<&Path>,
+        places: &[Placement; 3],
+    ) -> io::Result<LocalCluster> {
         if !binary.is_file() {
             return Err(io::Error::new(
                 io::ErrorKind::NotFound,
@@ -43,27 +114,32 @@ impl LocalCluster {
             (free_ports()?, free_ports()?, free_ports()?);
         let routes: Vec<String> = route_ports
             .iter()
-            .map(|p| format!("nats-route://127.0.0.1:{p}"))
+            .zip(places)
+            .map(|(p, place)| format!("nats-route://{}:{p}", place.address))
             .collect();
         if let Some(certs) = secured {
             // nats-server reads an include relative to the config's folder.
             std::fs::copy(certs.join("auth.conf"), dir.join("auth.conf"))?;
         }
         let mut cluster = LocalCluster {
+            addresses: places.iter().map(|p| p.address.clone()).collect(),
             client_ports,
             monitor_ports,
             servers: Vec::new(),
             names: NAMES.iter().map(|n| n.to_string()).collect(),
+            launches: Vec::new(),
         };
         for (i, name) in NAMES.iter().enumerate() {
             let config = dir.join(format!("{name}.conf"));
             std::fs::write(
                 &config,
                 format!(
-                    "server_name: {name}\nlisten: 0.0.0.0:{client}\nhttp: 127.0.0.1:{monitor}\n\
-                     jetstream {{ store_dir: \"{store}\", sync_interval: always }}\n\
-                     cluster {{ name: levelmap, listen: 127.0.0.1:{route}, routes: [{routes}]{route_tls} }}\n\
+                    "server_name: {name}\nlisten: 0.0.0.0:{client}\nhttp: {address}:{monitor}\n\
+                     jetstream {{ store_dir: \"{store}\", max_file_store: {LOCAL_FILE_STORE}, \
+                     sync_interval: always }}\n\
+                     cluster {{ name: levelmap, listen: {address}:{route}, routes: [{routes}]{route_tls} }}\n\
                      {client_tls}",
+                    address = places[i].address,
                     client = cluster.client_ports[i],
                     monitor = cluster.monitor_ports[i],
                     store = dir.join(name).display(),
@@ -79,13 +155,14 @@ impl LocalCluster {
                     )),
                 ),
             )?;
-            let log = std::fs::File::create(dir.join(format!("{name}.log")))?;
-            let child = Command::new(binary)
-                .arg("-c")
-                .arg(&config)
-                .stdout(Stdio::null())
-                .stderr(log)
-                .spawn()?;
+            let launch = Launch {
+                binary: binary.to_owned(),
+                config,
+                log: dir.join(format!("{name}.log")),
+                netns: places[i].netns.clone(),
+            };
+            let child = launch.spawn()?;
+            cluster.launches.push(launch);
             cluster.servers.push(Some(child));
         }
         Ok(cluster)
@@ -96,17 +173,31 @@ impl LocalCluster {
         &self.client_ports
     }
 
-    /// `nats://127.0.0.1:port` of every server.
+    /// `nats://address:port` of every server.
     pub fn client_urls(&self) -> Vec<String> {
-        self.client_ports
-            .iter()
-            .map(|p| format!("nats://127.0.0.1:{p}"))
+        self.at(&self.client_ports)
+            .into_iter()
+            .map(|a| format!("nats://{a}"))
             .collect()
     }
 
-    /// The monitoring port (HTTP: `/jsz`, `/varz`) of every server.
-    pub fn monitor_ports(&self) -> &[u16] {
-        &self.monitor_ports
+    /// The address of every server.
+    pub fn addresses(&self) -> &[String] {
+        &self.addresses
+    }
+
+    /// `address:port` of every server's monitoring (HTTP: `/jsz`, `/varz`).
+    pub fn monitors(&self) -> Vec<String> {
+        self.at(&self.monitor_ports)
+    }
+
+    /// `address:port` of every server, with its port of `ports`.
+    fn at(&self, ports: &[u16]) -> Vec<String> {
+        self.addresses
+            .iter()
+            .zip(ports)
+            .map(|(a, p)| format!("{a}:{p}"))
+            .collect()
     }
 
     /// The names of the servers, in the order of their ports.
@@ -116,18 +207,32 @@ impl LocalCluster {
 
     /// SIGKILLs the server named `name` and reaps it.
     pub fn kill(&mut self, name: &str) -> io::Result<()> {
-        let child = self
-            .names
-            .iter()
-            .position(|n| n == name)
-            .and_then(|i| self.servers[i].as_mut())
+        let i = self.index(name)?;
+        let child = self.servers[i]
+            .as_mut()
             .ok_or_else(|| io::Error::other(format!("no server {name} runs")))?;
         child.kill()?;
         child.wait()?;
-        if let Some(i) = self.names.iter().position(|n| n == name) {
-            self.servers[i] = None;
-        }
+        self.servers[i] = None;
         Ok(())
+    }
+
+    /// Starts the server named `name` again (killed first if it runs), on its config and
+    /// store: it catches up from the others.
+    pub fn restart(&mut self, name: &str) -> io::Result<()> {
+        if self.servers[self.index(name)?].is_some() {
+            self.kill(name)?;
+        }
+        let i = self.index(name)?;
+        self.servers[i] = Some(self.launches[i].spawn()?);
+        Ok(())
+    }
+
+    fn index(&self, name: &str) -> io::Result<usize> {
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| io::Error::other(format!("no server named {name}")))
     }
 }
 

@@ -11,7 +11,7 @@ mod common;
 
 use async_nats::jetstream;
 use bytes::Bytes;
-use common::{Cluster, open_when_ready, when_ready};
+use common::{Cluster, open_when_ready, stream_replicas, when_ready};
 use sitelog::{
     Appended, CloudRetention, Clouds, Leases, LogError, RecordId, RetryPolicy, SiteLog,
     SnapshotTag, Snapshots, VersionFiles,
@@ -19,14 +19,9 @@ use sitelog::{
 use std::time::{Duration, Instant};
 
 async fn stream_leader(js: &jetstream::Context, site: &str) -> String {
-    let mut stream = js
-        .get_stream(format!("LEVELMAP_SITE_{site}"))
-        .await
-        .expect("the stream");
-    let info = stream.info().await.expect("stream info");
-    let cluster = info.cluster.clone().expect("a clustered stream");
-    assert_eq!(cluster.replicas.len(), 2, "R3: a leader and two followers");
-    cluster.leader.expect("a leader")
+    let (leader, followers) = stream_replicas(js, site).await;
+    assert_eq!(followers.len(), 2, "R3: a leader and two followers");
+    leader
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -69,7 +64,7 @@ async fn killing_the_stream_leader_loses_no_acked_record_and_stores_none_twice()
 
     // Read back through a new connection, from the servers left.
     let js = jetstream::new(cluster.client().await);
-    let mut reader = open_when_ready(js, "park").await;
+    let reader = open_when_ready(js, "park").await;
     let entries = reader.read_from(1).await.expect("read the log");
     let ids: Vec<String> = entries.iter().map(|e| e.id.clone()).collect();
     assert_eq!(ids, acked, "every acked record once, in order");
@@ -198,6 +193,26 @@ async fn a_lease_is_held_by_one_host_lapses_unrenewed_and_its_old_holder_learns_
         !leases_a.renew(&mut lease_a).await.unwrap(),
         "h1's late renewal"
     );
+    assert_eq!(
+        leases_a.claim_again("park", "h1").await.unwrap(),
+        None,
+        "h1 cannot claim again what h2 holds"
+    );
+    assert!(leases_b.renew(&mut lease_b).await.unwrap());
+    // A renewal of h2's applied but its answer lost: h2's lease is at a revision it did not
+    // hear of. Its next renewal is refused; claimed again, the lease is h2's as it stands.
+    let mut unheard = lease_b.clone();
+    assert!(leases_b.renew(&mut unheard).await.unwrap());
+    assert!(
+        !leases_b.renew(&mut lease_b).await.unwrap(),
+        "a stale revision"
+    );
+    lease_b = leases_b
+        .claim_again("park", "h2")
+        .await
+        .unwrap()
+        .expect("h2's own lease");
+    assert_eq!(lease_b, unheard);
     assert!(leases_b.renew(&mut lease_b).await.unwrap());
     // A stale release by h1 leaves h2's lease alone; h2's own release frees the site.
     leases_a.release(lease_a).await.unwrap();
@@ -206,9 +221,43 @@ async fn a_lease_is_held_by_one_host_lapses_unrenewed_and_its_old_holder_learns_
         Some("h2")
     );
     leases_b.release(lease_b).await.unwrap();
+    let mut lease_a = leases_a
+        .claim_again("park", "h1")
+        .await
+        .unwrap()
+        .expect("released");
+
+    // h1 is known dead (its Zenoh token went): h2 takes the lease from it at once, and only
+    // from it; h1's renewal, were it alive after all, is refused.
+    assert_eq!(
+        leases_b.claim_from("park", "h2", "h3").await.unwrap(),
+        None,
+        "held by h1, not by the host named gone"
+    );
+    // h1's lease was written just now: this is no lapse.
+    let lease_b = leases_b
+        .claim_from("park", "h2", "h1")
+        .await
+        .unwrap()
+        .expect("taken from h1");
+    assert_eq!(
+        leases_a.holder("park").await.unwrap().as_deref(),
+        Some("h2")
+    );
+    assert!(!leases_a.renew(&mut lease_a).await.unwrap(), "h1 lost it");
+    assert_eq!(
+        leases_a.claim_from("park", "h1", "h1").await.unwrap(),
+        None,
+        "h2 holds it now"
+    );
+    leases_b.release(lease_b).await.unwrap();
     assert!(
-        leases_a.claim("park", "h1").await.unwrap().is_some(),
-        "released"
+        leases_a
+            .claim_from("park", "h1", "h2")
+            .await
+            .unwrap()
+            .is_some(),
+        "released: free to claim"
     );
 }
 
@@ -269,6 +318,26 @@ async fn clouds_are_read_by_any_host_put_once_and_the_oldest_dropped_past_the_bo
     let cluster = Cluster::start("clouds", None);
     let js_a = jetstream::new(cluster.client().await);
     let js_b = jetstream::new(cluster.client().await);
+    // A bound beyond each server's file storage (8G here) is refused, naming what to change.
+    let too_big = CloudRetention {
+        max_age: None,
+        max_bytes: Some(9 << 30),
+    };
+    let started = Instant::now();
+    let refused = loop {
+        match Clouds::open(js_a.clone(), 3, too_big).await {
+            Ok(_) => panic!("a clouds' stream larger than the servers' storage was made"),
+            Err(e) if e.to_string().contains("insufficient storage") => break e.to_string(),
+            Err(e) => {
+                assert!(started.elapsed() < Duration::from_secs(60), "{e}");
+                tokio::time::sleep(Duration::from_millis(500)).await;
+            }
+        }
+    };
+    assert!(
+        refused.contains("max_file_store") && refused.contains("[clouds] max_bytes"),
+        "{refused}"
+    );
     let retention = CloudRetention {
         max_age: None,
         max_bytes: Some(400_000),

@@ -13,7 +13,7 @@ use runtime::session::SessionConfig;
 use sitelog::NatsAccess;
 use sitelog::local::LocalCluster;
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -34,6 +34,8 @@ pub(super) struct Deployment {
     hosts: Vec<Host>,
     gateway: Option<(String, Child)>,
     _nats: Option<LocalCluster>,
+    /// The run's folder: each process's config and log in a folder named after it.
+    dir: PathBuf,
 }
 
 impl Deployment {
@@ -85,6 +87,7 @@ impl Deployment {
             hosts: started,
             gateway: Some((gateway_http, gateway)),
             _nats: Some(nats),
+            dir: dir.to_owned(),
         })
     }
 
@@ -103,6 +106,7 @@ impl Deployment {
             }],
             gateway: None,
             _nats: None,
+            dir: dir.to_owned(),
         })
     }
 
@@ -139,10 +143,16 @@ impl Deployment {
                 return Ok(());
             }
             if let Some(exited) = self.exited() {
-                bail!("{exited} exited before the sites were served");
+                bail!(
+                    "{exited} exited before the sites were served{}",
+                    self.log_tails()
+                );
             }
             if Instant::now() > deadline {
-                bail!("no owner serves {missing:?} after {timeout:?}");
+                bail!(
+                    "no owner serves {missing:?} after {timeout:?}{}",
+                    self.log_tails()
+                );
             }
             std::thread::sleep(Duration::from_millis(200));
         }
@@ -177,6 +187,24 @@ impl Deployment {
             }
             std::thread::sleep(Duration::from_millis(500));
         }
+    }
+
+    /// The last lines of every process's log, to say why a run failed where its folder is
+    /// gone (a CI machine's).
+    fn log_tails(&self) -> String {
+        const LINES: usize = 4;
+        let names = self.hosts.iter().map(|h| h.name.as_str());
+        let names = names.chain(self.gateway.as_ref().map(|_| "gateway"));
+        let mut tails = String::new();
+        for name in names {
+            let log = std::fs::read_to_string(self.dir.join(name).join("log")).unwrap_or_default();
+            let lines: Vec<&str> = log.lines().collect();
+            tails.push_str(&format!("\n{name}'s log ends:"));
+            for line in &lines[lines.len().saturating_sub(LINES)..] {
+                tails.push_str(&format!("\n  {line}"));
+            }
+        }
+        tails
     }
 
     /// The first process found exited, named.

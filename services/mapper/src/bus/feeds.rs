@@ -46,6 +46,11 @@ impl Feeds {
         }
     }
 
+    /// The session the feeds are declared on.
+    pub fn session(&self) -> &zenoh::Session {
+        &self.session
+    }
+
     /// Declares `fleet`'s feeds ([`EVERY_FLEET`]: every fleet's).
     pub async fn declare(&self, fleet: &str) -> Result<Declared> {
         let node_keys = format!("{}/{fleet}/robots/*/{}", wire::KEY_ROOT, Topic::Node);

@@ -1,6 +1,6 @@
 //! One site's keeper on one host: claims the site's lease when it is free and this host's
-//! turn has come, takes the site over, renews the lease, and drops the site when the lease
-//! is lost.
+//! turn has come (or, as the site's standby, takes it from a holder whose process is gone),
+//! takes the site over, renews the lease, and drops the site when the lease is lost.
 
 use super::Host;
 use super::record::{LogRecord, SiteRecord};
@@ -20,6 +20,10 @@ const CATCH_UP_BATCH: usize = 256;
 /// How often a site's standby reads what was appended to the site's log since.
 const FOLLOW_EVERY: Duration = Duration::from_secs(1);
 
+/// A standby's round of following gives up after this (and opens the log again next
+/// round): a round takes milliseconds, and the keeper claims nothing while it runs.
+const FOLLOW_BOUND: Duration = Duration::from_millis(500);
+
 /// Records a standby reads in one round at most: a long log is read over several rounds, and
 /// the keeper looks at the lease between them.
 const FOLLOW_MAX: usize = 4 * CATCH_UP_BATCH;
@@ -36,6 +40,14 @@ const HAND_BACK_HOLD_OFF: Duration = Duration::from_secs(3);
 /// A site is handed back at most this often: a home host that is alive but does not claim
 /// it does not make the site bounce.
 const HAND_BACK_EVERY: Duration = Duration::from_secs(60);
+
+/// How a host claims a site.
+enum Claim {
+    /// Free: its lease lapsed or was released.
+    Free,
+    /// From its holder, whose process is gone.
+    From(String),
+}
 
 /// How a host's ownership of a site ended.
 enum Owned {
@@ -60,6 +72,9 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
     let mut next_follow = Instant::now();
     let mut follow_failed = false;
     let (mut claim_from, mut handed_back) = (Instant::now(), None::<Instant>);
+    // After the lease could not be read (the bucket electing a leader): until then the site's
+    // holder, if alive, may claim its lapsed lease again first.
+    let mut unread_hold_off = Instant::now();
     // The holder last seen: once the site is free, the ranks are taken without it, so that
     // its standby claims at once and the others after their stagger.
     let mut last_holder: Option<String> = None;
@@ -69,8 +84,16 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
         }
         // The order over the live hosts, once this host has read who is alive.
         let live = host.presence.live_order(&order, this);
-        match (live, host.leases.holder(&site).await) {
-            (None, _) => {}
+        // Bounded: a read lost in an election would time out only after the client's 5 s,
+        // and the hold-off after it (below) would start that much later.
+        let ttl = host.leases.ttl();
+        let holder = sitelog::within(ttl / 3, host.leases.holder(&site)).await;
+        if complained && holder.is_ok() {
+            tracing::info!(site, "cluster: the lease is read again");
+            complained = false;
+        }
+        let claim = match (live, holder) {
+            (None, Ok(_)) => None,
             (Some(live), Ok(None)) => {
                 let rank = live
                     .iter()
@@ -78,55 +101,96 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
                     .position(|h| *h == this)
                     .unwrap_or(0) as u32;
                 let stagger = Duration::from_millis(host.cluster.claim_stagger_ms) * rank;
-                let since = *free_since.get_or_insert_with(Instant::now);
-                if since.elapsed() >= stagger && Instant::now() >= claim_from {
-                    free_since = None;
-                    match host.leases.claim(&site, this).await {
-                        Ok(Some(lease)) => {
-                            let may_hand_back =
-                                handed_back.is_none_or(|t| t.elapsed() >= HAND_BACK_EVERY);
-                            match own(&host, lease, &order, may_hand_back, &mut stopping).await {
-                                Owned::Stopping => return,
-                                Owned::Lost => {}
-                                Owned::HandedBack => {
-                                    handed_back = Some(Instant::now());
-                                    claim_from = Instant::now() + HAND_BACK_HOLD_OFF;
-                                }
-                            }
-                        }
-                        Ok(None) => complained = false,
-                        Err(e) if !complained => {
-                            tracing::warn!(site, "cluster: claiming the lease: {e}");
-                            complained = true;
-                        }
-                        Err(_) => {}
+                // A holder whose process is gone (its Zenoh token went) claims nothing again.
+                let holder_gone = last_holder
+                    .as_deref()
+                    .is_some_and(|h| h != this && host.tokens.gone(h));
+                let hold_off = if holder_gone {
+                    if unread_hold_off > Instant::now() {
+                        tracing::info!(
+                            site,
+                            holder = last_holder.as_deref(),
+                            "cluster: the lease lapsed and its holder's process is gone (its \
+                             Zenoh token went): not waiting for it to claim again"
+                        );
+                        unread_hold_off = Instant::now();
                     }
-                }
+                    claim_from
+                } else {
+                    claim_from.max(unread_hold_off)
+                };
+                // The stagger counts from the end of a hold-off too: hosts whose hold-offs
+                // end apart still claim in the site's order.
+                let since = *free_since.get_or_insert_with(Instant::now);
+                (Instant::now() >= since.max(hold_off) + stagger).then(|| {
+                    free_since = None;
+                    Claim::Free
+                })
             }
             (Some(live), Ok(Some(holder))) => {
                 free_since = None;
-                complained = false;
                 last_holder = Some(holder.clone());
-                let standby = live.iter().find(|h| **h != holder);
-                if standby == Some(&this) && Instant::now() >= next_follow {
-                    next_follow = Instant::now() + FOLLOW_EVERY;
-                    match follow(&host, &site, &mut follower).await {
-                        Ok(()) => follow_failed = false,
-                        Err(e) => {
-                            if !follow_failed {
-                                tracing::warn!(site, "cluster: following the site's log: {e:#}");
-                            }
-                            follow_failed = true;
-                            follower = None;
-                        }
+                let standby = live.iter().find(|h| **h != holder) == Some(&this);
+                if standby && host.tokens.gone(&holder) {
+                    // Its process is gone (its Zenoh token went with its links): the lease
+                    // would lapse only within a lease's time. Taken over now; were the
+                    // holder alive after all, its renewal is refused and its append fenced.
+                    Some(Claim::From(holder))
+                } else {
+                    if standby && Instant::now() >= next_follow {
+                        next_follow = Instant::now() + FOLLOW_EVERY;
+                        follow_round(&host, &site, &mut follower, &mut follow_failed).await;
+                    }
+                    None
+                }
+            }
+            (_, Err(e)) => {
+                // The bucket may be electing a leader: once it answers, the site's holder
+                // gets a lease's time to claim again a lease that lapsed meanwhile.
+                unread_hold_off = Instant::now() + ttl;
+                if !complained {
+                    tracing::warn!(site, "cluster: the lease cannot be read: {e}");
+                    complained = true;
+                }
+                None
+            }
+        };
+        let claimed = match &claim {
+            Some(Claim::Free) => host.leases.claim(&site, this).await,
+            Some(Claim::From(holder)) => host.leases.claim_from(&site, this, holder).await,
+            None => Ok(None),
+        };
+        if let (Some(Claim::From(holder)), Ok(Some(_))) = (&claim, &claimed) {
+            tracing::info!(
+                site,
+                holder,
+                "cluster: the holder's process is gone (its Zenoh token went): its lease \
+                 taken over before it lapsed"
+            );
+            host.shared.instruments.leases_taken_from_gone.inc();
+        }
+        match claimed {
+            Ok(Some(lease)) => {
+                let may_hand_back = handed_back.is_none_or(|t| t.elapsed() >= HAND_BACK_EVERY);
+                match own(&host, lease, &order, may_hand_back, &mut stopping).await {
+                    Owned::Stopping => return,
+                    Owned::Lost => {}
+                    Owned::HandedBack => {
+                        handed_back = Some(Instant::now());
+                        claim_from = Instant::now() + HAND_BACK_HOLD_OFF;
                     }
                 }
             }
-            (Some(_), Err(e)) if !complained => {
-                tracing::warn!(site, "cluster: the lease cannot be read: {e}");
+            Ok(None) => {
+                if claim.is_some() {
+                    complained = false;
+                }
+            }
+            Err(e) if !complained => {
+                tracing::warn!(site, "cluster: claiming the lease: {e}");
                 complained = true;
             }
-            (Some(_), Err(_)) => {}
+            Err(_) => {}
         }
         tokio::select! {
             _ = tokio::time::sleep(POLL) => {}
@@ -209,13 +273,25 @@ async fn own(
         };
         // A renewal that does not answer within a third of the lease counts as failed: a
         // host cut off from NATS must notice before its lease lapses.
-        let renewal = tokio::time::timeout(ttl / 3, host.leases.renew(&mut lease)).await;
-        let renewal = renewal.unwrap_or_else(|_| {
-            Err(sitelog::LogError::Unavailable(
-                ttl / 3,
-                "renewal timed out".into(),
-            ))
-        });
+        let renewal = sitelog::within(ttl / 3, host.leases.renew(&mut lease)).await;
+        let renewal = match renewal {
+            // Lapsed while the bucket did not answer, and nobody claimed it (or renewed
+            // without this host hearing the answer): ours again.
+            Ok(false) => match host.leases.claim_again(&site, &host.cluster.host).await {
+                Ok(Some(again)) => {
+                    tracing::warn!(
+                        site,
+                        "cluster: the lease lapsed unrenewed; claimed again, the map kept"
+                    );
+                    host.shared.instruments.leases_reclaimed.inc();
+                    lease = again;
+                    Ok(true)
+                }
+                Ok(None) => Ok(false),
+                Err(e) => Err(e),
+            },
+            other => other,
+        };
         let lost = match renewal {
             Ok(true) => {
                 renewed = Instant::now();
@@ -237,9 +313,12 @@ async fn own(
                 None
             }
             Ok(false) => Some("its lease was claimed by another host".to_owned()),
-            // Not renewed for two thirds of its life: it may lapse before we hear back, so
-            // this host stops acking now rather than risk two owners.
-            Err(e) if renewed.elapsed() * 3 >= ttl * 2 => Some(format!("not renewed: {e}")),
+            // Past the lease and its grace: the bucket does not come back, or this host is
+            // cut from it. (Meanwhile another host may have claimed the site; if so, the
+            // log fences this host's next append.)
+            Err(e) if renewed.elapsed() >= host.cluster.unrenewed_limit() => {
+                Some(format!("not renewed: {e}"))
+            }
             Err(e) => {
                 tracing::warn!(site, "cluster: renewal failed, retrying: {e}");
                 None
@@ -315,6 +394,30 @@ async fn drop_site(host: &Host, site: &str) {
 async fn take_over_after(pause: Duration, host: Arc<Host>, site: String) -> Result<usize> {
     tokio::time::sleep(pause).await;
     take_over(host, site).await
+}
+
+/// One round of [`follow`], bounded by [`FOLLOW_BOUND`] so that a stream without a leader
+/// does not keep the standby from claiming the site when its lease lapses. A failure is
+/// logged once until a round succeeds, and the log opened again next round.
+async fn follow_round(
+    host: &Arc<Host>,
+    site: &str,
+    follower: &mut Option<SiteLog>,
+    failed: &mut bool,
+) {
+    let followed = tokio::time::timeout(FOLLOW_BOUND, follow(host, site, follower))
+        .await
+        .unwrap_or_else(|_| Err(anyhow::anyhow!("no answer in {FOLLOW_BOUND:?}")));
+    match followed {
+        Ok(()) => *failed = false,
+        Err(e) => {
+            if !*failed {
+                tracing::warn!(site, "cluster: following the site's log: {e:#}");
+            }
+            *failed = true;
+            *follower = None;
+        }
+    }
 }
 
 /// As the site's standby (the next host in its order): reads what was appended to its log

@@ -7,7 +7,9 @@
 //! started (or back after a fault) gets its own sites and only those.
 //!
 //! The bucket is the source of truth for ownership already; taking liveness from it too
-//! means a host that cannot reach NATS is not counted alive, whatever else it reaches.
+//! means a host that cannot reach NATS is not counted alive, whatever else it reaches. What
+//! Zenoh adds (`tokens.rs`): a host whose liveliness token was seen to go is not kept alive
+//! through a bucket's election on what was known before.
 
 use super::Host;
 use std::collections::BTreeMap;
@@ -17,6 +19,11 @@ use std::time::{Duration, Instant};
 /// The lease key of a host's presence.
 pub(super) fn presence_key(host: &str) -> String {
     format!("host.{host}")
+}
+
+/// Whether a lease key is a host's presence rather than a site's.
+pub(super) fn is_presence_key(key: &str) -> bool {
+    key.starts_with("host.")
 }
 
 /// The live hosts as this host last read them, with when it first saw each alive.
@@ -91,8 +98,15 @@ pub(super) async fn keep_presence(host: Arc<Host>) {
     let every = host.leases.ttl() / 3;
     let mut stopping = host.shared.stopping.subscribe();
     let mut complained = false;
+    // Until then, a host found missing is kept alive all the same: after the bucket did not
+    // answer (a leader election, longer than a lease), every presence may have lapsed, and a
+    // live host gets a lease's time to claim its own again. Without this, the hosts' ranks
+    // in a site's order are wrong right after an election, and not the standby but any host
+    // may claim a free site.
+    let mut unsure_until = Instant::now();
     loop {
-        if let Err(e) = hold(&host, &key).await {
+        if let Err(e) = sitelog::within(every, hold(&host, &key)).await {
+            unsure_until = Instant::now() + host.leases.ttl();
             if !complained {
                 tracing::warn!("cluster: this host's presence: {e}");
             }
@@ -105,14 +119,22 @@ pub(super) async fn keep_presence(host: Arc<Host>) {
             if *other == host.cluster.host {
                 continue;
             }
-            // Only a lease read and found missing says a host is gone: a read that fails
-            // (a loaded or electing bucket) keeps what was known.
+            // Only a lease read and found missing, or a Zenoh token seen to go, says a host is
+            // gone: a read that fails (a loaded or electing bucket) keeps what was known.
             let known = host.presence.is_alive(other);
-            match host.leases.holder(&presence_key(other)).await {
+            let other_key = presence_key(other);
+            match sitelog::within(every, host.leases.holder(&other_key)).await {
                 Ok(Some(_)) => alive.push(other.clone()),
+                Ok(None) if known && Instant::now() < unsure_until && !host.tokens.gone(other) => {
+                    alive.push(other.clone())
+                }
                 Ok(None) => {}
-                Err(_) if known => alive.push(other.clone()),
-                Err(_) => {}
+                Err(_) => {
+                    unsure_until = Instant::now() + host.leases.ttl();
+                    if known && !host.tokens.gone(other) {
+                        alive.push(other.clone());
+                    }
+                }
             }
         }
         host.presence.set(&alive);
@@ -130,14 +152,16 @@ async fn hold(host: &Host, key: &str) -> Result<(), sitelog::LogError> {
     let held = host.held.lock().expect("leases lock").get(key).cloned();
     match held {
         Some(mut lease) => {
-            if !host.leases.renew(&mut lease).await? {
-                host.held.lock().expect("leases lock").remove(key);
-                return Ok(());
-            }
-            host.held
-                .lock()
-                .expect("leases lock")
-                .insert(key.to_owned(), lease);
+            let lease = match host.leases.renew(&mut lease).await? {
+                true => Some(lease),
+                // Lapsed (the bucket electing a leader), or renewed unheard: claimed again.
+                false => host.leases.claim_again(key, &host.cluster.host).await?,
+            };
+            let mut held = host.held.lock().expect("leases lock");
+            match lease {
+                Some(lease) => held.insert(key.to_owned(), lease),
+                None => held.remove(key),
+            };
         }
         None => {
             if let Some(lease) = host.leases.claim(key, &host.cluster.host).await? {

@@ -3,6 +3,7 @@
 //! them after the counters of [`super::Metrics`].
 
 use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
 use prometheus_client::registry::{Registry, Unit};
@@ -19,6 +20,9 @@ pub struct Instruments {
     pub takeover: Histogram,
     /// Cluster mode: sites this host owns now.
     pub sites_owned: Gauge,
+    /// Cluster mode: of each owned site's log, the copies current (the leader and the
+    /// followers caught up), labelled `site`.
+    pub log_copies_current: Family<Vec<(String, String)>, Gauge>,
     /// Cluster mode: sites this host took over.
     pub sites_adopted: Counter,
     /// Cluster mode: sites this host dropped (lease lost, append fenced, handed back).
@@ -26,6 +30,12 @@ pub struct Instruments {
     /// Cluster mode: sites this host handed back to their home host (a live host before it
     /// in the site's order).
     pub sites_handed_back: Counter,
+    /// Cluster mode: leases of sites this host owned, claimed again after they lapsed while
+    /// the leases' bucket did not answer (the map kept).
+    pub leases_reclaimed: Counter,
+    /// Cluster mode: leases taken over from a holder whose process was gone (its Zenoh token
+    /// went), before they lapsed.
+    pub leases_taken_from_gone: Counter,
     /// Cluster mode: appends refused because another writer appended to the site's log.
     pub appends_fenced: Counter,
     /// Cluster mode: records of sites another host owns, read into this host's store as
@@ -55,9 +65,12 @@ impl Default for Instruments {
             // 50 ms to 100 s: a takeover reads a site's whole log when it has no snapshot.
             takeover: Histogram::new(exponential_buckets(0.05, 2.0, 12)),
             sites_owned: Gauge::default(),
+            log_copies_current: Family::default(),
             sites_adopted: Counter::default(),
             sites_dropped: Counter::default(),
             sites_handed_back: Counter::default(),
+            leases_reclaimed: Counter::default(),
+            leases_taken_from_gone: Counter::default(),
             appends_fenced: Counter::default(),
             records_followed: Counter::default(),
             records_taken_over: Counter::default(),
@@ -94,6 +107,11 @@ impl Default for Instruments {
             "Cluster mode: sites this host owns.",
             i.sites_owned.clone(),
         );
+        registry.register(
+            "levelmap_site_log_copies_current",
+            "Cluster mode: of each owned site's log, the copies current (its leader and the followers caught up); fewer than the replicas: a NATS server down, behind, or out of disk.",
+            i.log_copies_current.clone(),
+        );
         let counted = [
             (
                 "levelmap_sites_adopted",
@@ -109,6 +127,16 @@ impl Default for Instruments {
                 "levelmap_sites_handed_back",
                 "Cluster mode: sites this host handed back to their home host, before it in the site's order.",
                 &i.sites_handed_back,
+            ),
+            (
+                "levelmap_leases_reclaimed",
+                "Cluster mode: leases of sites this host owned, claimed again after they lapsed while the leases' bucket did not answer (the map kept).",
+                &i.leases_reclaimed,
+            ),
+            (
+                "levelmap_leases_taken_from_gone",
+                "Cluster mode: leases taken over from a holder whose process was gone (its Zenoh token went), before they lapsed.",
+                &i.leases_taken_from_gone,
             ),
             (
                 "levelmap_log_appends_fenced",
@@ -179,6 +207,8 @@ mod tests {
         Instruments::time(&i.log_append, Duration::from_micros(1_500));
         i.sites_adopted.inc();
         i.sites_owned.set(2);
+        let park = vec![("site".to_owned(), "park".to_owned())];
+        i.log_copies_current.get_or_create(&park).set(2);
         let mut text = String::new();
         i.encode(&mut text);
         let line = |prefix: &str| {
@@ -197,6 +227,10 @@ mod tests {
             "levelmap_sites_adopted_total 1"
         );
         assert_eq!(line("levelmap_sites_owned"), "levelmap_sites_owned 2");
+        assert_eq!(
+            line("levelmap_site_log_copies_current{"),
+            "levelmap_site_log_copies_current{site=\"park\"} 2"
+        );
         assert!(
             !text.contains("# EOF"),
             "appended to the other metrics: no EOF"

@@ -308,3 +308,19 @@ fn a_bad_tls_setting_is_one_line_naming_the_key_and_file() {
         r#"[zenoh] mode "routr": one of "router", "peer", "client""#
     );
 }
+
+/// A SIGTERM sent after the call, before the future is awaited (a service still starting),
+/// is caught: the process is not killed, and the wait ends.
+#[tokio::test]
+async fn a_stop_signal_sent_before_the_wait_is_caught() {
+    let stop = shutdown_signal();
+    let me = std::process::id().to_string();
+    let sent = std::process::Command::new("kill")
+        .args(["-TERM", &me])
+        .status()
+        .expect("kill runs");
+    assert!(sent.success());
+    tokio::time::timeout(std::time::Duration::from_secs(5), stop)
+        .await
+        .expect("the SIGTERM ended the wait");
+}

@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 mod servers;
+pub mod tmpfs;
 
 pub use servers::*;
 
@@ -37,6 +38,19 @@ impl Cluster {
             .await
             .expect("connect to the cluster")
     }
+}
+
+/// Site `site`'s stream as its leader reports it: its leader, and its followers as (name,
+/// current).
+pub async fn stream_replicas(js: &jetstream::Context, site: &str) -> (String, Vec<(String, bool)>) {
+    let mut stream = js
+        .get_stream(format!("LEVELMAP_SITE_{site}"))
+        .await
+        .expect("the stream");
+    let info = stream.info().await.expect("stream info");
+    let cluster = info.cluster.clone().expect("a clustered stream");
+    let followers = cluster.replicas.iter().map(|p| (p.name.clone(), p.current));
+    (cluster.leader.expect("a leader"), followers.collect())
 }
 
 /// The site's log opened once the cluster has elected its JetStream meta leader.

@@ -4,7 +4,7 @@
 
 #![allow(dead_code)]
 
-use sitelog::local::LocalCluster;
+use sitelog::local::{LocalCluster, Placement};
 use std::ops::{Deref, DerefMut};
 use std::path::{Path, PathBuf};
 
@@ -31,9 +31,21 @@ pub struct Cluster {
 impl Cluster {
     /// `name` keeps each test's servers in a folder of their own.
     pub fn start(name: &str, secured: Option<&Path>) -> Cluster {
-        let dir = TempDir::new(&format!("sitelog-{name}"));
+        Cluster::start_in(TempDir::new(&format!("sitelog-{name}")), secured)
+    }
+
+    /// In `dir` (each server's store in `dir/<name>`, which may be mounted first).
+    pub fn start_in(dir: TempDir, secured: Option<&Path>) -> Cluster {
         let servers =
             LocalCluster::start(&nats_server(), dir.path(), secured).expect("start nats-servers");
+        Cluster { servers, _dir: dir }
+    }
+
+    /// Unsecured, each server where `places` puts it (the drills' hosts' namespaces).
+    pub fn start_placed(name: &str, places: &[Placement; 3]) -> Cluster {
+        let dir = TempDir::new(&format!("sitelog-{name}"));
+        let servers = LocalCluster::start_placed(&nats_server(), dir.path(), None, places)
+            .expect("start nats-servers");
         Cluster { servers, _dir: dir }
     }
 
