@@ -49,6 +49,36 @@ enum Claim {
     From(String),
 }
 
+/// When a host's turn comes to claim a free site.
+struct Turn {
+    /// Its place in the site's order over the live hosts, the last holder left out.
+    rank: u32,
+    /// Each host before it in that order gets this long to claim first.
+    stagger: Duration,
+    /// The last holder's process is gone (its Zenoh token went): it claims nothing again.
+    holder_gone: bool,
+    /// No claim before this (a hand-back's hold-off).
+    claim_from: Instant,
+    /// A lease's time after the lease last could not be read (an election): until then the
+    /// holder, if alive, may claim its lapsed lease again first.
+    unread_hold_off: Instant,
+}
+
+impl Turn {
+    /// For a site free since `free_since`. The standby (rank 0) need not wait for a gone
+    /// holder; every other host still holds off, for the standby, whose reads of the bucket may
+    /// come back later than its own after an election. The stagger counts from the end of a
+    /// hold-off: hosts whose hold-offs end apart still claim in the site's order.
+    fn claim_at(&self, free_since: Instant) -> Instant {
+        let hold_off = if self.holder_gone && self.rank == 0 {
+            self.claim_from
+        } else {
+            self.claim_from.max(self.unread_hold_off)
+        };
+        free_since.max(hold_off) + self.stagger * self.rank
+    }
+}
+
 /// How a host's ownership of a site ended.
 enum Owned {
     /// The mapper is stopping.
@@ -100,29 +130,27 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
                     .filter(|h| last_holder.as_deref() != Some(**h) || **h == this)
                     .position(|h| *h == this)
                     .unwrap_or(0) as u32;
-                let stagger = Duration::from_millis(host.cluster.claim_stagger_ms) * rank;
-                // A holder whose process is gone (its Zenoh token went) claims nothing again.
                 let holder_gone = last_holder
                     .as_deref()
                     .is_some_and(|h| h != this && host.tokens.gone(h));
-                let hold_off = if holder_gone {
-                    if unread_hold_off > Instant::now() {
-                        tracing::info!(
-                            site,
-                            holder = last_holder.as_deref(),
-                            "cluster: the lease lapsed and its holder's process is gone (its \
-                             Zenoh token went): not waiting for it to claim again"
-                        );
-                        unread_hold_off = Instant::now();
-                    }
-                    claim_from
-                } else {
-                    claim_from.max(unread_hold_off)
+                if holder_gone && rank == 0 && unread_hold_off > Instant::now() {
+                    tracing::info!(
+                        site,
+                        holder = last_holder.as_deref(),
+                        "cluster: the lease lapsed and its holder's process is gone (its \
+                         Zenoh token went): not waiting for it to claim again"
+                    );
+                    unread_hold_off = Instant::now();
+                }
+                let turn = Turn {
+                    rank,
+                    stagger: Duration::from_millis(host.cluster.claim_stagger_ms),
+                    holder_gone,
+                    claim_from,
+                    unread_hold_off,
                 };
-                // The stagger counts from the end of a hold-off too: hosts whose hold-offs
-                // end apart still claim in the site's order.
                 let since = *free_since.get_or_insert_with(Instant::now);
-                (Instant::now() >= since.max(hold_off) + stagger).then(|| {
+                (Instant::now() >= turn.claim_at(since)).then(|| {
                     free_since = None;
                     Claim::Free
                 })
@@ -597,4 +625,43 @@ async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
         .await
         .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
     Ok(records)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn turn(rank: u32, holder_gone: bool, now: Instant) -> Turn {
+        Turn {
+            rank,
+            stagger: Duration::from_millis(500),
+            holder_gone,
+            claim_from: now,
+            unread_hold_off: now + Duration::from_secs(3),
+        }
+    }
+
+    #[test]
+    fn after_an_election_the_standby_alone_skips_the_wait_for_a_gone_holder() {
+        let now = Instant::now();
+        assert_eq!(turn(0, true, now).claim_at(now), now);
+        // CI saw h2 read the free lease 1.2 s before the standby: it must still wait.
+        let second = turn(1, true, now).claim_at(now);
+        assert_eq!(second, now + Duration::from_millis(3500));
+    }
+
+    #[test]
+    fn a_live_holder_gets_its_lease_time_and_the_order_holds_after_it() {
+        let now = Instant::now();
+        let standby = turn(0, false, now).claim_at(now);
+        let second = turn(1, false, now).claim_at(now);
+        assert_eq!(standby, now + Duration::from_secs(3));
+        assert_eq!(second - standby, Duration::from_millis(500));
+        // Without a hold-off the stagger counts from when the site was seen free.
+        let free = Turn {
+            unread_hold_off: now,
+            ..turn(2, false, now)
+        };
+        assert_eq!(free.claim_at(now), now + Duration::from_secs(1));
+    }
 }
