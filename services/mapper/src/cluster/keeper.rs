@@ -29,7 +29,7 @@ const FOLLOW_BOUND: Duration = Duration::from_millis(500);
 const FOLLOW_MAX: usize = 4 * CATCH_UP_BATCH;
 
 /// The pause before a failed takeover is tried again; doubled after each failure up to
-/// `MAX_TAKEOVER_RETRY`.
+/// `MAX_TAKEOVER_RETRY`, but for an open of the log given up after its bound.
 const FIRST_TAKEOVER_RETRY: Duration = Duration::from_millis(250);
 const MAX_TAKEOVER_RETRY: Duration = Duration::from_secs(5);
 
@@ -40,6 +40,11 @@ const HAND_BACK_HOLD_OFF: Duration = Duration::from_secs(3);
 /// A site is handed back at most this often: a home host that is alive but does not claim
 /// it does not make the site bounce.
 const HAND_BACK_EVERY: Duration = Duration::from_secs(60);
+
+/// A takeover's open of the site's log, given up after its bound.
+#[derive(Debug, thiserror::Error)]
+#[error("the site's log did not open within a third of the lease's time")]
+struct LogNotOpened;
 
 /// How a host claims a site.
 enum Claim {
@@ -281,7 +286,12 @@ async fn own(
                             host.clone(),
                             site.clone(),
                         )));
-                        retry = (retry * 2).min(MAX_TAKEOVER_RETRY);
+                        // An open given up has waited its bound already: no longer pause.
+                        retry = if e.is::<LogNotOpened>() {
+                            FIRST_TAKEOVER_RETRY
+                        } else {
+                            (retry * 2).min(MAX_TAKEOVER_RETRY)
+                        };
                     }
                     Err(e) => tracing::error!(site, "cluster: takeover failed: {e}"),
                 }
@@ -559,12 +569,13 @@ async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
         deadline: host.leases.ttl(),
         ..RetryPolicy::default()
     };
-    // While a NATS server is lost the stream's info may not come for the client's 10 s
-    // request timeout: give up after a lease's time and try again (the keeper retries).
+    // A request sent while the stream elects a leader is never answered: it would wait the
+    // client's 10 s. Given up after a third of the lease (as the lease reads) and sent again,
+    // so that the takeover follows the election's end within about that.
     let open = SiteLog::open(host.js.clone(), &site, host.cluster.replicas, retry);
-    let mut log = tokio::time::timeout(host.leases.ttl(), open)
+    let mut log = tokio::time::timeout(host.leases.ttl() / 3, open)
         .await
-        .map_err(|_| anyhow::anyhow!("the site's log did not open within the lease's time"))??;
+        .map_err(|_| LogNotOpened)??;
     let records = catch_up(&host, &site, &mut log, usize::MAX).await?;
     // The newest shared snapshot, if this host's store has none as new: the restore then
     // replays only the nodes after it. Never waited on for longer than a lease.
