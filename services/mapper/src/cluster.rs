@@ -21,6 +21,7 @@ pub mod record;
 mod copies;
 mod keeper;
 mod presence;
+mod replay;
 mod shelf;
 mod tokens;
 

@@ -3,30 +3,18 @@
 //! takes the site over, renews the lease, and drops the site when the lease is lost.
 
 use super::Host;
-use super::record::{LogRecord, SiteRecord};
-use crate::store::{SiteChange, Store};
+use super::replay::{LogNotOpened, follow_round, take_over, take_over_after};
 use crate::worker::Work;
-use anyhow::{Context, Result, bail};
-use sitelog::{Lease, RetryPolicy, SiteLog};
+use anyhow::Result;
+use sitelog::{Lease, SiteLog};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// How often a host looks whether a site it does not own is free.
 const POLL: Duration = Duration::from_millis(250);
 
-/// Records read into the store per transaction while catching up.
-const CATCH_UP_BATCH: usize = 256;
-
 /// How often a site's standby reads what was appended to the site's log since.
 const FOLLOW_EVERY: Duration = Duration::from_secs(1);
-
-/// A standby's round of following gives up after this (and opens the log again next
-/// round): a round takes milliseconds, and the keeper claims nothing while it runs.
-const FOLLOW_BOUND: Duration = Duration::from_millis(500);
-
-/// Records a standby reads in one round at most: a long log is read over several rounds, and
-/// the keeper looks at the lease between them.
-const FOLLOW_MAX: usize = 4 * CATCH_UP_BATCH;
 
 /// The pause before a failed takeover is tried again; doubled after each failure up to
 /// `MAX_TAKEOVER_RETRY`, but for an open of the log given up after its bound.
@@ -40,11 +28,6 @@ const HAND_BACK_HOLD_OFF: Duration = Duration::from_secs(3);
 /// A site is handed back at most this often: a home host that is alive but does not claim
 /// it does not make the site bounce.
 const HAND_BACK_EVERY: Duration = Duration::from_secs(60);
-
-/// A takeover's open of the site's log, given up after its bound.
-#[derive(Debug, thiserror::Error)]
-#[error("the site's log did not open within a third of the lease's time")]
-struct LogNotOpened;
 
 /// How a host claims a site.
 enum Claim {
@@ -426,216 +409,6 @@ async fn drop_site(host: &Host, site: &str) {
     {
         let _ = dropped.await;
     }
-}
-
-/// [`take_over`] after `pause`.
-async fn take_over_after(pause: Duration, host: Arc<Host>, site: String) -> Result<usize> {
-    tokio::time::sleep(pause).await;
-    take_over(host, site).await
-}
-
-/// One round of [`follow`], bounded by [`FOLLOW_BOUND`] so that a stream without a leader
-/// does not keep the standby from claiming the site when its lease lapses. A failure is
-/// logged once until a round succeeds, and the log opened again next round.
-async fn follow_round(
-    host: &Arc<Host>,
-    site: &str,
-    follower: &mut Option<SiteLog>,
-    failed: &mut bool,
-) {
-    let followed = tokio::time::timeout(FOLLOW_BOUND, follow(host, site, follower))
-        .await
-        .unwrap_or_else(|_| Err(anyhow::anyhow!("no answer in {FOLLOW_BOUND:?}")));
-    match followed {
-        Ok(()) => *failed = false,
-        Err(e) => {
-            if !*failed {
-                tracing::warn!(site, "cluster: following the site's log: {e:#}");
-            }
-            *failed = true;
-            *follower = None;
-        }
-    }
-}
-
-/// As the site's standby (the next host in its order): reads what was appended to its log
-/// since into this host's store, so that a takeover reads a short tail only.
-async fn follow(host: &Arc<Host>, site: &str, follower: &mut Option<SiteLog>) -> Result<()> {
-    if follower.is_none() {
-        let retry = RetryPolicy::default();
-        *follower = Some(SiteLog::open(host.js.clone(), site, host.cluster.replicas, retry).await?);
-    }
-    let log = follower.as_mut().expect("opened above");
-    let read = catch_up(host, site, log, FOLLOW_MAX).await?;
-    host.shared.instruments.records_followed.inc_by(read as u64);
-    if let Err(e) = super::shelf::take_in(host, site).await {
-        // The log is followed all the same; the snapshot is looked at again next round.
-        tracing::debug!(site, "cluster: the shared snapshot not taken in: {e:#}");
-    }
-    Ok(())
-}
-
-/// Reads `site`'s log after what this host's store holds into the store, at most `max`
-/// records, in transactions of [`CATCH_UP_BATCH`]; how many it read.
-async fn catch_up(host: &Arc<Host>, site: &str, log: &mut SiteLog, max: usize) -> Result<usize> {
-    let store = host.store.clone();
-    let name = site.to_owned();
-    let have = tokio::task::spawn_blocking(move || store.site_log_sequence(&name)).await??;
-    let last = log.stream_last_sequence().await?;
-    if last < have {
-        bail!(
-            "its log ends at {last} but this host's store holds records up to {have}: the log \
-             was replaced; move this host's store aside and start it again"
-        );
-    }
-    let (mut next, mut read) = (have + 1, 0);
-    while read < max {
-        let entries = log.read_some(next, CATCH_UP_BATCH.min(max - read)).await?;
-        let Some(newest) = entries.last() else { break };
-        next = newest.sequence + 1;
-        read += entries.len();
-        let records = read_records(host, site, &entries).await?;
-        let (store, name) = (host.store.clone(), site.to_owned());
-        tokio::task::spawn_blocking(move || commit_records(&store, &name, records)).await??;
-    }
-    Ok(read)
-}
-
-/// A record of the log as this host stores it.
-enum Read {
-    /// A batch, at its sequence, with its passes' GPS fixes.
-    Batch(u64, SiteRecord, Vec<slam::GpsEdge>),
-    /// A change, at its sequence, with an added version's file (`None`: deleted since).
-    Change(u64, SiteChange, Option<Vec<u8>>),
-}
-
-/// The log's `entries` of `site` decoded, with the files of the versions they add.
-async fn read_records(host: &Host, site: &str, entries: &[sitelog::Entry]) -> Result<Vec<Read>> {
-    let mut records = Vec::with_capacity(entries.len());
-    for e in entries {
-        let what = || format!("record {} ({})", e.sequence, e.id);
-        records.push(match LogRecord::decode(&e.payload).with_context(what)? {
-            LogRecord::Batch(record) => {
-                let fixes = record.pass_fixes().with_context(what)?;
-                Read::Batch(e.sequence, record, fixes)
-            }
-            LogRecord::Change(change) => {
-                let file = match &change {
-                    SiteChange::VersionAdded {
-                        number, host: by, ..
-                    } => host
-                        .version_files
-                        .get(site, *number, by)
-                        .await
-                        .with_context(what)?,
-                    _ => None,
-                };
-                Read::Change(e.sequence, change, file)
-            }
-        });
-    }
-    Ok(records)
-}
-
-/// Stores the log's `records` of `site` as the worker would have: each run of batches in one
-/// commit, each change in its order.
-fn commit_records(store: &Store, site: &str, records: Vec<Read>) -> Result<()> {
-    let mut batches = Vec::new();
-    for record in &records {
-        match record {
-            Read::Batch(sequence, record, fixes) => {
-                let mut batch = record.as_batch(site, *sequence);
-                batch.pass_fixes = fixes;
-                batches.push(batch);
-            }
-            Read::Change(sequence, change, file) => {
-                if !batches.is_empty() {
-                    store.commit(&std::mem::take(&mut batches))?;
-                }
-                store.apply_site_change(site, *sequence, change, file.clone())?;
-            }
-        }
-    }
-    store.commit(&batches)?;
-    Ok(())
-}
-
-/// Takes `site` over: its log after what this host's store holds read into the store, its
-/// map restored, handed to the worker. The records read.
-async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
-    // An append that outlasts the lease is no use: the site is another host's by then. The
-    // worker, which appends for every site of this host, waits no longer than that.
-    let retry = RetryPolicy {
-        deadline: host.leases.ttl(),
-        ..RetryPolicy::default()
-    };
-    // A request sent while the stream elects a leader is never answered: it would wait the
-    // client's 10 s. Given up after a third of the lease (as the lease reads) and sent again,
-    // so that the takeover follows the election's end within about that.
-    let open = SiteLog::open(host.js.clone(), &site, host.cluster.replicas, retry);
-    let mut log = tokio::time::timeout(host.leases.ttl() / 3, open)
-        .await
-        .map_err(|_| LogNotOpened)??;
-    let records = catch_up(&host, &site, &mut log, usize::MAX).await?;
-    // The newest shared snapshot, if this host's store has none as new: the restore then
-    // replays only the nodes after it. Never waited on for longer than a lease.
-    let taken_in = tokio::time::timeout(host.leases.ttl(), super::shelf::take_in(&host, &site));
-    match taken_in.await {
-        Ok(Ok(())) => {}
-        Ok(Err(e)) => tracing::warn!(site, "cluster: the shared snapshot not taken in: {e:#}"),
-        Err(_) => tracing::warn!(site, "cluster: the shared snapshot not taken in: timed out"),
-    }
-    host.shared
-        .instruments
-        .records_taken_over
-        .inc_by(records as u64);
-    let (store, shared, config) = (host.store.clone(), host.shared.clone(), host.config.clone());
-    let name = site.clone();
-    let (map, covered) = tokio::task::spawn_blocking(move || {
-        crate::store::restore::restore_one(&config, &store, &shared, &name).inspect_err(|e| {
-            shared
-                .quarantined
-                .write()
-                .expect("quarantine lock")
-                .insert(name.clone(), format!("{e:#}"));
-        })
-    })
-    .await??;
-    // Its robots' modes as its log left them, with their versions' maps (built here, off
-    // the worker), handed over before its nodes.
-    let (store, maps, name) = (host.store.clone(), host.maps.clone(), site.clone());
-    let (modes, maps) = tokio::task::spawn_blocking(move || -> Result<_> {
-        let stored = store.modes()?.into_iter().find(|(fleet, _)| *fleet == name);
-        let stored = stored.map(|(_, modes)| modes).unwrap_or_default();
-        Ok(crate::localization::with_maps(
-            &store, &maps, &name, &stored,
-        ))
-    })
-    .await??;
-    let (reply, modes_set) = tokio::sync::oneshot::channel();
-    let set = Work::SetModes {
-        fleet: site.clone(),
-        modes,
-        maps,
-        reply,
-    };
-    let (reply, adopted) = tokio::sync::oneshot::channel();
-    let adopt = Work::Adopt {
-        site,
-        map: Box::new(map),
-        covered,
-        log: Box::new(log),
-        reply,
-    };
-    let work = host.work.clone();
-    tokio::task::spawn_blocking(move || work.send(set).and_then(|()| work.send(adopt)))
-        .await?
-        .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
-    let _ = modes_set.await;
-    adopted
-        .await
-        .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
-    Ok(records)
 }
 
 #[cfg(test)]
