@@ -146,7 +146,7 @@ fn verify_store(config: &mapper::MapperConfig, json: bool) -> Result<()> {
     anyhow::ensure!(path.exists(), "{}: no store there", path.display());
     let store = mapper::Store::open(path)
         .map_err(|e| anyhow::anyhow!("{}: cannot open the store: {e}", path.display()))?;
-    let check = mapper::store::restore::verify_store(config, &store)?;
+    let check = mapper::restore::verify_store(config, &store)?;
     if json {
         println!("{}", serde_json::to_string_pretty(&check)?);
     } else {

@@ -21,6 +21,18 @@ pub struct AckOf<'a> {
     pub resend_from: Option<u64>,
 }
 
+/// What the worker sends out as it goes: acks, localizations, corrected poses. The bus
+/// ([`Bus`]) puts them on Zenoh; a test keeps them.
+pub trait Outbound: Send {
+    /// Tells a robot the highest node of its chain that is mapped and stored.
+    fn ack(&self, metrics: &Metrics, of: &AckOf);
+    /// A localizing robot's node on its map version, to the robot.
+    fn localization(&self, metrics: &Metrics, message: &wire::Localized);
+    /// Every robot's last node, corrected, with where the solve was taken (`solved_from`:
+    /// each robot's last node_seq then).
+    fn publish_poses(&self, map: &FleetMap, solved_from: &[(String, u64)]);
+}
+
 /// The mapper's side of the bus.
 pub struct Bus {
     session: zenoh::Session,
@@ -31,9 +43,10 @@ impl Bus {
     pub fn new(session: zenoh::Session) -> Bus {
         Bus { session }
     }
+}
 
-    /// Tells a robot the highest node of its chain that is mapped and stored.
-    pub fn ack(&self, metrics: &Metrics, of: &AckOf) {
+impl Outbound for Bus {
+    fn ack(&self, metrics: &Metrics, of: &AckOf) {
         let ack = v1::Ack {
             header: Some(v1::Header::new(of.fleet, of.robot, 0, now_ns(), now_ns())),
             acked_node_seq: of.acked,
@@ -50,8 +63,7 @@ impl Bus {
         }
     }
 
-    /// A localizing robot's node on its map version, to the robot.
-    pub fn localization(&self, metrics: &Metrics, message: &wire::Localized) {
+    fn localization(&self, metrics: &Metrics, message: &wire::Localized) {
         let Ok(key) = wire::localization_key(&message.fleet, &message.robot) else {
             return;
         };
@@ -62,9 +74,8 @@ impl Bus {
         }
     }
 
-    /// Every robot's last node, corrected, on `levelmap/{fleet}/map/poses`, with where the
-    /// solve was taken (`solved_from`: each robot's last node_seq then).
-    pub fn publish_poses(&self, map: &FleetMap, solved_from: &[(String, u64)]) {
+    /// On `levelmap/{fleet}/map/poses`.
+    fn publish_poses(&self, map: &FleetMap, solved_from: &[(String, u64)]) {
         let poses: Vec<MapPose> = map
             .robots()
             .iter()

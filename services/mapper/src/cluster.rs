@@ -8,32 +8,38 @@
 //! (`cluster/tokens.rs`: its process is gone); then it takes the site over: the log after what this host's store holds is read
 //! into the store (the store is the host's cache of the logs), the newest shared snapshot
 //! taken in (`cluster/shelf.rs`), the map restored from them as a start restores a fleet,
-//! and handed to the worker ([`Work::Adopt`]), which from then on appends each of the
-//! site's batches to the log before its commit and ack; the keeper then declares the site's
-//! feeds (`crate::bus::feeds`), held while it owns the site. The keeper renews the
+//! the log handed to the host's journal ([`LogJournal`]) and the map to the worker
+//! ([`Work::Adopt`]), which from then on journals each of the site's entries to the log
+//! before its commit and ack; the keeper then declares the site's feeds
+//! (`crate::bus::feeds`), held while it owns the site. The keeper renews the
 //! lease every third of its time to live; a lease claimed by another host (or not renewed
 //! for the lease and `renewal_grace_ms`) drops the site at once ([`Work::Drop`]), as does a
-//! fenced append in the worker. A lease that lapsed while the bucket did not answer, and
+//! fenced append in the journal. A lease that lapsed while the bucket did not answer, and
 //! that nobody claimed, is claimed again and the site kept.
 
 pub mod record;
 
+mod blobs;
 mod copies;
+mod journal;
 mod keeper;
+mod ownership;
 mod presence;
 mod replay;
 mod shelf;
 mod tokens;
 
+pub use crate::config::ClusterConfig;
+pub use blobs::ClusterBlobs;
+pub use journal::{LogInbox, LogJournal};
 pub use shelf::{Shelf, Shelved, Shelving, shelf};
 
 use crate::config::MapperConfig;
+use crate::inbox::Work;
 use crate::store::Store;
 use crate::views::Shared;
-use crate::worker::{Fenced, Work};
-use anyhow::{Context, Result, bail};
-use serde::{Deserialize, Serialize};
-use sitelog::{CloudRetention, Clouds, Lease, Leases, NatsAccess, Snapshots, VersionFiles};
+use anyhow::{Context, Result};
+use sitelog::{CloudRetention, Clouds, Lease, Leases, Snapshots, VersionFiles};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
@@ -47,88 +53,6 @@ pub const SNAPSHOT_EVERY_NODES: u64 = 100;
 pub const LEASES_BUCKET: &str = "levelmap_site_leases";
 /// The object store of the sites' map version files (`sitelog::VersionFiles`).
 pub const VERSION_FILES_BUCKET: &str = "levelmap_site_versions";
-
-/// A mapper host's place in the cluster (`[cluster]`); unset: single-machine mode.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct ClusterConfig {
-    /// This host's name: in the leases, in the site order, the common name of its NATS
-    /// certificate.
-    pub host: String,
-    /// Every mapper host that may own the sites (`fleets`), this one among them: the
-    /// rendezvous order of each site is taken over them.
-    pub hosts: Vec<String>,
-    /// The NATS servers and this host's credentials (`[cluster.nats]`).
-    pub nats: NatsAccess,
-    /// Copies of each site's log and of the leases: 3, so that one NATS server may be lost.
-    pub replicas: usize,
-    /// A lease lapses this long after its last renewal (ms): the longest a dead host keeps
-    /// its sites. Renewed every third of it.
-    pub lease_ttl_ms: u64,
-    /// A host whose renewals go unanswered keeps its sites this long past the lease's time
-    /// (ms) before it drops them: the leases' bucket electing a leader (4–9 s) does not
-    /// drop every site, and a lease that lapsed meanwhile is claimed again, its map kept.
-    /// The site's log is what keeps two writers apart (its appends are fenced), so this
-    /// costs no acked node; a host cut from NATS acks nothing meanwhile (its appends fail).
-    pub renewal_grace_ms: u64,
-    /// A free site is claimed by the host of rank r in its order after r times this (ms):
-    /// the first host in the order wins unless it is down.
-    pub claim_stagger_ms: u64,
-    /// A host holding a site hands it back to a host before it in the site's order once
-    /// that one has been alive this long (ms): a host started, or back, gets its sites
-    /// after it has shown it stays, not at every blink.
-    pub hand_back_after_ms: u64,
-}
-
-impl Default for ClusterConfig {
-    fn default() -> Self {
-        ClusterConfig {
-            host: String::new(),
-            hosts: Vec::new(),
-            nats: NatsAccess::default(),
-            replicas: 3,
-            lease_ttl_ms: 3000,
-            renewal_grace_ms: 10_000,
-            claim_stagger_ms: 500,
-            hand_back_after_ms: 10_000,
-        }
-    }
-}
-
-impl ClusterConfig {
-    /// Refuses a configuration that cannot work, saying why.
-    pub fn check(&self) -> Result<()> {
-        if self.host.is_empty() {
-            bail!("[cluster] host: name this mapper host");
-        }
-        if !self.hosts.contains(&self.host) {
-            bail!(
-                "[cluster] hosts {:?} must list this host, {:?}",
-                self.hosts,
-                self.host
-            );
-        }
-        if self.nats.servers.is_empty() {
-            bail!("[cluster.nats] servers: list the NATS servers' URLs");
-        }
-        if self.lease_ttl_ms < 1000 {
-            bail!("[cluster] lease_ttl_ms: at least 1000 (a renewal every third of it)");
-        }
-        if self.replicas == 0 {
-            bail!("[cluster] replicas: at least 1 (3 in production)");
-        }
-        Ok(())
-    }
-
-    fn ttl(&self) -> Duration {
-        Duration::from_millis(self.lease_ttl_ms)
-    }
-
-    /// How long a host keeps a site without a renewal answered: the lease and the grace.
-    fn unrenewed_limit(&self) -> Duration {
-        Duration::from_millis(self.lease_ttl_ms + self.renewal_grace_ms)
-    }
-}
 
 /// The cluster side of a running mapper: the keepers and the leases they hold.
 pub struct Cluster {
@@ -156,7 +80,8 @@ struct Host {
     js: sitelog::JetStream,
     leases: Arc<Leases>,
     held: Held,
-    fenced: Fenced,
+    /// Where a site's log goes to the journal on a takeover.
+    logs: journal::LogInbox,
     store: Arc<Store>,
     shared: Arc<Shared>,
     work: mpsc::SyncSender<Work>,
@@ -185,6 +110,19 @@ pub fn cloud_retention(clouds: &crate::config::CloudsConfig) -> CloudRetention {
     }
 }
 
+/// The journal of a host, and where its keepers hand it the sites' logs: appends on
+/// `runtime`, snapshots and clouds shared through `shelf`.
+pub fn journal(
+    config: &MapperConfig,
+    store: Arc<Store>,
+    shared: Arc<Shared>,
+    shelf: Shelf,
+) -> (LogJournal, LogInbox) {
+    let runtime = tokio::runtime::Handle::current();
+    let mapping_version = crate::mapping::mapping_version(config).to_string();
+    LogJournal::new(runtime, store, shared, shelf, mapping_version)
+}
+
 /// Connects to NATS (retried in the background until the servers answer).
 pub async fn connect(cluster: &ClusterConfig) -> Result<sitelog::JetStream> {
     cluster.check()?;
@@ -196,8 +134,8 @@ pub async fn connect(cluster: &ClusterConfig) -> Result<sitelog::JetStream> {
 pub struct WorkerEnds {
     /// The worker's queue (takeovers, drops).
     pub work: mpsc::SyncSender<Work>,
-    /// The sites the worker dropped on a fenced append.
-    pub fenced: Fenced,
+    /// Where a site's log goes to the worker's journal.
+    pub logs: LogInbox,
     /// The snapshots the worker stored, to share.
     pub shelving: Shelving,
     /// Declares a site's feeds, which go to the worker.
@@ -219,7 +157,7 @@ impl Cluster {
     ) -> Result<Cluster> {
         let WorkerEnds {
             work,
-            fenced,
+            logs,
             shelving,
             feeds,
             maps,
@@ -253,7 +191,7 @@ impl Cluster {
             js,
             leases: leases.clone(),
             held: held.clone(),
-            fenced,
+            logs,
             store,
             shared,
             work,

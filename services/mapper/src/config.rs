@@ -1,6 +1,11 @@
 //! The mapping server's configuration (TOML). Every field has a default; `deploy/mapper.toml`
 //! shows them all.
 
+mod cluster;
+mod localization;
+
+pub use cluster::ClusterConfig;
+pub use localization::LocalizationConfig;
 use runtime::session::SessionConfig;
 use serde::{Deserialize, Serialize};
 use slam::Mapper2dParams;
@@ -45,7 +50,7 @@ pub struct MapperConfig {
     /// Map versions: frozen maps kept in the store (`[versions]`).
     pub versions: VersionsConfig,
     /// Robots localizing on a map version (`[localization]`).
-    pub localization: crate::localization::LocalizationConfig,
+    pub localization: LocalizationConfig,
     /// How long 3D clouds are kept (`[clouds]`).
     pub clouds: CloudsConfig,
     /// Snapshots of the fleets' maps in the store (`[store]`).
@@ -53,7 +58,7 @@ pub struct MapperConfig {
     /// Cluster mode (`[cluster]`, docs/cluster.md): the fleets are sites spread over
     /// mapper hosts, each site's record in NATS JetStream. Unset: this one process holds
     /// every fleet (single-machine mode, the default).
-    pub cluster: Option<crate::cluster::ClusterConfig>,
+    pub cluster: Option<ClusterConfig>,
 }
 
 impl Default for MapperConfig {
@@ -79,30 +84,7 @@ impl Default for MapperConfig {
         }
     }
 }
-
 impl MapperConfig {
-    /// A fleet's empty map, as this configuration sets it up.
-    pub fn new_fleet(&self, id: &str) -> fleetmap::FleetMap {
-        fleetmap::FleetMap::new(
-            id,
-            self.mapping.clone(),
-            self.datum.map(|origin| slam::geodesy::GeoDatum { origin }),
-            self.max_range_m,
-        )
-    }
-
-    /// The mapping version of this configuration: [`fleetmap::MAPPING_CODE`] and a digest of
-    /// what it maps with (`[mapping]`, `datum`, `max_range_m`). A store's fleet mapped by
-    /// another version is rebuilt from its nodes at start (`crate::restore`).
-    pub fn mapping_version(&self) -> crate::store::MappingVersion {
-        let parameters = serde_json::to_vec(&(&self.mapping, &self.datum, self.max_range_m))
-            .expect("mapping parameters serialize");
-        crate::store::MappingVersion {
-            code: fleetmap::MAPPING_CODE.to_owned(),
-            parameters: format!("{:08x}", crc32fast::hash(&parameters)),
-        }
-    }
-
     /// Reads a TOML file (none: the defaults), then the `LEVELMAP_…` environment variables
     /// (`runtime::session::env`); unknown keys are errors.
     pub fn load(path: Option<&Path>) -> anyhow::Result<MapperConfig> {
@@ -360,7 +342,7 @@ mod tests {
         cluster.check().unwrap();
         assert_eq!(cluster.nats.servers.len(), 3);
         assert_eq!(file.mapping, MapperConfig::default().mapping);
-        let lone = crate::cluster::ClusterConfig {
+        let lone = ClusterConfig {
             host: "h9".into(),
             ..cluster
         };

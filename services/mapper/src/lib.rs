@@ -6,9 +6,11 @@
 //! `fleetmap` crate; this crate is its shell, in rooms:
 //! - [`bus`]: Zenoh in and out (acks, corrected poses, live odometry and scans), a recording
 //!   fed in as the bus's traffic, the maps to ROS 2;
-//! - [`worker`]: the ingest loop (check, map, commit, ack, solve), on its own thread;
-//! - [`store`]: the durable store (redb), and the store read back at start ([`store::restore`],
-//!   also `--verify-store`);
+//! - [`worker`]: the ingest loop (check, map, journal, ack, solve), on its own thread, the
+//!   single writer; [`inbox`] what it is handed; [`journal`] the one seam through which it
+//!   makes every change of a site's record durable; [`blobs`] what a host shares beside it;
+//! - [`store`]: the durable store (redb); [`restore`] the store read back at start (also
+//!   `--verify-store`), [`mapping`] what a fleet is mapped with;
 //! - [`views`]: what the HTTP side reads (each fleet's `FleetView`, metrics, events, each
 //!   robot's live feed);
 //! - [`api`]: the HTTP API; [`localization`] (robots localizing on a map version) and
@@ -18,11 +20,16 @@
 //! - [`server`] wires them; [`config`] is the configuration.
 
 pub mod api;
+pub mod blobs;
 pub mod bus;
 pub mod cluster;
 pub mod config;
 pub mod gateway;
+pub mod inbox;
+pub mod journal;
 pub mod localization;
+pub mod mapping;
+pub mod restore;
 pub mod server;
 pub mod store;
 pub mod versions;

@@ -5,14 +5,17 @@
 //! publish). Live odometry is handled in its Zenoh callback ([`crate::bus::odometry`]), with no
 //! mapping work, so teleoperation sees it at once.
 
+use crate::blobs::{Blobs, NotShared};
 use crate::bus::Bus;
 use crate::bus::feeds::{Declared, EVERY_FLEET, Feeds};
 use crate::bus::recording::FeedReport;
 use crate::config::MapperConfig;
+use crate::inbox::Work;
+use crate::journal::{Journal, StoreJournal};
 use crate::localization::MapCache;
 use crate::store::Store;
 use crate::views::Shared;
-use crate::worker::{Work, Worker};
+use crate::worker::Worker;
 use anyhow::{Context, Result};
 use runtime::session::now_ns;
 use std::sync::Arc;
@@ -105,15 +108,36 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     };
     let (fleets, snapshots) = match nats {
         Some(_) => Default::default(),
-        None => crate::store::restore::restore(&config, &store, &shared)?,
+        None => crate::restore::restore(&config, &store, &shared)?,
     };
     let maps = Arc::new(MapCache::new(&config.localization, config.max_range_m));
     let localizing = crate::localization::restore(&store, &maps)?;
 
     let session = config.zenoh.open(runtime::session::Role::Router).await?;
-    let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::worker::INGEST_QUEUE);
-    let fenced = crate::worker::Fenced::default();
+    let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::inbox::INGEST_QUEUE);
     let (shelf, shelving) = crate::cluster::shelf();
+    // The single writer's journal: the store, or in cluster mode the sites' logs first; and
+    // what the API shares beyond the store.
+    let (journal, logs, blobs): (Box<dyn Journal>, _, Arc<dyn Blobs>) =
+        match nats.as_ref().zip(config.cluster.as_ref()) {
+            None => (
+                Box::new(StoreJournal::new(store.clone())),
+                None,
+                Arc::new(NotShared),
+            ),
+            Some((js, cluster)) => {
+                let (journal, logs) =
+                    crate::cluster::journal(&config, store.clone(), shared.clone(), shelf);
+                let retention = crate::cluster::cloud_retention(&config.clouds);
+                let blobs = crate::cluster::ClusterBlobs::new(
+                    &cluster.host,
+                    js.clone(),
+                    cluster.replicas,
+                    retention,
+                );
+                (Box::new(journal), Some(logs), Arc::new(blobs))
+            }
+        };
     let feeds = Feeds::new(
         session.clone(),
         shared.clone(),
@@ -124,21 +148,13 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     let worker = {
         let worker = Worker::new(
             config.clone(),
-            store.clone(),
             fleets,
             localizing,
             shared.clone(),
-            Bus::new(session.clone()),
+            Box::new(Bus::new(session.clone())),
+            journal,
         )
         .with_snapshots(snapshots);
-        let worker = match &nats {
-            Some(_) => worker.with_site_logs(crate::worker::SiteLogs::new(
-                tokio::runtime::Handle::current(),
-                fenced.clone(),
-                shelf,
-            )),
-            None => worker,
-        };
         std::thread::Builder::new()
             .name("levelmap-mapping".into())
             .spawn(move || {
@@ -156,22 +172,8 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             config.fleets.clone(),
         );
     }
-    // In cluster mode the API reaches the cluster's stores: version files, clouds.
-    let in_cluster = nats
-        .as_ref()
-        .zip(config.cluster.as_ref())
-        .map(|(js, cluster)| {
-            let retention = crate::cluster::cloud_retention(&config.clouds);
-            let stores = crate::api::ClusterStores::new(
-                &cluster.host,
-                js.clone(),
-                cluster.replicas,
-                retention,
-            );
-            Arc::new(stores)
-        });
-    let cluster = match nats {
-        Some(js) => Some(
+    let cluster = match nats.zip(logs) {
+        Some((js, logs)) => Some(
             crate::cluster::Cluster::start(
                 &config,
                 js,
@@ -179,7 +181,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
                 shared.clone(),
                 crate::cluster::WorkerEnds {
                     work: work_tx.clone(),
-                    fenced,
+                    logs,
                     shelving,
                     feeds,
                     maps: maps.clone(),
@@ -193,14 +195,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
-    let app = crate::api::router(
-        shared.clone(),
-        work_tx.clone(),
-        store,
-        maps,
-        in_cluster,
-        &config,
-    );
+    let app = crate::api::router(shared.clone(), work_tx.clone(), store, maps, blobs, &config);
     let http = serve_until_stopped(listener, app, shared.stopping.subscribe());
     Ok(Running {
         http_addr,

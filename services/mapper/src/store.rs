@@ -10,7 +10,7 @@
 //! rows are damaged does not keep the others from being restored.
 //!
 //! A snapshot of each fleet's map (`snapshots`) spares a restart most of the replay: the map
-//! is restored from it and the nodes after it are replayed (`crate::restore`).
+//! is restored from it and the nodes after it are replayed ([`crate::restore`]).
 //!
 //! Map versions (`versions`) are kept in tables of their own, written from the HTTP side's
 //! blocking pool: redb runs one write transaction at a time, so they interleave with the
@@ -25,7 +25,6 @@ use std::sync::{Mutex, RwLock};
 mod changes;
 mod localization;
 mod meta;
-pub mod restore;
 mod retention;
 mod versions;
 pub use changes::SiteChange;
@@ -72,9 +71,6 @@ pub enum StoreError {
     /// Rows that do not make a fleet's history (a gap in the indices).
     #[error("store: {0}")]
     Damaged(String),
-    /// Cluster mode: the site's log in JetStream did not take the batch (`crate::cluster`).
-    #[error("site log: {0}")]
-    Log(String),
     /// A store format this build cannot read (`store::STORE_FORMAT`).
     #[error("store: {0}")]
     Format(String),

@@ -99,7 +99,7 @@ mod tests {
             }),
             ..MapperConfig::default()
         };
-        let mut map = config.new_fleet("park");
+        let mut map = crate::mapping::new_fleet(&config, "park");
         for seq in 0..nodes {
             map.ingest(&node(seq)).unwrap();
         }

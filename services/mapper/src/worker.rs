@@ -4,14 +4,18 @@
 //! views and events → apply the solves the solver thread finished and send out the due ones
 //! (`worker/solving.rs`) → answer operator requests. Under load, nodes batch up (one commit
 //! per batch) and the whole network is solved beside them, not between them.
-//! A node is acked only once it is committed. A failed commit (a full disk) keeps what the
-//! maps took but the store did not (`Unstored`): no node is taken meanwhile, the commit is
-//! tried again every second, and its nodes are acked once it succeeds; the robots keep
-//! re-sending the rest. Nodes of a quarantined fleet (its store did not replay) are not taken.
+//! The worker is the single writer: every change of a site's record (a batch, a version, a
+//! change of modes) is an entry it makes durable through the journal ([`crate::journal`])
+//! before it acks or answers. A node is acked only once it is committed. A failed commit (a
+//! full disk) keeps what the maps took but the store did not (`Unstored`): no node is taken
+//! meanwhile, the commit is tried again every second, and its nodes are acked once it
+//! succeeds; the robots keep re-sending the rest. A site whose log alone failed waits alone
+//! in the same way. Nodes of a quarantined fleet (its store did not replay) are not taken.
 
-use crate::bus::Bus;
+use crate::bus::Outbound;
 use crate::config::MapperConfig;
-use crate::store::Store;
+use crate::inbox::Work;
+use crate::journal::Journal;
 use crate::views::instruments::Instruments;
 use crate::views::{Metrics, Shared};
 use commit::Unstored;
@@ -30,160 +34,8 @@ mod sites;
 mod snapshots;
 mod solving;
 
-pub use sites::{Fenced, SiteLogs};
-
 /// Most messages taken into one batch (one solve, one store commit).
 const MAX_BATCH: usize = 512;
-
-/// Most messages waiting for the worker: nodes beyond it are shed (not acked, so their robots
-/// send them again), which bounds the mapper's memory when it falls behind (1,024 nodes with
-/// clouds are about 60 MB).
-pub const INGEST_QUEUE: usize = 1024;
-
-/// The answer to an operator's optimize request: the report as JSON, or why not.
-pub type OptimizeReply = tokio::sync::oneshot::Sender<Result<serde_json::Value, OptimizeError>>;
-
-/// Work for the mapping worker.
-pub enum Work {
-    /// A node as it came from the bus.
-    Node {
-        /// Its Zenoh key.
-        key: String,
-        /// Its bytes.
-        payload: Vec<u8>,
-        /// When it reached the mapper.
-        received: Instant,
-    },
-    /// Finish this turn, then stop (the HTTP side may still hold senders).
-    Stop,
-    /// Re-optimize a fleet now.
-    Optimize {
-        /// The fleet.
-        fleet: String,
-        /// Where the report goes.
-        reply: OptimizeReply,
-    },
-    /// A recording's feed: take a fleet's solve here (the recorded mapper took it here) and
-    /// run it; it is applied at [`Work::ApplySolve`].
-    TakeSolve {
-        /// The fleet.
-        fleet: String,
-        /// Whether it was taken.
-        reply: tokio::sync::oneshot::Sender<Result<(), OptimizeError>>,
-    },
-    /// A recording's feed: apply the fleet's solve taken before, here.
-    ApplySolve {
-        /// The fleet.
-        fleet: String,
-        /// Where the report goes.
-        reply: OptimizeReply,
-    },
-    /// New modes of a fleet's robots (stored already), with the maps of the versions they
-    /// localize on (built off the worker).
-    SetModes {
-        /// The fleet.
-        fleet: String,
-        /// Its modes.
-        modes: crate::localization::FleetModes,
-        /// The map of each version the modes name.
-        maps: HashMap<u64, Arc<slam::localize::LocalizationMap>>,
-        /// Answered once the worker uses them.
-        reply: tokio::sync::oneshot::Sender<()>,
-    },
-    /// Cluster mode: this host holds `site`'s lease and restored its map from the site's
-    /// log: map its nodes from now on.
-    Adopt {
-        /// The site (a fleet).
-        site: String,
-        /// Its map, restored.
-        map: Box<FleetMap>,
-        /// How many of its nodes the snapshot it was restored from covered.
-        covered: usize,
-        /// Its log, read to the end.
-        log: Box<sitelog::SiteLog>,
-        /// Answered once its nodes are taken.
-        reply: tokio::sync::oneshot::Sender<()>,
-    },
-    /// Cluster mode: a change of `site`'s versions or modes, checked by the API: appended
-    /// to the site's log, then stored (`crate::store::SiteChange`).
-    Change {
-        /// The site.
-        site: String,
-        /// The change (boxed: it is the largest of the work).
-        change: Box<crate::store::SiteChange>,
-        /// An added version's file (in the version files already).
-        file: Option<Vec<u8>>,
-        /// When the operator asked (names a change of modes in the log).
-        asked_ns: u64,
-        /// Answered once stored, or with why not.
-        reply: tokio::sync::oneshot::Sender<Result<(), ChangeError>>,
-    },
-    /// Cluster mode: this host lost `site`'s lease: drop it at once.
-    Drop {
-        /// The site.
-        site: String,
-        /// Answered once nothing of it is acked any more.
-        reply: tokio::sync::oneshot::Sender<()>,
-    },
-}
-
-/// Why a change of a site's versions or modes was not made.
-#[derive(Debug, thiserror::Error)]
-pub enum ChangeError {
-    /// This host does not hold the site (any more): its owner takes the change.
-    #[error("this host does not hold site {0} now; ask again (through a gateway)")]
-    NotOwner(String),
-    /// The log did not take it (not reachable in time, or fenced: the site was dropped).
-    #[error("{0}")]
-    Log(String),
-    /// Appended, and this host's store failed to keep it: the log has it.
-    #[error("{0}")]
-    Store(String),
-}
-
-/// Why an optimize request got no report.
-#[derive(Debug, thiserror::Error)]
-pub enum OptimizeError {
-    /// The worker is gone: the mapper is stopping.
-    #[error("the mapping worker stopped")]
-    Stopped,
-    /// The worker's queue is full: try again.
-    #[error("the mapping worker is busy")]
-    Busy,
-    /// The worker refused: no such fleet, a network not anchored yet, a failed solve.
-    #[error("{0}")]
-    Refused(String),
-    /// The store cannot commit (the solve's point would not be stored): try again later.
-    #[error("{0}")]
-    StoreFailed(String),
-}
-
-impl Work {
-    /// A node received on `key`, as the Zenoh subscription and a recording's feed both hand
-    /// it to the worker (which decodes and checks it).
-    pub fn node(key: &str, payload: Vec<u8>) -> Work {
-        Work::Node {
-            key: key.to_owned(),
-            payload,
-            received: Instant::now(),
-        }
-    }
-
-    /// Asks the worker behind `work` to re-optimize `fleet` now and waits for its report.
-    pub async fn optimize(
-        work: &mpsc::SyncSender<Work>,
-        fleet: &str,
-    ) -> Result<serde_json::Value, OptimizeError> {
-        let (reply, answer) = tokio::sync::oneshot::channel();
-        let fleet = fleet.to_owned();
-        work.try_send(Work::Optimize { fleet, reply })
-            .map_err(|e| match e {
-                mpsc::TrySendError::Full(_) => OptimizeError::Busy,
-                mpsc::TrySendError::Disconnected(_) => OptimizeError::Stopped,
-            })?;
-        answer.await.map_err(|_| OptimizeError::Stopped)?
-    }
-}
 
 /// A node that passed the checks: who sent it, what it holds, what is stored of it.
 struct Checked {
@@ -234,10 +86,10 @@ struct Batch {
 /// The worker's state: the maps, and what of them is stored.
 pub struct Worker {
     config: MapperConfig,
-    store: Arc<Store>,
     fleets: HashMap<String, FleetMap>,
     shared: Arc<Shared>,
-    bus: Bus,
+    /// Where acks, localizations and corrected poses go (the Zenoh bus).
+    bus: Box<dyn Outbound>,
     /// Per fleet, how many of its edges are stored.
     edges_stored: HashMap<String, usize>,
     /// The solver thread and the solves out on it.
@@ -250,20 +102,20 @@ pub struct Worker {
     localizing: HashMap<String, crate::localization::Localizing>,
     /// Per fleet, the nodes its stored snapshot covers.
     snapshots: HashMap<String, usize>,
-    /// Cluster mode: the logs of the sites this host owns (`None`: single-machine mode).
-    sites: Option<SiteLogs>,
+    /// Makes the entries durable: the store, or in cluster mode the sites' logs first.
+    journal: Box<dyn Journal>,
 }
 
 impl Worker {
     /// A worker over the restored `fleets` (all of it stored), their robots' modes in
-    /// `localizing`.
+    /// `localizing`, writing through `journal`.
     pub fn new(
         config: MapperConfig,
-        store: Arc<Store>,
         fleets: HashMap<String, FleetMap>,
         localizing: HashMap<String, crate::localization::Localizing>,
         shared: Arc<Shared>,
-        bus: Bus,
+        bus: Box<dyn Outbound>,
+        journal: Box<dyn Journal>,
     ) -> Worker {
         let edges_stored = fleets
             .iter()
@@ -271,7 +123,6 @@ impl Worker {
             .collect();
         Worker {
             config,
-            store,
             fleets,
             shared,
             bus,
@@ -281,7 +132,7 @@ impl Worker {
             retry_at: Instant::now(),
             localizing,
             snapshots: HashMap::new(),
-            sites: None,
+            journal,
         }
     }
 
@@ -321,7 +172,7 @@ impl Worker {
         for job in jobs {
             match job {
                 // Counted, not logged: robots re-send every second while the store is down.
-                Work::Node { .. } if self.unstored.is_some() => {
+                Work::Node { key, .. } if self.waits(&key) => {
                     self.shared.metrics.reject("node", "store")
                 }
                 Work::Node { key, .. } if self.quarantined(&key) => {
@@ -358,10 +209,9 @@ impl Worker {
                     site,
                     map,
                     covered,
-                    log,
                     reply,
                 } => {
-                    self.adopt(site, *map, covered, *log);
+                    self.adopt(site, *map, covered);
                     let _ = reply.send(());
                 }
                 Work::Change {
@@ -437,7 +287,7 @@ impl Worker {
         let map = self
             .fleets
             .entry(fleet.clone())
-            .or_insert_with(|| config.new_fleet(&fleet));
+            .or_insert_with(|| crate::mapping::new_fleet(config, &fleet));
         let reack = |resend_from| Reack {
             fleet: fleet.clone(),
             robot: robot.clone(),
@@ -504,6 +354,17 @@ impl Worker {
             }
         };
         batch.accepted.extend(accepted);
+    }
+
+    /// Whether `key` is a node of a site whose last entries are not durable yet (all of
+    /// them, when the store failed).
+    fn waits(&self, key: &str) -> bool {
+        self.unstored
+            .as_ref()
+            .is_some_and(|u| match wire::parse_robot_key(key) {
+                Ok(k) => u.holds(k.fleet),
+                Err(_) => u.holds(""),
+            })
     }
 
     /// Whether `key` is a node of a quarantined fleet.
@@ -594,3 +455,6 @@ fn take_batch(work: &mpsc::Receiver<Work>, wake: Duration) -> Option<Vec<Work>> 
     }
     Some(batch)
 }
+
+#[cfg(test)]
+mod tests;

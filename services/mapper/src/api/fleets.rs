@@ -3,7 +3,7 @@
 
 use super::access::authorized;
 use super::{Api, ApiError, Reply};
-use crate::worker::{OptimizeError, Work};
+use crate::inbox::{OptimizeError, Work};
 use axum::Json;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, header};

@@ -90,36 +90,34 @@ pub(super) async fn set_modes(
     for robot in change.robots.iter().flatten() {
         wire::validate_id("robot", robot).map_err(|e| ApiError::BadRequest(e.to_string()))?;
     }
-    let _one_at_a_time = api.modes_lock.lock().await;
+    let _one_at_a_time = api.changes_lock.lock().await;
+    let version = change.mode.stored();
+    api.limits
+        .heavy_write({
+            let (api, fleet) = (api.clone(), fleet.clone());
+            move || {
+                if version != 0 {
+                    // Built before it is journaled: a map that cannot be used is never set.
+                    api.maps
+                        .get(&api.store, &fleet, version)
+                        .map_err(|e| map_error(&api, e))?;
+                }
+                api.store
+                    .mode_version_exists(&fleet, version)
+                    .map_err(|e| mode_error(&api, e))
+            }
+        })
+        .await?;
+    let set = SiteChange::ModesSet {
+        robots: change.robots,
+        version,
+    };
+    api.change_site(&fleet, set, None).await?;
     let (modes, maps) = api
         .limits
         .heavy_write({
             let (api, fleet) = (api.clone(), fleet.clone());
             move || {
-                let version = change.mode.stored();
-                if version != 0 {
-                    // Built before it is stored: a map that cannot be used is never set.
-                    api.maps
-                        .get(&api.store, &fleet, version)
-                        .map_err(|e| map_error(&api, e))?;
-                }
-                match &api.in_cluster {
-                    None => api
-                        .store
-                        .set_modes(&fleet, change.robots.as_deref(), version)
-                        .map_err(|e| mode_error(&api, e))?,
-                    Some(_) => {
-                        // Checked here, on the owner, which alone appends to the site's log.
-                        api.store
-                            .mode_version_exists(&fleet, version)
-                            .map_err(|e| mode_error(&api, e))?;
-                        let set = SiteChange::ModesSet {
-                            robots: change.robots.clone(),
-                            version,
-                        };
-                        api.change_site_blocking(&fleet, set, None)?;
-                    }
-                }
                 let modes = api.stored_modes(&fleet)?;
                 let mut maps = HashMap::new();
                 for v in modes.versions() {
@@ -135,7 +133,7 @@ pub(super) async fn set_modes(
         })
         .await?;
     let (reply, done) = tokio::sync::oneshot::channel();
-    let work = crate::worker::Work::SetModes {
+    let work = crate::inbox::Work::SetModes {
         fleet: fleet.clone(),
         modes,
         maps,

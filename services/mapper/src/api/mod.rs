@@ -6,7 +6,7 @@
 //! work through `limits`; `access` holds the tokens and CORS.
 
 mod access;
-mod cluster;
+mod changes;
 mod events;
 mod faults;
 mod fleets;
@@ -22,10 +22,11 @@ mod versions;
 mod web;
 mod window;
 
+use crate::blobs::Blobs;
 use crate::config::MapperConfig;
+use crate::inbox::Work;
 use crate::store::Store;
 use crate::views::Shared;
-use crate::worker::Work;
 use axum::Router;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -36,7 +37,6 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
-pub use cluster::ClusterStores;
 pub use faults::Degraded;
 pub use web::WEB_DIR_ENV;
 
@@ -63,13 +63,14 @@ struct Api {
     max_versions: usize,
     /// Versions' localization maps, shared with the worker.
     maps: Arc<crate::localization::MapCache>,
-    /// Held while a fleet's modes change: stored and handed to the worker in one order.
-    modes_lock: Arc<tokio::sync::Mutex<()>>,
+    /// Held while a change of a site's versions or modes is checked and journaled: one at
+    /// a time, so a version's number is given once and a check holds until its change is
+    /// durable.
+    changes_lock: Arc<tokio::sync::Mutex<()>>,
     /// The base map the dashboard may draw (`[http.base_map]`).
     base_map: Option<Arc<crate::config::BaseMap>>,
-    /// Cluster mode (`[cluster]`): changes of versions and modes go through the site's log;
-    /// clouds this store lacks come from the cluster's.
-    in_cluster: Option<Arc<ClusterStores>>,
+    /// The version files and clouds shared beyond this host's store (`crate::blobs`).
+    blobs: Arc<dyn Blobs>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -301,7 +302,7 @@ pub fn router(
     work: mpsc::SyncSender<Work>,
     store: Arc<Store>,
     maps: Arc<crate::localization::MapCache>,
-    in_cluster: Option<Arc<ClusterStores>>,
+    blobs: Arc<dyn Blobs>,
     config: &MapperConfig,
 ) -> Router {
     let api = Api {
@@ -315,9 +316,9 @@ pub fn router(
         tiles: Arc::default(),
         served: config.fleets.clone().into(),
         max_versions: config.versions.max_versions.get(),
-        in_cluster,
+        blobs,
         maps,
-        modes_lock: Arc::default(),
+        changes_lock: Arc::default(),
         base_map: config.http.base_map.clone().map(Arc::new),
     };
     let (router, doc) = parts(Some(&api));

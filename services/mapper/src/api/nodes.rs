@@ -135,8 +135,8 @@ pub(super) async fn node_detail(
     }))
 }
 
-/// A node's encoded cloud from the store (a disk read: heavy work); in cluster mode, one
-/// the store lacks from the cluster's clouds.
+/// A node's encoded cloud from the store (a disk read: heavy work), or from the clouds
+/// shared beyond it when the store lacks it (`crate::blobs`).
 async fn stored_cloud(api: &Api, fleet: &str, node: usize) -> Reply<Option<Vec<u8>>> {
     // 503 for as long as commits fail, whether or not the file is open between attempts.
     if let Some(fault) = api.shared.store_fault() {
@@ -148,10 +148,14 @@ async fn stored_cloud(api: &Api, fleet: &str, node: usize) -> Reply<Option<Vec<u
         .heavy(move || Ok(store.cloud(&name, node as u64)))
         .await?
         .map_err(|e| api.store_error(e))?;
-    match (stored, &api.in_cluster) {
-        // A node mapped on another host before this one took the site over.
-        (None, Some(cluster)) => cluster.cloud(fleet, node as u64).await,
-        (stored, _) => Ok(stored),
+    match stored {
+        // In cluster mode, a node mapped on another host before this one took the site over.
+        None => api
+            .blobs
+            .cloud(fleet, node as u64)
+            .await
+            .map_err(ApiError::Unavailable),
+        stored => Ok(stored),
     }
 }
 

@@ -94,7 +94,14 @@ fn app(config: MapperConfig) -> Router {
         &config.localization,
         config.max_range_m,
     ));
-    router(shared, mpsc::sync_channel(1).0, store, maps, None, &config)
+    router(
+        shared,
+        mpsc::sync_channel(1).0,
+        store,
+        maps,
+        Arc::new(crate::blobs::NotShared),
+        &config,
+    )
 }
 
 fn tokens() -> MapperConfig {

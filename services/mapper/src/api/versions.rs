@@ -1,6 +1,7 @@
 //! Map versions: freeze a fleet's map, list, read, export and delete versions, import one
 //! from another mapper's file (`crate::versions`). Making, importing and deleting need the
-//! write token; each runs on the blocking pool and is waited for to its end.
+//! write token; each is made on the blocking pool, journaled by the worker
+//! ([`Api::change_site`]) and waited for to its end.
 
 use super::access::authorized;
 use super::{Api, ApiError, Reply};
@@ -46,14 +47,6 @@ impl Api {
         ApiError::NotFound(format!(
             "no version {version} in fleet {fleet:?} (deleted, or never made)"
         ))
-    }
-
-    /// A version stored, or why not.
-    fn added(
-        &self,
-        result: Result<VersionSummary, AddVersionError<VersionError>>,
-    ) -> Reply<VersionSummary> {
-        result.map_err(|e| self.add_error(e))
     }
 
     /// Why a version was not stored, as an answer.
@@ -152,44 +145,15 @@ pub(super) async fn version_import(
     .await
 }
 
-/// A version made by `make` and stored as the fleet's next, on the blocking pool: 201 with
-/// its summary.
+/// A version made by `make` and journaled as the fleet's next (numbered by the store,
+/// which holds every change of the site the worker journaled; its file shared first where
+/// other hosts read it): 201 with its summary.
 async fn store_new(
     api: &Api,
     fleet: String,
     make: impl FnOnce() -> Reply<wire::MapVersion> + Send + 'static,
 ) -> Reply {
-    if let Some(changes) = api.in_cluster.clone() {
-        return store_new_in_cluster(api, &changes, fleet, make).await;
-    }
-    let summary = api
-        .limits
-        .heavy_write({
-            let api = api.clone();
-            move || {
-                let version = make()?;
-                api.added(crate::versions::store(
-                    &api.store,
-                    api.max_versions,
-                    version,
-                ))
-            }
-        })
-        .await?;
-    Ok(created(summary))
-}
-
-/// [`store_new`] in cluster mode: numbered by this host's store (caught up with the site's
-/// log, which only its owner appends to), its file put in the version files, then appended
-/// to the log and stored. One change at a time.
-async fn store_new_in_cluster(
-    api: &Api,
-    changes: &super::ClusterStores,
-    fleet: String,
-    make: impl FnOnce() -> Reply<wire::MapVersion> + Send + 'static,
-) -> Reply {
-    let _one_at_a_time = api.modes_lock.lock().await;
-    let files = changes.files().await?;
+    let _one_at_a_time = api.changes_lock.lock().await;
     let (summary, rows) = api
         .limits
         .heavy_write({
@@ -205,14 +169,15 @@ async fn store_new_in_cluster(
             }
         })
         .await?;
-    files
-        .put(&fleet, summary.version, &changes.host, &rows.file)
+    let host = api
+        .blobs
+        .put_version_file(&fleet, summary.version, &rows.file)
         .await
-        .map_err(|e| ApiError::Unavailable(format!("the version's file was not stored: {e}")))?;
+        .map_err(ApiError::Unavailable)?;
     let added = SiteChange::VersionAdded {
         number: summary.version,
         summary: rows.summary,
-        host: changes.host.clone(),
+        host,
     };
     api.change_site(&fleet, added, Some(rows.file)).await?;
     Ok(created(summary))
@@ -340,37 +305,25 @@ pub(super) async fn version_delete(
 ) -> Reply<StatusCode> {
     authorized(&api, &headers)?;
     api.versions_of(&fleet)?;
-    let in_cluster = api.in_cluster.clone();
-    let _one_at_a_time = match &in_cluster {
-        Some(_) => Some(api.modes_lock.lock().await),
-        None => None,
-    };
+    let _one_at_a_time = api.changes_lock.lock().await;
     api.limits
         .heavy_write({
             let (api, fleet) = (api.clone(), fleet.clone());
-            move || {
-                let deleted = match &in_cluster {
-                    None => api.store.delete_version(&fleet, version),
-                    Some(_) => api.store.deletable(&fleet, version),
-                };
-                match deleted {
-                    Ok(true) => Ok(()),
-                    Ok(false) => Err(Api::no_version(&fleet, version)),
-                    Err(e @ ModeError::InUse { .. }) => Err(ApiError::Conflict(e.to_string())),
-                    Err(ModeError::Store(e)) => Err(api.store_error(e)),
-                    Err(e @ ModeError::NoVersion { .. }) => Err(ApiError::NotFound(e.to_string())),
-                }
+            move || match api.store.deletable(&fleet, version) {
+                Ok(true) => Ok(()),
+                Ok(false) => Err(Api::no_version(&fleet, version)),
+                Err(e @ ModeError::InUse { .. }) => Err(ApiError::Conflict(e.to_string())),
+                Err(ModeError::Store(e)) => Err(api.store_error(e)),
+                Err(e @ ModeError::NoVersion { .. }) => Err(ApiError::NotFound(e.to_string())),
             }
         })
         .await?;
-    if let Some(changes) = &api.in_cluster {
-        let deleted = SiteChange::VersionDeleted { number: version };
-        api.change_site(&fleet, deleted, None).await?;
-        // The record is the truth: a file left behind is only space (a host reading the
-        // log skips a deleted version's file either way).
-        if let Err(e) = changes.files().await?.delete(&fleet, version).await {
-            tracing::warn!(fleet, version, "the deleted version's file stays: {e}");
-        }
+    let deleted = SiteChange::VersionDeleted { number: version };
+    api.change_site(&fleet, deleted, None).await?;
+    // The record is the truth: a file left behind is only space (a host reading the log
+    // skips a deleted version's file either way).
+    if let Err(e) = api.blobs.delete_version_file(&fleet, version).await {
+        tracing::warn!(fleet, version, "the deleted version's file stays: {e}");
     }
     Ok(StatusCode::NO_CONTENT)
 }

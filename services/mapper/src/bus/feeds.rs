@@ -4,8 +4,8 @@
 //! one set per site this host owns, declared once it took the site over and undeclared when
 //! it drops it, so the routers carry a site's messages to its owner only.
 
+use crate::inbox::Work;
 use crate::views::Shared;
-use crate::worker::Work;
 use anyhow::Result;
 use std::sync::{Arc, mpsc};
 use wire::Topic;

@@ -12,8 +12,8 @@
 //! them) and the worker's own timer is off meanwhile, so the replay rebuilds the recorded
 //! map; nodes after the last recorded solve get one more at the end.
 
+use crate::inbox::{OptimizeError, Work};
 use crate::views::Shared;
-use crate::worker::{OptimizeError, Work};
 use runtime::recording::RecordingReader;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};

@@ -1,10 +1,13 @@
-//! One site's keeper on one host: claims the site's lease when it is free and this host's
-//! turn has come (or, as the site's standby, takes it from a holder whose process is gone),
-//! takes the site over, renews the lease, and drops the site when the lease is lost.
+//! One site's keeper on one host: the driver of the site's ownership state machine
+//! (`ownership.rs`). It reads the lease and the live hosts, claims, takes the site over,
+//! renews, drops and hands back as the state machine says; the rules are all there.
 
 use super::Host;
-use super::replay::{LogNotOpened, follow_round, take_over, take_over_after};
-use crate::worker::Work;
+use super::ownership::{
+    Act, Claimed, Ended, Holding, Keep, Look, Note, Renewal, TakeoverEnded, Times, Waiting,
+};
+use super::replay::{LogNotOpened, TakenOver, follow_round, take_over, take_over_after};
+use crate::inbox::Work;
 use anyhow::Result;
 use sitelog::{Lease, SiteLog};
 use std::sync::Arc;
@@ -13,200 +16,89 @@ use std::time::{Duration, Instant};
 /// How often a host looks whether a site it does not own is free.
 const POLL: Duration = Duration::from_millis(250);
 
-/// How often a site's standby reads what was appended to the site's log since.
-const FOLLOW_EVERY: Duration = Duration::from_secs(1);
-
-/// The pause before a failed takeover is tried again; doubled after each failure up to
-/// `MAX_TAKEOVER_RETRY`, but for an open of the log given up after its bound.
-const FIRST_TAKEOVER_RETRY: Duration = Duration::from_millis(250);
-const MAX_TAKEOVER_RETRY: Duration = Duration::from_secs(5);
-
-/// A host that handed a site back does not claim it again for this long: the site's home
-/// host claims it meanwhile.
-const HAND_BACK_HOLD_OFF: Duration = Duration::from_secs(3);
-
-/// A site is handed back at most this often: a home host that is alive but does not claim
-/// it does not make the site bounce.
-const HAND_BACK_EVERY: Duration = Duration::from_secs(60);
-
-/// How a host claims a site.
-enum Claim {
-    /// Free: its lease lapsed or was released.
-    Free,
-    /// From its holder, whose process is gone.
-    From(String),
-}
-
-/// When a host's turn comes to claim a free site.
-struct Turn {
-    /// Its place in the site's order over the live hosts, the last holder left out.
-    rank: u32,
-    /// Each host before it in that order gets this long to claim first.
-    stagger: Duration,
-    /// The last holder's process is gone (its Zenoh token went): it claims nothing again.
-    holder_gone: bool,
-    /// No claim before this (a hand-back's hold-off).
-    claim_from: Instant,
-    /// A lease's time after the lease last could not be read (an election): until then the
-    /// holder, if alive, may claim its lapsed lease again first.
-    unread_hold_off: Instant,
-}
-
-impl Turn {
-    /// For a site free since `free_since`. The standby (rank 0) need not wait for a gone
-    /// holder; every other host still holds off, for the standby, whose reads of the bucket may
-    /// come back later than its own after an election. The stagger counts from the end of a
-    /// hold-off: hosts whose hold-offs end apart still claim in the site's order.
-    fn claim_at(&self, free_since: Instant) -> Instant {
-        let hold_off = if self.holder_gone && self.rank == 0 {
-            self.claim_from
-        } else {
-            self.claim_from.max(self.unread_hold_off)
-        };
-        free_since.max(hold_off) + self.stagger * self.rank
-    }
-}
-
-/// How a host's ownership of a site ended.
+/// How a host's holding of a site ended, for the keeper's loop.
 enum Owned {
     /// The mapper is stopping.
     Stopping,
-    /// The lease was lost (or the site could not be kept): dropped.
-    Lost,
-    /// Handed back to the site's home host: dropped, the lease released.
-    HandedBack,
+    /// Lost or handed back.
+    Ended(Ended),
 }
 
-/// Keeps `site` on this host while it may, until the mapper stops.
+/// The times `[cluster]` sets.
+fn times(host: &Host) -> Times {
+    Times {
+        ttl: host.cluster.ttl(),
+        stagger: Duration::from_millis(host.cluster.claim_stagger_ms),
+        unrenewed_limit: host.cluster.unrenewed_limit(),
+        hand_back_after: Duration::from_millis(host.cluster.hand_back_after_ms),
+    }
+}
+
+/// Keeps `site` on this host while it may, until the mapper stops: looks at the lease and
+/// the live hosts, does what [`Waiting::step`] says, and holds the site when a claim wins.
 pub(super) async fn keep(host: Arc<Host>, site: String) {
     let names: Vec<&str> = host.cluster.hosts.iter().map(String::as_str).collect();
     let order = sitelog::host_order(&site, &names);
     let this = host.cluster.host.as_str();
     let mut stopping = host.shared.stopping.subscribe();
-    let mut free_since: Option<Instant> = None;
-    let mut complained = false;
+    let mut waiting = Waiting::new(times(&host), Instant::now());
     // While another host owns the site and this one is next in its order: its log, as read.
     let mut follower: Option<SiteLog> = None;
-    let mut next_follow = Instant::now();
     let mut follow_failed = false;
-    let (mut claim_from, mut handed_back) = (Instant::now(), None::<Instant>);
-    // After the lease could not be read (the bucket electing a leader): until then the site's
-    // holder, if alive, may claim its lapsed lease again first.
-    let mut unread_hold_off = Instant::now();
-    // The holder last seen: once the site is free, the ranks are taken without it, so that
-    // its standby claims at once and the others after their stagger.
-    let mut last_holder: Option<String> = None;
     loop {
         if *stopping.borrow() {
             return;
         }
-        // The order over the live hosts, once this host has read who is alive.
-        let live = host.presence.live_order(&order, this);
         // Bounded: a read lost in an election would time out only after the client's 5 s,
-        // and the hold-off after it (below) would start that much later.
+        // and the hold-off after it would start that much later.
         let ttl = host.leases.ttl();
         let holder = sitelog::within(ttl / 3, host.leases.holder(&site)).await;
-        if complained && holder.is_ok() {
-            tracing::info!(site, "cluster: the lease is read again");
-            complained = false;
+        let gone = |h: &str| host.tokens.gone(h);
+        let (act, notes) = waiting.step(&Look {
+            now: Instant::now(),
+            this,
+            // The order over the live hosts, once this host has read who is alive.
+            live: host.presence.live_order(&order, this),
+            holder: holder.map_err(|e| e.to_string()),
+            gone: &gone,
+        });
+        for note in notes {
+            tell(&site, &note);
         }
-        let claim = match (live, holder) {
-            (None, Ok(_)) => None,
-            (Some(live), Ok(None)) => {
-                let rank = live
-                    .iter()
-                    .filter(|h| last_holder.as_deref() != Some(**h) || **h == this)
-                    .position(|h| *h == this)
-                    .unwrap_or(0) as u32;
-                let holder_gone = last_holder
-                    .as_deref()
-                    .is_some_and(|h| h != this && host.tokens.gone(h));
-                if holder_gone && rank == 0 && unread_hold_off > Instant::now() {
-                    tracing::info!(
-                        site,
-                        holder = last_holder.as_deref(),
-                        "cluster: the lease lapsed and its holder's process is gone (its \
-                         Zenoh token went): not waiting for it to claim again"
-                    );
-                    unread_hold_off = Instant::now();
-                }
-                let turn = Turn {
-                    rank,
-                    stagger: Duration::from_millis(host.cluster.claim_stagger_ms),
-                    holder_gone,
-                    claim_from,
-                    unread_hold_off,
-                };
-                let since = *free_since.get_or_insert_with(Instant::now);
-                (Instant::now() >= turn.claim_at(since)).then(|| {
-                    free_since = None;
-                    Claim::Free
-                })
-            }
-            (Some(live), Ok(Some(holder))) => {
-                free_since = None;
-                last_holder = Some(holder.clone());
-                let standby = live.iter().find(|h| **h != holder) == Some(&this);
-                if standby && host.tokens.gone(&holder) {
-                    // Its process is gone (its Zenoh token went with its links): the lease
-                    // would lapse only within a lease's time. Taken over now; were the
-                    // holder alive after all, its renewal is refused and its append fenced.
-                    Some(Claim::From(holder))
-                } else {
-                    if standby && Instant::now() >= next_follow {
-                        next_follow = Instant::now() + FOLLOW_EVERY;
-                        follow_round(&host, &site, &mut follower, &mut follow_failed).await;
-                    }
-                    None
-                }
-            }
-            (_, Err(e)) => {
-                // The bucket may be electing a leader: once it answers, the site's holder
-                // gets a lease's time to claim again a lease that lapsed meanwhile.
-                unread_hold_off = Instant::now() + ttl;
-                if !complained {
-                    tracing::warn!(site, "cluster: the lease cannot be read: {e}");
-                    complained = true;
-                }
+        let claimed = match &act {
+            Act::Wait => None,
+            Act::Follow => {
+                follow_round(&host, &site, &mut follower, &mut follow_failed).await;
                 None
             }
+            Act::Claim => Some(host.leases.claim(&site, this).await),
+            Act::ClaimFrom(holder) => Some(host.leases.claim_from(&site, this, holder).await),
         };
-        let claimed = match &claim {
-            Some(Claim::Free) => host.leases.claim(&site, this).await,
-            Some(Claim::From(holder)) => host.leases.claim_from(&site, this, holder).await,
-            None => Ok(None),
-        };
-        if let (Some(Claim::From(holder)), Ok(Some(_))) = (&claim, &claimed) {
-            tracing::info!(
-                site,
-                holder,
-                "cluster: the holder's process is gone (its Zenoh token went): its lease \
-                 taken over before it lapsed"
-            );
-            host.shared.instruments.leases_taken_from_gone.inc();
-        }
-        match claimed {
-            Ok(Some(lease)) => {
-                let may_hand_back = handed_back.is_none_or(|t| t.elapsed() >= HAND_BACK_EVERY);
+        if let Some(claimed) = claimed {
+            let outcome = match &claimed {
+                Ok(Some(_)) => Claimed::Held,
+                Ok(None) => Claimed::NotHeld,
+                Err(e) => Claimed::Failed(e.to_string()),
+            };
+            if let Some(note) = waiting.claimed(&act, &outcome) {
+                tell(&site, &note);
+            }
+            if let Ok(Some(lease)) = claimed {
+                if let Act::ClaimFrom(holder) = &act {
+                    tracing::info!(
+                        site,
+                        holder,
+                        "cluster: the holder's process is gone (its Zenoh token went): its \
+                         lease taken over before it lapsed"
+                    );
+                    host.shared.instruments.leases_taken_from_gone.inc();
+                }
+                let may_hand_back = waiting.may_hand_back(Instant::now());
                 match own(&host, lease, &order, may_hand_back, &mut stopping).await {
                     Owned::Stopping => return,
-                    Owned::Lost => {}
-                    Owned::HandedBack => {
-                        handed_back = Some(Instant::now());
-                        claim_from = Instant::now() + HAND_BACK_HOLD_OFF;
-                    }
+                    Owned::Ended(ended) => waiting.ended(ended, Instant::now()),
                 }
             }
-            Ok(None) => {
-                if claim.is_some() {
-                    complained = false;
-                }
-            }
-            Err(e) if !complained => {
-                tracing::warn!(site, "cluster: claiming the lease: {e}");
-                complained = true;
-            }
-            Err(_) => {}
         }
         tokio::select! {
             _ = tokio::time::sleep(POLL) => {}
@@ -215,10 +107,27 @@ pub(super) async fn keep(host: Arc<Host>, site: String) {
     }
 }
 
-/// Owns the site while `lease` holds: takes it over, renews the lease, and, when
-/// `may_hand_back`, hands the site back to a live host before this one in its `order`
-/// once that host has been alive for `hand_back_after_ms`. The lease is left held when the
-/// mapper stops, for `Cluster::release_all` once the worker stopped.
+/// Logs what a look or a claim told.
+fn tell(site: &str, note: &Note) {
+    match note {
+        Note::ReadAgain => tracing::info!(site, "cluster: the lease is read again"),
+        Note::Unread(e) => tracing::warn!(site, "cluster: the lease cannot be read: {e}"),
+        Note::HolderGone(holder) => tracing::info!(
+            site,
+            holder,
+            "cluster: the lease lapsed and its holder's process is gone (its Zenoh token \
+             went): not waiting for it to claim again"
+        ),
+        Note::ClaimFailed(e) => tracing::warn!(site, "cluster: claiming the lease: {e}"),
+    }
+}
+
+/// A takeover under way, and the fence alarm of the last one that succeeded.
+type Takeover = tokio::task::JoinHandle<Result<TakenOver>>;
+
+/// Owns the site while `lease` holds: takes it over, renews the lease every third of its
+/// time, and does what [`Holding::renewed`] says. The lease is left held when the mapper
+/// stops, for `Cluster::release_all` once the worker stopped.
 async fn own(
     host: &Arc<Host>,
     lease: Lease,
@@ -233,18 +142,27 @@ async fn own(
         .lock()
         .expect("leases lock")
         .insert(site.clone(), lease);
-    let mut takeover = Some(tokio::spawn(take_over(host.clone(), site.clone())));
+    let mut holding = Holding::new(times(host), claimed, may_hand_back);
+    let mut takeover: Option<Takeover> = Some(tokio::spawn(take_over(host.clone(), site.clone())));
     let ttl = host.leases.ttl();
-    let mut renewed = Instant::now();
-    let mut retry = FIRST_TAKEOVER_RETRY;
     // The site's feeds, declared once it is taken over, undeclared when this returns.
-    let (mut taken, mut feeds) = (false, None);
+    let mut feeds = None;
+    // Rings when the journal's append was fenced while this host holds the site.
+    let mut fence_alarm: Option<tokio::sync::oneshot::Receiver<()>> = None;
     loop {
         tokio::select! {
+            rang = async { fence_alarm.as_mut().expect("guarded").await }, if fence_alarm.is_some() => {
+                fence_alarm = None;
+                // Dropped unrung: the site left the journal without a fence.
+                if rang.is_ok() {
+                    holding.fence_rang();
+                }
+            }
             done = async { takeover.as_mut().expect("guarded").await }, if takeover.is_some() => {
                 takeover = None;
-                match done {
-                    Ok(Ok(records)) => {
+                let ended = match done {
+                    Ok(Ok((records, alarm))) => {
+                        fence_alarm = Some(alarm);
                         crate::views::instruments::Instruments::time(
                             &host.shared.instruments.takeover,
                             claimed.elapsed(),
@@ -255,117 +173,103 @@ async fn own(
                             "cluster: site taken over {:.0} ms after its lease was claimed",
                             claimed.elapsed().as_secs_f64() * 1e3
                         );
-                        taken = true;
+                        TakeoverEnded::Taken
+                    }
+                    Ok(Err(e)) if e.is::<LogNotOpened>() => {
+                        tracing::warn!(site, "cluster: takeover failed: {e:#}");
+                        TakeoverEnded::LogNotOpened
                     }
                     Ok(Err(e)) => {
-                        // Its stream may have no leader yet (an election takes 4–9 s): the
-                        // site is ours and nobody else serves it, so try again.
-                        tracing::warn!(
-                            site,
-                            "cluster: takeover failed, trying again in {retry:?}: {e:#}"
-                        );
-                        takeover = Some(tokio::spawn(take_over_after(
-                            retry,
-                            host.clone(),
-                            site.clone(),
-                        )));
-                        // An open given up has waited its bound already: no longer pause.
-                        retry = if e.is::<LogNotOpened>() {
-                            FIRST_TAKEOVER_RETRY
-                        } else {
-                            (retry * 2).min(MAX_TAKEOVER_RETRY)
-                        };
+                        tracing::warn!(site, "cluster: takeover failed: {e:#}");
+                        TakeoverEnded::Failed
                     }
-                    Err(e) => tracing::error!(site, "cluster: takeover failed: {e}"),
+                    Err(e) => {
+                        tracing::error!(site, "cluster: takeover failed: {e}");
+                        TakeoverEnded::Failed
+                    }
+                };
+                if let Some(pause) = holding.takeover_ended(ended) {
+                    tracing::info!(site, "cluster: takeover tried again in {pause:?}");
+                    let again = take_over_after(pause, host.clone(), site.clone());
+                    takeover = Some(tokio::spawn(again));
                 }
             }
             _ = tokio::time::sleep(ttl / 3) => {}
             _ = stopping.changed() => return Owned::Stopping,
         }
-        if taken && feeds.is_none() {
+        if holding.taken() && feeds.is_none() {
             match host.feeds.declare(&site).await {
                 Ok(declared) => feeds = Some(declared),
                 Err(e) => tracing::warn!(site, "cluster: the site's feeds not declared yet: {e:#}"),
             }
         }
-        let fenced = host.fenced.lock().expect("fenced lock").remove(&site);
-        let Some(mut lease) = host.held.lock().expect("leases lock").get(&site).cloned() else {
-            return Owned::Lost;
+        let Some(lease) = host.held.lock().expect("leases lock").get(&site).cloned() else {
+            return Owned::Ended(Ended::Lost);
         };
-        // A renewal that does not answer within a third of the lease counts as failed: a
-        // host cut off from NATS must notice before its lease lapses.
-        let renewal = sitelog::within(ttl / 3, host.leases.renew(&mut lease)).await;
-        let renewal = match renewal {
-            // Lapsed while the bucket did not answer, and nobody claimed it (or renewed
-            // without this host hearing the answer): ours again.
-            Ok(false) => match host.leases.claim_again(&site, &host.cluster.host).await {
-                Ok(Some(again)) => {
-                    tracing::warn!(
-                        site,
-                        "cluster: the lease lapsed unrenewed; claimed again, the map kept"
-                    );
-                    host.shared.instruments.leases_reclaimed.inc();
-                    lease = again;
-                    Ok(true)
-                }
-                Ok(None) => Ok(false),
-                Err(e) => Err(e),
-            },
-            other => other,
-        };
-        let lost = match renewal {
-            Ok(true) => {
-                renewed = Instant::now();
-                host.held
-                    .lock()
-                    .expect("leases lock")
-                    .insert(site.clone(), lease);
-                if fenced {
-                    // The worker dropped the site on a fenced append, yet the lease is
-                    // still ours: a writer that lost its lease without knowing appended.
-                    // Read the log again, its records with it, and go on.
-                    tracing::warn!(
-                        site,
-                        "cluster: fenced while holding the lease; taking the site over again"
-                    );
-                    finish(takeover.take()).await;
-                    takeover = Some(tokio::spawn(take_over(host.clone(), site.clone())));
-                }
-                None
-            }
-            Ok(false) => Some("its lease was claimed by another host".to_owned()),
-            // Past the lease and its grace: the bucket does not come back, or this host is
-            // cut from it. (Meanwhile another host may have claimed the site; if so, the
-            // log fences this host's next append.)
-            Err(e) if renewed.elapsed() >= host.cluster.unrenewed_limit() => {
-                Some(format!("not renewed: {e}"))
-            }
-            Err(e) => {
-                tracing::warn!(site, "cluster: renewal failed, retrying: {e}");
-                None
-            }
-        };
-        if let Some(why) = lost {
-            tracing::warn!(site, "cluster: lease lost ({why}); dropping the site");
-            host.held.lock().expect("leases lock").remove(&site);
-            // A takeover under way hands the site to the worker first: drop it after.
-            finish(takeover).await;
-            drop_site(host, &site).await;
-            return Owned::Lost;
-        }
-        // Not within `hand_back_after_ms` of the claim either: a site just taken over under
-        // duress (its standby slow to claim) is not moved twice in a row.
+        let renewal = renew(host, &site, lease).await;
         let settled = Duration::from_millis(host.cluster.hand_back_after_ms);
-        if may_hand_back
-            && takeover.is_none()
-            && claimed.elapsed() >= settled
-            && let Some(home) = host
-                .presence
-                .home_before(order, &host.cluster.host, settled)
-        {
-            hand_back(host, &site, home).await;
-            return Owned::HandedBack;
+        let home = host
+            .presence
+            .home_before(order, &host.cluster.host, settled);
+        match holding.renewed(Instant::now(), renewal, home) {
+            Keep::Hold => {}
+            Keep::Retry(e) => tracing::warn!(site, "cluster: renewal failed, retrying: {e}"),
+            Keep::TakeOverAgain => {
+                tracing::warn!(
+                    site,
+                    "cluster: fenced while holding the lease; taking the site over again"
+                );
+                finish(takeover.take()).await;
+                takeover = Some(tokio::spawn(take_over(host.clone(), site.clone())));
+            }
+            Keep::Drop(why) => {
+                tracing::warn!(site, "cluster: lease lost ({why}); dropping the site");
+                host.held.lock().expect("leases lock").remove(&site);
+                // A takeover under way hands the site to the worker first: drop it after.
+                finish(takeover).await;
+                drop_site(host, &site).await;
+                return Owned::Ended(Ended::Lost);
+            }
+            Keep::HandBack(home) => {
+                hand_back(host, &site, &home).await;
+                return Owned::Ended(Ended::HandedBack);
+            }
         }
+    }
+}
+
+/// Renews `lease` (bounded by a third of the lease: a host cut off from NATS must notice
+/// before its lease lapses); one that lapsed while the bucket did not answer, and that
+/// nobody claimed, is claimed again. The lease held is updated.
+async fn renew(host: &Host, site: &str, mut lease: Lease) -> Renewal {
+    let ttl = host.leases.ttl();
+    let renewal = match sitelog::within(ttl / 3, host.leases.renew(&mut lease)).await {
+        Ok(true) => Ok(true),
+        Ok(false) => match host.leases.claim_again(site, &host.cluster.host).await {
+            Ok(Some(again)) => {
+                tracing::warn!(
+                    site,
+                    "cluster: the lease lapsed unrenewed; claimed again, the map kept"
+                );
+                host.shared.instruments.leases_reclaimed.inc();
+                lease = again;
+                Ok(true)
+            }
+            Ok(None) => Ok(false),
+            Err(e) => Err(e),
+        },
+        Err(e) => Err(e),
+    };
+    match renewal {
+        Ok(true) => {
+            host.held
+                .lock()
+                .expect("leases lock")
+                .insert(site.to_owned(), lease);
+            Renewal::Renewed
+        }
+        Ok(false) => Renewal::Claimed,
+        Err(e) => Renewal::Failed(e.to_string()),
     }
 }
 
@@ -389,7 +293,7 @@ async fn hand_back(host: &Arc<Host>, site: &str, home: &str) {
 }
 
 /// Waits for a takeover under way to end.
-async fn finish(takeover: Option<tokio::task::JoinHandle<Result<usize>>>) {
+async fn finish(takeover: Option<Takeover>) {
     if let Some(t) = takeover {
         let _ = t.await;
     }
@@ -408,44 +312,5 @@ async fn drop_site(host: &Host, site: &str) {
         .is_ok_and(|sent| sent.is_ok())
     {
         let _ = dropped.await;
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn turn(rank: u32, holder_gone: bool, now: Instant) -> Turn {
-        Turn {
-            rank,
-            stagger: Duration::from_millis(500),
-            holder_gone,
-            claim_from: now,
-            unread_hold_off: now + Duration::from_secs(3),
-        }
-    }
-
-    #[test]
-    fn after_an_election_the_standby_alone_skips_the_wait_for_a_gone_holder() {
-        let now = Instant::now();
-        assert_eq!(turn(0, true, now).claim_at(now), now);
-        // CI saw h2 read the free lease 1.2 s before the standby: it must still wait.
-        let second = turn(1, true, now).claim_at(now);
-        assert_eq!(second, now + Duration::from_millis(3500));
-    }
-
-    #[test]
-    fn a_live_holder_gets_its_lease_time_and_the_order_holds_after_it() {
-        let now = Instant::now();
-        let standby = turn(0, false, now).claim_at(now);
-        let second = turn(1, false, now).claim_at(now);
-        assert_eq!(standby, now + Duration::from_secs(3));
-        assert_eq!(second - standby, Duration::from_millis(500));
-        // Without a hold-off the stagger counts from when the site was seen free.
-        let free = Turn {
-            unread_hold_off: now,
-            ..turn(2, false, now)
-        };
-        assert_eq!(free.claim_at(now), now + Duration::from_secs(1));
     }
 }

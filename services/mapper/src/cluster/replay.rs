@@ -4,8 +4,8 @@
 
 use super::Host;
 use super::record::{LogRecord, SiteRecord};
+use crate::inbox::Work;
 use crate::store::{SiteChange, Store};
-use crate::worker::Work;
 use anyhow::{Context, Result, bail};
 use sitelog::{RetryPolicy, SiteLog};
 use std::sync::Arc;
@@ -27,12 +27,16 @@ const FOLLOW_MAX: usize = 4 * CATCH_UP_BATCH;
 #[error("the site's log did not open within a third of the lease's time")]
 pub(super) struct LogNotOpened;
 
+/// A takeover's outcome: the records read, and the alarm that rings if the site's journal
+/// is fenced while this host holds it.
+pub(super) type TakenOver = (usize, tokio::sync::oneshot::Receiver<()>);
+
 /// [`take_over`] after `pause`.
 pub(super) async fn take_over_after(
     pause: Duration,
     host: Arc<Host>,
     site: String,
-) -> Result<usize> {
+) -> Result<TakenOver> {
     tokio::time::sleep(pause).await;
     take_over(host, site).await
 }
@@ -155,7 +159,7 @@ fn commit_records(store: &Store, site: &str, records: Vec<Read>) -> Result<()> {
                 if !batches.is_empty() {
                     store.commit(&std::mem::take(&mut batches))?;
                 }
-                store.apply_site_change(site, *sequence, change, file.clone())?;
+                store.apply_site_change(site, Some(*sequence), change, file.clone())?;
             }
         }
     }
@@ -164,8 +168,8 @@ fn commit_records(store: &Store, site: &str, records: Vec<Read>) -> Result<()> {
 }
 
 /// Takes `site` over: its log after what this host's store holds read into the store, its
-/// map restored, handed to the worker. The records read.
-pub(super) async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
+/// map restored, the log handed to the journal and the map to the worker.
+pub(super) async fn take_over(host: Arc<Host>, site: String) -> Result<TakenOver> {
     // An append that outlasts the lease is no use: the site is another host's by then. The
     // worker, which appends for every site of this host, waits no longer than that.
     let retry = RetryPolicy {
@@ -195,13 +199,8 @@ pub(super) async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
     let (store, shared, config) = (host.store.clone(), host.shared.clone(), host.config.clone());
     let name = site.clone();
     let (map, covered) = tokio::task::spawn_blocking(move || {
-        crate::store::restore::restore_one(&config, &store, &shared, &name).inspect_err(|e| {
-            shared
-                .quarantined
-                .write()
-                .expect("quarantine lock")
-                .insert(name.clone(), format!("{e:#}"));
-        })
+        let unrecorded = crate::restore::Unrecorded::Running;
+        crate::restore::restore_fleet(&config, &store, &shared, &name, unrecorded)
     })
     .await??;
     // Its robots' modes as its log left them, with their versions' maps (built here, off
@@ -222,12 +221,16 @@ pub(super) async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
         maps,
         reply,
     };
+    // The log first: the worker's journal takes it in as it adopts the site.
+    let (handed, fence_alarm) = super::journal::HandedLog::new(&site, log);
+    host.logs
+        .send(handed)
+        .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
     let (reply, adopted) = tokio::sync::oneshot::channel();
     let adopt = Work::Adopt {
         site,
         map: Box::new(map),
         covered,
-        log: Box::new(log),
         reply,
     };
     let work = host.work.clone();
@@ -238,5 +241,5 @@ pub(super) async fn take_over(host: Arc<Host>, site: String) -> Result<usize> {
     adopted
         .await
         .map_err(|_| anyhow::anyhow!("the mapping worker stopped"))?;
-    Ok(records)
+    Ok((records, fence_alarm))
 }

@@ -1,7 +1,8 @@
-//! Changes of a site's versions and modes as its cluster log records them
-//! (`crate::cluster::record`): the owner appends one, then stores it here; a standby or a
-//! new owner reads it from the log and stores it the same way. Storing one twice stores
-//! it once, and the site's log sequence only ever moves forward.
+//! Changes of a site's versions and modes, as the writer journals them
+//! ([`crate::journal`]): stored here on a single machine; in cluster mode the owner appends
+//! one to the site's log (`crate::cluster::record`) and then stores it here, and a standby
+//! or a new owner reads it from the log and stores it the same way. Storing one twice
+//! stores it once, and the site's log sequence only ever moves forward.
 
 use super::{SITE_LOG, Store, StoreError, VersionRows, localization, versions};
 use redb::ReadableTable;
@@ -34,13 +35,13 @@ pub enum SiteChange {
 }
 
 impl Store {
-    /// Stores `change` of `fleet`, the record at `sequence` of its log, in one transaction
-    /// with that sequence. `file` is an added version's file (`None`: deleted since; the
-    /// number is kept, so it is never given again).
+    /// Stores `change` of `fleet` (in cluster mode the record at `sequence` of its log, in
+    /// one transaction with that sequence). `file` is an added version's file (`None`:
+    /// deleted since; the number is kept, so it is never given again).
     pub fn apply_site_change(
         &self,
         fleet: &str,
-        sequence: u64,
+        sequence: Option<u64>,
         change: &SiteChange,
         file: Option<Vec<u8>>,
     ) -> Result<(), StoreError> {
@@ -64,7 +65,7 @@ impl Store {
                     localization::write_modes(&txn, fleet, robots.as_deref(), *version)?;
                 }
             }
-            {
+            if let Some(sequence) = sequence {
                 let mut site_log = txn.open_table(SITE_LOG)?;
                 let held = site_log.get(fleet)?.map_or(0, |v| v.value());
                 site_log.insert(fleet, held.max(sequence))?;
@@ -89,7 +90,7 @@ mod tests {
         };
         for _ in 0..2 {
             store
-                .apply_site_change("park", 4, &added, Some(vec![7; 3]))
+                .apply_site_change("park", Some(4), &added, Some(vec![7; 3]))
                 .unwrap();
         }
         assert_eq!(store.version_file("park", 1).unwrap(), Some(vec![7; 3]));
@@ -98,18 +99,26 @@ mod tests {
             robots: Some(vec!["r1".into()]),
             version: 1,
         };
-        store.apply_site_change("park", 5, &localize, None).unwrap();
+        store
+            .apply_site_change("park", Some(5), &localize, None)
+            .unwrap();
         assert!(store.deletable("park", 1).is_err(), "r1 localizes on it");
         let map = SiteChange::ModesSet {
             robots: None,
             version: 0,
         };
-        store.apply_site_change("park", 6, &map, None).unwrap();
+        store
+            .apply_site_change("park", Some(6), &map, None)
+            .unwrap();
         assert!(store.deletable("park", 1).unwrap());
         let deleted = SiteChange::VersionDeleted { number: 1 };
-        store.apply_site_change("park", 7, &deleted, None).unwrap();
+        store
+            .apply_site_change("park", Some(7), &deleted, None)
+            .unwrap();
         // An older record read again never moves the sequence back.
-        store.apply_site_change("park", 3, &deleted, None).unwrap();
+        store
+            .apply_site_change("park", Some(3), &deleted, None)
+            .unwrap();
         assert_eq!(store.site_log_sequence("park").unwrap(), 7);
         assert_eq!(store.version_summary("park", 1).unwrap(), None);
         // A version whose file was deleted before it was read keeps its number only.
@@ -118,7 +127,9 @@ mod tests {
             summary: b"{\"version\":2}".to_vec(),
             host: "h1".into(),
         };
-        store.apply_site_change("park", 8, &gone, None).unwrap();
+        store
+            .apply_site_change("park", Some(8), &gone, None)
+            .unwrap();
         assert_eq!(store.version_summary("park", 2).unwrap(), None);
         assert_eq!(store.next_version_number::<()>("park", 5).unwrap(), 3);
         drop(store);

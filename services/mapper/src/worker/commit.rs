@@ -1,15 +1,19 @@
-//! The worker's store step and its failure path: a batch is committed before it is acked; a
-//! batch whose commit failed (a full disk) is kept, as the maps hold it already, and committed
-//! again every second until that succeeds. No node is taken meanwhile.
+//! The worker's store step and its failure path: a batch is made durable through the
+//! journal before it is acked. A batch whose commit failed (a full disk) is kept, as the maps
+//! hold it already, and committed again every second until that succeeds; no node is taken
+//! meanwhile. A site whose log alone did not take its part (cluster mode) is kept the same
+//! way, and only its nodes wait: the other sites' parts are committed and acked.
 
 use super::{Batch, Worker, fleets_of};
+use crate::journal::SiteFault;
 use crate::store::{FleetBatch, SolvePoint, StoreError};
+use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
 /// How often a commit that failed is tried again.
 const STORE_RETRY: Duration = Duration::from_secs(1);
 
-/// What the maps hold and the store does not: a batch or solve points whose commit failed.
+/// What the maps hold and the journal does not: a batch or solve points whose commit failed.
 /// The maps cannot give nodes back, so it is committed again until that succeeds; its nodes
 /// are acked and shown only then.
 #[derive(Default)]
@@ -19,20 +23,74 @@ pub(super) struct Unstored {
     /// Solves applied whose point is not stored, with the passes' GPS fixes they moved into
     /// the network.
     pub(super) solves: Vec<(String, SolvePoint, Vec<slam::GpsEdge>)>,
+    /// The sites that wait for it: `None` when the store failed (every site waits).
+    pub(super) sites: Option<BTreeSet<String>>,
+}
+
+impl Unstored {
+    /// Whether `site`'s nodes wait for this to be committed.
+    pub(super) fn holds(&self, site: &str) -> bool {
+        self.sites.as_ref().is_none_or(|s| s.contains(site))
+    }
+
+    /// What of this is of `sites`, taken out.
+    fn take_sites(&mut self, sites: &BTreeSet<String>) -> Unstored {
+        let of = |fleet: &str| sites.contains(fleet);
+        let batch = &mut self.batch;
+        let taken = Batch {
+            accepted: drain_where(&mut batch.accepted, |a| of(&a.fleet)),
+            reacks: drain_where(&mut batch.reacks, |r| of(&r.fleet)),
+            localized: drain_where(&mut batch.localized, |l| of(&l.fleet)),
+            ..Batch::default()
+        };
+        Unstored {
+            batch: taken,
+            solves: drain_where(&mut self.solves, |(fleet, ..)| of(fleet)),
+            sites: Some(sites.clone()),
+        }
+    }
+}
+
+/// The items of `items` that `take` picks, removed from it, in their order.
+fn drain_where<T>(items: &mut Vec<T>, take: impl Fn(&T) -> bool) -> Vec<T> {
+    let (taken, kept) = std::mem::take(items).into_iter().partition(|i| take(i));
+    *items = kept;
+    taken
 }
 
 impl Worker {
     /// Commits what the maps took, then acks it, shows it and runs the solves that are due.
     /// On a failure it is kept for [`Self::retry_store`]: nothing of it is acked or shown.
     pub(super) fn store_and_ack(&mut self, mut work: Unstored, started: Instant) {
-        let fenced = match self.commit(&work) {
-            Ok(fenced) => fenced,
+        let faults = match self.commit(&work) {
+            Ok(faults) => faults,
             Err(_) => {
-                self.store_failed(work);
+                self.store_failed(work, None);
                 return;
             }
         };
-        self.drop_fenced(&fenced, &mut work);
+        let mut waiting = BTreeSet::new();
+        for (site, fault) in faults {
+            match fault {
+                SiteFault::Fenced(_) => {
+                    work.solves.retain(|(fleet, ..)| *fleet != site);
+                    self.drop_site(&site, "another host appended to its log", &mut work.batch);
+                }
+                SiteFault::Unavailable(why) => {
+                    if !self.unstored.as_ref().is_some_and(|u| u.holds(&site)) {
+                        tracing::warn!(
+                            site,
+                            "the site's entries are not durable; its nodes wait: {why}"
+                        );
+                    }
+                    waiting.insert(site);
+                }
+            }
+        }
+        if !waiting.is_empty() {
+            let kept = work.take_sites(&waiting);
+            self.store_failed(kept, Some(waiting));
+        }
         self.ack(&work.batch);
         self.publish(&work.batch.accepted, started);
         self.publish_localized(&work.batch.localized);
@@ -52,10 +110,13 @@ impl Worker {
         }
     }
 
-    /// Commits the nodes' rows, their clouds, the new edges of their fleets and the solve
-    /// points in one transaction; in cluster mode each site's part is first appended to its
-    /// log. The sites whose append was fenced (not committed: the caller drops them).
-    pub(super) fn commit(&mut self, work: &Unstored) -> Result<Vec<String>, StoreError> {
+    /// Journals the nodes' rows, their clouds, the new edges of their fleets and the solve
+    /// points (on a single machine, one transaction). The sites whose part was not made
+    /// durable, with why; `Err` when the store failed and nothing was.
+    pub(super) fn commit(
+        &mut self,
+        work: &Unstored,
+    ) -> Result<Vec<(String, SiteFault)>, StoreError> {
         let accepted = &work.batch.accepted;
         let localized = &work.batch.localized;
         let mut touched = fleets_of(accepted);
@@ -100,28 +161,22 @@ impl Worker {
             pass_fixes: fixes,
             ..Default::default()
         }));
-        let fenced = match self.append_to_logs(&mut batches) {
-            Ok(fenced) => fenced,
-            Err(e) => {
-                let result = Err(e);
-                self.note_store(&result, accepted.len() + localized.len());
-                return result.map(|()| Vec::new());
-            }
-        };
-        let result = self.store.commit(&batches);
+        let result = self.journal.commit(&mut batches);
         if result.is_ok() {
             for b in &batches {
                 *self.edges_stored.entry(b.fleet.to_owned()).or_default() += b.edges.len();
             }
-            self.share_clouds(&batches);
         }
         drop(batches);
-        self.note_store(&result, accepted.len() + localized.len());
-        result.map(|()| fenced)
+        self.note_store(
+            result.as_ref().map(|_| ()),
+            accepted.len() + localized.len(),
+        );
+        result
     }
 
     /// A commit's outcome as `/healthz` shows it; logged when it changes, not every retry.
-    fn note_store(&self, result: &Result<(), StoreError>, nodes: usize) {
+    fn note_store(&self, result: Result<(), &StoreError>, nodes: usize) {
         let mut fault = self.shared.store_fault.write().expect("fault lock");
         match (result, fault.is_some()) {
             (Ok(()), false) => {}
@@ -138,13 +193,34 @@ impl Worker {
         }
     }
 
-    /// Keeps what a failed commit held, to be committed again after [`STORE_RETRY`].
-    pub(super) fn store_failed(&mut self, work: Unstored) {
+    /// Keeps what a failed commit held, to be committed again after [`STORE_RETRY`]; the
+    /// sites that wait for it (`None`: the store failed, every site waits).
+    pub(super) fn store_failed(&mut self, work: Unstored, sites: Option<BTreeSet<String>>) {
         self.retry_at = Instant::now() + STORE_RETRY;
-        let kept = self.unstored.get_or_insert_default();
+        let kept = self.unstored.get_or_insert_with(|| Unstored {
+            sites: Some(BTreeSet::new()),
+            ..Unstored::default()
+        });
+        kept.sites = match (kept.sites.take(), sites) {
+            (Some(mut waiting), Some(more)) => {
+                waiting.extend(more);
+                Some(waiting)
+            }
+            _ => None,
+        };
         kept.batch.accepted.extend(work.batch.accepted);
         kept.batch.reacks.extend(work.batch.reacks);
         kept.batch.localized.extend(work.batch.localized);
         kept.solves.extend(work.solves);
+    }
+
+    /// Whether the store itself failed and every site waits.
+    pub(super) fn store_stalled(&self) -> bool {
+        self.unstored.as_ref().is_some_and(|u| u.sites.is_none())
+    }
+
+    /// Whether `site`'s entries wait for a commit.
+    pub(super) fn site_waits(&self, site: &str) -> bool {
+        self.unstored.as_ref().is_some_and(|u| u.holds(site))
     }
 }

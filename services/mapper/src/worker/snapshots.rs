@@ -22,7 +22,7 @@ impl Worker {
     /// its last one.
     pub(super) fn snapshots_due(&mut self, all: bool) {
         let every = self.config.store.snapshot_every_nodes as usize;
-        if every == 0 || self.unstored.is_some() {
+        if every == 0 || self.store_stalled() {
             return;
         }
         let mut ids: Vec<String> = self.fleets.keys().cloned().collect();
@@ -42,7 +42,7 @@ impl Worker {
                 true => work > covered,
                 false => work >= covered + every,
             };
-            if !due || self.solve_out(&id) {
+            if !due || self.solve_out(&id) || self.site_waits(&id) {
                 continue;
             }
             let started = Instant::now();
@@ -50,19 +50,19 @@ impl Worker {
                 continue;
             };
             let encoded = started.elapsed();
-            let stored = self.store.put_snapshot(&id, &snapshot);
+            let bytes = snapshot.len();
+            let stored = self.journal.snapshot(&id, covers, snapshot);
             let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
             match stored {
                 Ok(()) => {
                     tracing::info!(
                         fleet = %id,
                         nodes,
-                        bytes = snapshot.len(),
+                        bytes,
                         "snapshot stored: encoded in {:.1} ms, written in {:.1} ms",
                         ms(encoded),
                         ms(started.elapsed() - encoded)
                     );
-                    self.share_snapshot(&id, covers, snapshot);
                 }
                 // Tried again after as many nodes: the last one stays usable.
                 Err(e) => tracing::warn!(fleet = %id, "snapshot not stored: {e}"),

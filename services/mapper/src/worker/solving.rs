@@ -6,8 +6,9 @@
 //! waits for the fleet's solve that is out, then solves on the worker itself. A recording's
 //! feed takes and applies each solve where the recorded mapper did.
 
-use super::{OptimizeError, OptimizeReply, Worker};
-use crate::store::StoreError;
+use super::Worker;
+use crate::inbox::{OptimizeError, OptimizeReply};
+use crate::journal::SiteFault;
 use crate::views::Metrics;
 use fleetmap::SolvePoint;
 use serde_json::json;
@@ -56,6 +57,9 @@ pub(super) struct Solving {
     /// Per fleet, solves still on the solver thread for a map dropped since (cluster mode):
     /// they come back first, in order, and are thrown away.
     stale: HashMap<String, usize>,
+    /// Solves that came back for a site whose entries wait for a commit: applied once they
+    /// are durable, after them.
+    deferred: Vec<Done>,
 }
 
 impl Solving {
@@ -88,6 +92,7 @@ impl Solving {
             last_taken: HashMap::new(),
             held: HashMap::new(),
             stale: HashMap::new(),
+            deferred: Vec::new(),
         }
     }
 
@@ -98,6 +103,7 @@ impl Solving {
         }
         self.held.remove(fleet);
         self.last_taken.remove(fleet);
+        self.deferred.retain(|d| d.fleet != fleet);
     }
 
     /// Whether `done` is a solve of a map dropped since (counted off).
@@ -147,16 +153,30 @@ const SOLVER_NICE: i32 = 10;
 
 impl Worker {
     /// Applies the solves that came back; takes the solves that are due (at most one per
-    /// fleet every solve interval, one out per fleet). Not while a commit failed, and no
-    /// timed solves while a recording is fed (it says where to solve).
+    /// fleet every solve interval, one out per fleet). Not while the store fails, nor for a
+    /// site whose entries wait for a commit, and no timed solves while a recording is fed
+    /// (it says where to solve).
     pub(super) fn due_solves(&mut self) {
-        if self.unstored.is_some() {
+        if self.store_stalled() {
             return;
         }
-        while let Ok(done) = self.solving.done.try_recv() {
-            if self.apply_solve(done).is_err() {
-                return;
+        let deferred = std::mem::take(&mut self.solving.deferred);
+        let came_back = deferred
+            .into_iter()
+            .chain(std::iter::from_fn(|| self.solving.done.try_recv().ok()))
+            .collect::<Vec<_>>();
+        let mut came_back = came_back.into_iter();
+        for done in came_back.by_ref() {
+            if self.site_waits(&done.fleet) {
+                self.solving.deferred.push(done);
+            } else if self.apply_solve(done).is_err() {
+                break;
             }
+        }
+        // Not applied this turn: kept, in order, for the next.
+        self.solving.deferred.extend(came_back);
+        if self.store_stalled() {
+            return;
         }
         self.snapshots_due(false);
         if self.shared.feeding.load(Ordering::SeqCst) {
@@ -171,7 +191,7 @@ impl Worker {
                 .last_taken
                 .get(&id)
                 .is_some_and(|t| t.elapsed() < interval);
-            if recent || solving.out.contains_key(&id) {
+            if recent || solving.out.contains_key(&id) || self.site_waits(&id) {
                 continue;
             }
             let Some(solve) = self.fleets.get_mut(&id).expect("listed").take_solve() else {
@@ -205,6 +225,12 @@ impl Worker {
         if self.unstored.is_some() {
             return;
         }
+        let deferred = std::mem::take(&mut self.solving.deferred);
+        for done in deferred {
+            if self.apply_solve(done).is_err() {
+                return;
+            }
+        }
         while let Ok(done) = self.solving.done.try_recv() {
             if self.apply_solve(done).is_err() {
                 return;
@@ -220,8 +246,8 @@ impl Worker {
 
     /// Applies a solve that ran: its point committed, then the new view and the corrected
     /// poses. Whether it was applied (not while a part of the network is unanchored); an
-    /// error when its point could not be committed (it is kept to be committed again).
-    fn apply_solve(&mut self, done: Done) -> Result<bool, StoreError> {
+    /// error when its point could not be made durable (it is kept to be committed again).
+    fn apply_solve(&mut self, done: Done) -> Result<bool, String> {
         if self.solving.is_stale(&done) {
             return Ok(false);
         }
@@ -249,17 +275,22 @@ impl Worker {
             solves: vec![(fleet.clone(), point, map.take_pass_fixes())],
             ..Default::default()
         };
-        match self.commit(&work) {
+        match self.commit(&work).map(|faults| faults.into_iter().next()) {
             Err(e) => {
-                self.store_failed(work);
-                return Err(e);
+                self.store_failed(work, None);
+                return Err(e.to_string());
             }
-            Ok(fenced) if !fenced.is_empty() => {
+            Ok(Some((site, SiteFault::Fenced(_)))) => {
                 let mut work = work;
-                self.drop_fenced(&fenced, &mut work);
+                self.drop_site(&site, "another host appended to its log", &mut work.batch);
                 return Ok(false);
             }
-            Ok(_) => {}
+            Ok(Some((site, fault @ SiteFault::Unavailable(_)))) => {
+                let why = format!("site {site}: {fault}");
+                self.store_failed(work, Some([site].into()));
+                return Err(why);
+            }
+            Ok(None) => {}
         }
         self.publish_solve(&fleet, started, &point);
         Ok(true)
@@ -331,12 +362,15 @@ impl Worker {
         if let Some(fault) = self.shared.store_fault() {
             return Err(OptimizeError::StoreFailed(fault));
         }
+        if self.site_waits(fleet) {
+            let why = format!("site {fleet}: its last entries are not durable yet");
+            return Err(OptimizeError::StoreFailed(why));
+        }
         if !self.fleets.contains_key(fleet) {
             return Err(OptimizeError::Refused(format!("no fleet {fleet}")));
         }
         if let Some(done) = self.solving.held.remove(fleet) {
-            self.apply_solve(done)
-                .map_err(|e| OptimizeError::StoreFailed(e.to_string()))?;
+            self.apply_solve(done).map_err(OptimizeError::StoreFailed)?;
         }
         while self.solving.out.contains_key(fleet) {
             let done = self
@@ -344,8 +378,11 @@ impl Worker {
                 .done
                 .recv()
                 .map_err(|_| OptimizeError::Stopped)?;
-            self.apply_solve(done)
-                .map_err(|e| OptimizeError::StoreFailed(e.to_string()))?;
+            if self.site_waits(&done.fleet) {
+                self.solving.deferred.push(done);
+                continue;
+            }
+            self.apply_solve(done).map_err(OptimizeError::StoreFailed)?;
         }
         let map = self.fleets.get_mut(fleet).expect("checked above");
         map.take_solve_now()
@@ -361,7 +398,7 @@ impl Worker {
                 let why = "part of the network is not anchored yet";
                 return Err(OptimizeError::Refused(why.into()));
             }
-            Err(e) => return Err(OptimizeError::StoreFailed(e.to_string())),
+            Err(e) => return Err(OptimizeError::StoreFailed(e)),
         }
         let report = self.fleets[&fleet].last_optimization();
         Ok(serde_json::to_value(report).expect("report serializes"))

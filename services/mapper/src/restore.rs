@@ -31,46 +31,34 @@ use std::time::Instant;
 /// full).
 pub type Restored = (HashMap<String, FleetMap>, HashMap<String, usize>);
 
-/// Restores the store, fleet by fleet. A fleet whose rows cannot be read or mapped is
-/// quarantined (its reason kept in `shared`); one mapped by another version is rebuilt
-/// (counted in `shared`'s metrics). Every fleet served is then recorded as mapped by the
-/// running version.
+/// What a fleet whose store records no mapping version is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Unrecorded {
+    /// Rows of a store of format 0: rebuilt by the running version.
+    Rebuilt,
+    /// Rows read from a site's log (cluster mode), which carry no mapping version: presumed
+    /// the running one. The edges are checked all the same, and a site whose writer mapped
+    /// otherwise is rebuilt.
+    Running,
+}
+
+/// Restores the store, fleet by fleet ([`restore_fleet`]); a fleet that does not replay is
+/// quarantined and the others restored. The configured fleets without rows yet are then
+/// recorded as mapped by the running version.
 pub fn restore(config: &MapperConfig, store: &Store, shared: &Shared) -> Result<Restored> {
     let (mut fleets, mut covered) = (HashMap::new(), HashMap::new());
-    let running = config.mapping_version();
     for id in store.fleet_ids()? {
-        match load(config, store, &id, &running) {
-            Ok((map, from, rebuilt)) => {
-                if rebuilt {
-                    Metrics::bump(&shared.metrics.fleets_rebuilt);
-                }
-                shared.publish_map(&map, 0.0);
-                covered.insert(id.clone(), from);
-                fleets.insert(id, map);
-            }
-            Err(e) => {
-                let reason = format!("{e:#}");
-                tracing::error!(fleet = %id, "quarantined: its stored map does not replay: {reason}");
-                shared
-                    .quarantined
-                    .write()
-                    .expect("quarantine lock")
-                    .insert(id, reason);
-            }
+        if let Ok((map, from)) = restore_fleet(config, store, shared, &id, Unrecorded::Rebuilt) {
+            shared.publish_map(&map, 0.0);
+            covered.insert(id.clone(), from);
+            fleets.insert(id, map);
         }
     }
-    // The fleets served, and the configured ones without rows yet, are this version's.
-    let quarantined: Vec<String> = shared
-        .quarantined
-        .read()
-        .expect("quarantine lock")
-        .keys()
-        .cloned()
-        .collect();
+    let running = crate::mapping::mapping_version(config);
     let mut due = Vec::new();
-    for id in fleets.keys().chain(&config.fleets) {
-        let served = !quarantined.contains(id) && !due.contains(&id.as_str());
-        if served && store.mapping_version(id)?.as_ref() != Some(&running) {
+    for id in &config.fleets {
+        let unmapped = !fleets.contains_key(id) && shared.quarantine(id).is_none();
+        if unmapped && store.mapping_version(id)?.as_ref() != Some(&running) {
             due.push(id.as_str());
         }
     }
@@ -78,35 +66,47 @@ pub fn restore(config: &MapperConfig, store: &Store, shared: &Shared) -> Result<
     Ok((fleets, covered))
 }
 
-/// One site's map in cluster mode, once its log was read into the store: as a start
-/// restores a fleet (from its snapshot, else replayed, else rebuilt), its mapping version
-/// then recorded; how many nodes the snapshot covered. A site with no rows starts empty.
-pub fn restore_one(
+/// One fleet's map, for a start and a cluster host's takeover alike: from its snapshot if it
+/// has a usable one, else replayed, else rebuilt (counted in `shared`'s metrics); its
+/// mapping version then recorded; how many nodes the snapshot covered. A fleet with no rows
+/// starts empty. One whose rows cannot be read or mapped is quarantined (its reason kept in
+/// `shared`).
+pub fn restore_fleet(
     config: &MapperConfig,
     store: &Store,
     shared: &Shared,
     id: &str,
+    unrecorded: Unrecorded,
 ) -> Result<(FleetMap, usize)> {
-    let running = config.mapping_version();
-    // Rows read from the log carry no mapping version: presume the running one. The edges
-    // are checked all the same, and a site whose writer mapped otherwise is rebuilt.
-    if store.mapping_version(id)?.is_none() {
-        store.set_mapping_version(&[id], &running)?;
-    }
-    let stored = store.load_fleet(id)?;
-    let restored = if stored.nodes.is_empty() && stored.localized.is_empty() {
-        (config.new_fleet(id), 0)
-    } else {
-        let (map, covered, rebuilt) = load(config, store, id, &running)?;
-        if rebuilt {
-            Metrics::bump(&shared.metrics.fleets_rebuilt);
+    let running = crate::mapping::mapping_version(config);
+    let restored = (|| {
+        if unrecorded == Unrecorded::Running && store.mapping_version(id)?.is_none() {
+            store.set_mapping_version(&[id], &running)?;
         }
-        (map, covered)
-    };
-    if store.mapping_version(id)?.as_ref() != Some(&running) {
-        store.set_mapping_version(&[id], &running)?;
-    }
-    Ok(restored)
+        let stored = store.load_fleet(id)?;
+        let restored = if stored.nodes.is_empty() && stored.localized.is_empty() {
+            (crate::mapping::new_fleet(config, id), 0)
+        } else {
+            let (map, covered, rebuilt) = load(config, store, id, &running)?;
+            if rebuilt {
+                Metrics::bump(&shared.metrics.fleets_rebuilt);
+            }
+            (map, covered)
+        };
+        if store.mapping_version(id)?.as_ref() != Some(&running) {
+            store.set_mapping_version(&[id], &running)?;
+        }
+        Ok(restored)
+    })();
+    restored.inspect_err(|e: &anyhow::Error| {
+        let reason = format!("{e:#}");
+        tracing::error!(fleet = %id, "quarantined: its stored map does not replay: {reason}");
+        shared
+            .quarantined
+            .write()
+            .expect("quarantine lock")
+            .insert(id.to_owned(), reason);
+    })
 }
 
 /// Why a fleet must be rebuilt rather than restored, if it must: its recorded mapping
@@ -212,10 +212,11 @@ pub fn from_snapshot(
 ) -> Result<(FleetMap, usize)> {
     let restoring = std::panic::AssertUnwindSafe(|| -> Result<(FleetMap, usize)> {
         let mut spans = SpanReplay::new(stored.localized.clone());
-        let (mut map, covered) =
-            config
-                .new_fleet(&stored.id)
-                .restore(bytes, &stored.nodes, &mut spans)?;
+        let (mut map, covered) = crate::mapping::new_fleet(config, &stored.id).restore(
+            bytes,
+            &stored.nodes,
+            &mut spans,
+        )?;
         replay_tail(&mut map, stored, covered, &mut spans)?;
         spans.rest(&mut map);
         check_edges(&map, stored)?;
@@ -235,7 +236,7 @@ pub fn replay(config: &MapperConfig, stored: &StoredFleet) -> Result<FleetMap> {
 /// One fleet's map replayed from all of its nodes by the running mapping version, whatever
 /// edges it stored.
 pub fn replay_unchecked(config: &MapperConfig, stored: &StoredFleet) -> Result<FleetMap> {
-    let mut map = config.new_fleet(&stored.id);
+    let mut map = crate::mapping::new_fleet(config, &stored.id);
     let mut spans = SpanReplay::new(stored.localized.clone());
     replay_tail(&mut map, stored, 0, &mut spans)?;
     spans.rest(&mut map);
@@ -469,7 +470,7 @@ pub struct StoreCheck {
 /// the stored ones and what its snapshot restores against the replay, and says which fleets
 /// a start would rebuild.
 pub fn verify_store(config: &MapperConfig, store: &Store) -> Result<StoreCheck> {
-    let running = config.mapping_version();
+    let running = crate::mapping::mapping_version(config);
     let mut fleets = Vec::new();
     for id in store.fleet_ids()? {
         let stored = store.load_fleet(&id)?;

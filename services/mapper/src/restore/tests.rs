@@ -136,9 +136,9 @@ fn map_as_the_worker(
 ) -> FleetMap {
     // As the mapper does at start: the fleet's rows are this version's.
     store
-        .set_mapping_version(&["park"], &config.mapping_version())
+        .set_mapping_version(&["park"], &crate::mapping::mapping_version(config))
         .unwrap();
-    let mut map = config.new_fleet("park");
+    let mut map = crate::mapping::new_fleet(config, "park");
     let mut out: Option<(u64, slam::BackgroundSolve)> = None;
     let mut edges = 0;
     let mut arrival = 0;
@@ -368,7 +368,10 @@ fn a_fleet_of_other_mapping_parameters_is_rebuilt_from_its_nodes_not_quarantined
     let mut other = config.clone();
     other.mapping.idc.final_max_distance_m *= 1.5;
     other.mapping.odometry_sigma_xy_per_m *= 1.5;
-    assert_ne!(other.mapping_version(), config.mapping_version());
+    assert_ne!(
+        crate::mapping::mapping_version(&other),
+        crate::mapping::mapping_version(&config)
+    );
     let expected = replay_unchecked(&other, &before).unwrap();
     assert!(
         edges_differ(&expected, &before).is_some(),
@@ -395,7 +398,7 @@ fn a_fleet_of_other_mapping_parameters_is_rebuilt_from_its_nodes_not_quarantined
     assert_eq!(after.edges, encode_edges(&expected.graph().edges));
     assert_eq!(
         store.mapping_version("park").unwrap(),
-        Some(other.mapping_version())
+        Some(crate::mapping::mapping_version(&other))
     );
     let check = verify_store(&other, &store).unwrap();
     assert!(check.ok && check.fleets[0].rebuild.is_none(), "{check:?}");
