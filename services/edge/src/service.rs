@@ -453,7 +453,7 @@ pub async fn run(
     let producer = {
         let outbox = outbox.clone();
         let config = config.clone();
-        tokio::task::spawn_blocking(move || produce(config, source, outbox, tx))
+        tokio::task::spawn_blocking(move || produce(&config, source, &outbox, &tx))
     };
     let mut sending = Sending {
         fleet: config.fleet.clone(),

@@ -10,6 +10,8 @@
 
 use crate::EncodeError;
 use crate::gridmap::{FREE, OCCUPIED, UNKNOWN, check_grid};
+
+mod tiff;
 use slam::geodesy::{GeoDatum, Geodetic};
 use slam::grid::{CellState, OccupancyGrid};
 use slam::nalgebra::Vector3;
@@ -152,7 +154,7 @@ impl GeoRaster {
     /// and longitude), the pixel-is-area transform from its western and northern edges, and
     /// [`UNKNOWN`] as GDAL's no-data value.
     pub fn to_geotiff(&self) -> Vec<u8> {
-        crate::tiff::geotiff_epsg4326(self)
+        tiff::geotiff_epsg4326(self)
     }
 }
 

@@ -15,7 +15,6 @@ pub mod georaster;
 pub mod gridmap;
 pub mod posegraph;
 pub mod relations;
-mod tiff;
 pub mod trajectory;
 pub mod webtiles;
 

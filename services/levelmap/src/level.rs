@@ -9,6 +9,8 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+mod ouster;
+
 /// A scan file's format: scanio's real ones and, in the lab build, the simulator's JSON.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
@@ -154,7 +156,7 @@ pub fn run(args: &LevelArgs) -> Result<()> {
     let params = load_params(args.config.as_deref())?;
     let format = scan_format(&args.file, args.format.as_deref())?;
     if format == Format::Ouster {
-        return crate::level_ouster::run(args, params);
+        return ouster::run(args, params);
     }
     if args.meta.is_some() {
         bail!(

@@ -6,7 +6,6 @@
 //! every build. A command not compiled in is not in `--help` either.
 
 mod level;
-mod level_ouster;
 #[cfg(feature = "mapper")]
 mod map_versions;
 #[cfg(feature = "mapper")]

@@ -84,7 +84,11 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
     let listen = zenoh.get_json("listen/endpoints").unwrap_or_default();
     runtime()?.block_on(async {
         let stop = runtime::session::shutdown_signal();
-        let running = mapper::start(config.clone()).await?;
+        // One mapper either way: alone, or deployed as one host of a cluster.
+        let running = match config.cluster {
+            None => mapper::start(config.clone()).await?,
+            Some(_) => cluster::start(config.clone()).await?,
+        };
         tracing::info!(
             "mapper: Zenoh {listen}, HTTP http://{}/api/v1, store {}",
             running.http_addr,
@@ -124,10 +128,10 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
 #[cfg(feature = "mapper")]
 pub fn run_gateway(args: &GatewayArgs) -> Result<()> {
     init_logging();
-    let config = mapper::gateway::GatewayConfig::load(args.config.as_deref())?;
+    let config = gateway::GatewayConfig::load(args.config.as_deref())?;
     runtime()?.block_on(async {
         let stop = runtime::session::shutdown_signal();
-        let running = mapper::gateway::start(config.clone()).await?;
+        let running = gateway::start(config.clone()).await?;
         tracing::info!(
             "gateway: HTTP http://{}/api/v1 for hosts {:?}",
             running.http_addr,

@@ -75,7 +75,7 @@ pub enum Work {
         reply: tokio::sync::oneshot::Sender<()>,
     },
     /// A change of `site`'s versions or modes, checked by the API: journaled by the worker
-    /// (`crate::journal`), as every change of a site's record is.
+    /// ([`crate::journal`]), as every change of a site's record is.
     Change {
         /// The site.
         site: String,

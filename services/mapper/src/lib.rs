@@ -15,28 +15,28 @@
 //!   robot's live feed);
 //! - [`api`]: the HTTP API; [`localization`] (robots localizing on a map version) and
 //!   [`versions`] (frozen maps) serve both the worker and the API;
-//! - [`cluster`]: cluster mode, the sites spread over hosts on NATS JetStream; [`gateway`]
-//!   its stateless HTTP front;
+//! - [`deployment`]: how the mapper is deployed: alone ([`deployment::Alone`]), or as one
+//!   host of a cluster by the `cluster` crate (which this crate does not depend on), its
+//!   stateless HTTP front the `gateway` crate;
 //! - [`server`] wires them; [`config`] is the configuration.
 
 pub mod api;
 pub mod blobs;
 pub mod bus;
-pub mod cluster;
 pub mod config;
-pub mod gateway;
+pub mod deployment;
 pub mod inbox;
 pub mod journal;
 pub mod localization;
 pub mod mapping;
 pub mod restore;
 pub mod server;
-pub mod store;
+pub use mapstore as store;
 pub mod versions;
 pub mod views;
 pub mod worker;
 
 pub use config::{MapperConfig, fleet_mapping_params};
 pub use fleetmap::{FleetMap, IngestError, Ingested, NodeRecord, Sequence};
-pub use server::{Running, start};
+pub use server::{Running, start, start_deployed};
 pub use store::{Store, StoreError};

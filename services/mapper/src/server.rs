@@ -5,13 +5,12 @@
 //! publish). Live odometry is handled in its Zenoh callback ([`crate::bus::odometry`]), with no
 //! mapping work, so teleoperation sees it at once.
 
-use crate::blobs::{Blobs, NotShared};
 use crate::bus::Bus;
 use crate::bus::feeds::{Declared, EVERY_FLEET, Feeds};
 use crate::bus::recording::FeedReport;
 use crate::config::MapperConfig;
+use crate::deployment::{Alone, Beside, Deployment, WorkerEnds};
 use crate::inbox::Work;
-use crate::journal::{Journal, StoreJournal};
 use crate::localization::MapCache;
 use crate::store::Store;
 use crate::views::Shared;
@@ -36,7 +35,8 @@ pub struct Running {
     worker: Option<std::thread::JoinHandle<()>>,
     work: mpsc::SyncSender<Work>,
     fleets: Vec<String>,
-    cluster: Option<crate::cluster::Cluster>,
+    /// What runs beside the worker (a cluster host's keepers), ended after it.
+    beside: Option<Box<dyn Beside>>,
 }
 
 impl Running {
@@ -47,7 +47,7 @@ impl Running {
             .map_err(|e| anyhow::anyhow!("optimizing fleet {fleet}: {e}"))
     }
 
-    /// Feeds the recording at `path` to the worker (`crate::recording`) and waits until it
+    /// Feeds the recording at `path` to the worker ([`crate::bus::recording`]) and waits until it
     /// has mapped it, solving where the recorded mapper solved and after the last node.
     pub async fn feed_recording(&self, path: &std::path::Path) -> Result<FeedReport> {
         let (path, work) = (path.to_owned(), self.work.clone());
@@ -83,16 +83,30 @@ impl Running {
                 .await?
                 .map_err(|_| anyhow::anyhow!("the mapping worker panicked"))?;
         }
-        // Nothing is acked any more: the next hosts may take the sites at once.
-        if let Some(cluster) = self.cluster.take() {
-            cluster.release_all().await;
+        // Nothing is acked any more: a cluster's next hosts may take the sites at once.
+        if let Some(beside) = self.beside.take() {
+            beside.stop().await;
         }
         Ok(())
     }
 }
 
-/// Starts the mapper: restores the store, opens Zenoh and the HTTP listener.
+/// Starts the mapper alone ([`Alone`]): restores the store, opens Zenoh and the HTTP
+/// listener. A `[cluster]` configuration is the `cluster` crate's to start.
 pub async fn start(config: MapperConfig) -> Result<Running> {
+    anyhow::ensure!(
+        config.cluster.is_none(),
+        "[cluster] is set: a cluster host starts through the cluster deployment (levelmap mapper does so)"
+    );
+    // Boxed: the start's state is large, and is awaited once.
+    Box::pin(start_deployed(config, Box::new(Alone))).await
+}
+
+/// Starts the mapper as `deployment` deploys it.
+pub async fn start_deployed(
+    config: MapperConfig,
+    mut deployment: Box<dyn Deployment>,
+) -> Result<Running> {
     for fleet in &config.fleets {
         wire::validate_id("fleet", fleet)?;
     }
@@ -101,50 +115,26 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
     // The worker writes; the HTTP side reads clouds (redb: readers never wait on the writer).
     let store = Arc::new(store);
     let shared = Arc::new(Shared::new(config.token.clone(), now_ns()));
-    // In cluster mode a site comes only with its lease, restored from its log.
-    let nats = match &config.cluster {
-        Some(cluster) => Some(crate::cluster::connect(cluster).await?),
-        None => None,
-    };
-    let (fleets, snapshots) = match nats {
-        Some(_) => Default::default(),
-        None => crate::restore::restore(&config, &store, &shared)?,
+    // A cluster host's sites come only with their leases, each restored then.
+    let every_fleet = deployment.holds_every_fleet();
+    let (fleets, snapshots) = match every_fleet {
+        true => crate::restore::restore(&config, &store, &shared)?,
+        false => Default::default(),
     };
     let maps = Arc::new(MapCache::new(&config.localization, config.max_range_m));
     let localizing = crate::localization::restore(&store, &maps)?;
 
     let session = config.zenoh.open(runtime::session::Role::Router).await?;
     let (work_tx, work_rx) = mpsc::sync_channel::<Work>(crate::inbox::INGEST_QUEUE);
-    let (shelf, shelving) = crate::cluster::shelf();
-    // The single writer's journal: the store, or in cluster mode the sites' logs first; and
-    // what the API shares beyond the store.
-    let (journal, logs, blobs): (Box<dyn Journal>, _, Arc<dyn Blobs>) =
-        match nats.as_ref().zip(config.cluster.as_ref()) {
-            None => (
-                Box::new(StoreJournal::new(store.clone())),
-                None,
-                Arc::new(NotShared),
-            ),
-            Some((js, cluster)) => {
-                let (journal, logs) =
-                    crate::cluster::journal(&config, store.clone(), shared.clone(), shelf);
-                let retention = crate::cluster::cloud_retention(&config.clouds);
-                let blobs = crate::cluster::ClusterBlobs::new(
-                    &cluster.host,
-                    js.clone(),
-                    cluster.replicas,
-                    retention,
-                );
-                (Box::new(journal), Some(logs), Arc::new(blobs))
-            }
-        };
+    // The single writer's journal, and what the API shares beyond the store.
+    let (journal, blobs) = deployment.journal(&config, &store, &shared);
     let feeds = Feeds::new(
         session.clone(),
         shared.clone(),
         &config.fleets,
         work_tx.clone(),
     );
-    let subscriptions = subscribe(&session, &feeds, nats.is_some(), &shared).await?;
+    let subscriptions = subscribe(&session, &feeds, every_fleet, &shared).await?;
     let worker = {
         let worker = Worker::new(
             config.clone(),
@@ -160,7 +150,7 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             .spawn(move || {
                 // The subscriptions live as long as the worker.
                 let _subscriptions = subscriptions;
-                worker.run(work_rx)
+                worker.run(&work_rx)
             })?
     };
 
@@ -172,25 +162,15 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
             config.fleets.clone(),
         );
     }
-    let cluster = match nats.zip(logs) {
-        Some((js, logs)) => Some(
-            crate::cluster::Cluster::start(
-                &config,
-                js,
-                store.clone(),
-                shared.clone(),
-                crate::cluster::WorkerEnds {
-                    work: work_tx.clone(),
-                    logs,
-                    shelving,
-                    feeds,
-                    maps: maps.clone(),
-                },
-            )
-            .await?,
-        ),
-        None => None,
+    let ends = WorkerEnds {
+        config: config.clone(),
+        store: store.clone(),
+        shared: shared.clone(),
+        work: work_tx.clone(),
+        feeds,
+        maps: maps.clone(),
     };
+    let beside = deployment.start(ends).await?;
     let listener = tokio::net::TcpListener::bind(&config.http_listen)
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
@@ -205,12 +185,12 @@ pub async fn start(config: MapperConfig) -> Result<Running> {
         worker: Some(worker),
         work: work_tx,
         fleets: config.fleets.clone(),
-        cluster,
+        beside: Some(beside),
     })
 }
 
 /// Serves `app` on `listener` until `stopping` turns true, then lets open requests finish.
-pub(crate) fn serve_until_stopped(
+pub fn serve_until_stopped(
     listener: tokio::net::TcpListener,
     app: axum::Router,
     mut stopping: tokio::sync::watch::Receiver<bool>,
@@ -229,21 +209,20 @@ pub(crate) fn serve_until_stopped(
 }
 
 /// What the mapper declares on the bus for as long as the worker runs: every fleet's feeds
-/// (single-machine mode; in cluster mode each site's keeper declares its own), the map
-/// queryable.
+/// (when it holds every fleet; a cluster host declares each site's own), the map queryable.
 type Subscriptions = (Option<Declared>, zenoh::query::Queryable<()>);
 
-/// Every fleet's feeds unless in cluster mode, and `levelmap/{fleet}/map/*` queries to the
+/// Every fleet's feeds when `every_fleet`, and `levelmap/{fleet}/map/*` queries to the
 /// current views.
 async fn subscribe(
     session: &zenoh::Session,
     feeds: &Feeds,
-    cluster: bool,
+    every_fleet: bool,
     shared: &Arc<Shared>,
 ) -> Result<Subscriptions> {
-    let declared = match cluster {
-        true => None,
-        false => Some(feeds.declare(EVERY_FLEET).await?),
+    let declared = match every_fleet {
+        true => Some(feeds.declare(EVERY_FLEET).await?),
+        false => None,
     };
     let views = shared.clone();
     let queries = session

@@ -104,7 +104,7 @@ pub struct Shared {
     pub quarantined: RwLock<BTreeMap<String, String>>,
     /// Set when the mapper stops: open event streams end, so HTTP can shut down gracefully.
     pub stopping: tokio::sync::watch::Sender<bool>,
-    /// Set while a recording is fed (`crate::recording`): the worker solves only when the
+    /// Set while a recording is fed ([`crate::bus::recording`]): the worker solves only when the
     /// feed asks, where the recorded mapper solved, not on its own timer.
     pub feeding: std::sync::atomic::AtomicBool,
     /// Localizing robots' recent localizations.

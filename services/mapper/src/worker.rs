@@ -2,7 +2,7 @@
 //!
 //! Each turn: take a batch → check each node → map it → commit the batch → ack → publish
 //! views and events → apply the solves the solver thread finished and send out the due ones
-//! (`worker/solving.rs`) → answer operator requests. Under load, nodes batch up (one commit
+//! (the `solving` module) → answer operator requests. Under load, nodes batch up (one commit
 //! per batch) and the whole network is solved beside them, not between them.
 //! The worker is the single writer: every change of a site's record (a batch, a version, a
 //! change of modes) is an entry it makes durable through the journal ([`crate::journal`])
@@ -137,9 +137,9 @@ impl Worker {
     }
 
     /// Runs until every sender of `work` is gone.
-    pub fn run(mut self, work: mpsc::Receiver<Work>) {
+    pub fn run(mut self, work: &mpsc::Receiver<Work>) {
         let interval = Duration::from_millis(self.config.solve_interval_ms.max(10));
-        while let Some(jobs) = take_batch(&work, self.solving.wake(interval)) {
+        while let Some(jobs) = take_batch(work, self.solving.wake(interval)) {
             let started = Instant::now();
             self.retry_store();
             let mut batch = self.check_and_map(jobs);

@@ -1,12 +1,12 @@
 //! The Zenoh session of a levelmap service: mode, endpoints and TLS from the service's config
 //! file, over an optional Zenoh configuration file (access control and the rest); the config
-//! loader both services share ([`load_toml`], with [`mod@env`] overrides).
+//! loader every service shares is `settings`' ([`load_toml`], with [`mod@env`] overrides),
+//! re-exported here.
 
 use anyhow::{anyhow, bail};
-use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::{SystemTime, UNIX_EPOCH};
 
 /// Wall-clock time in ns since the Unix epoch, as the wire's stamps are.
@@ -16,56 +16,8 @@ pub fn now_ns() -> u64 {
         .map_or(0, |d| d.as_nanos() as u64)
 }
 
-pub mod env;
+pub use settings::{env, load_toml, load_toml_with};
 mod tls;
-
-/// Reads a service's config: its TOML file (none: every key at its default), then the
-/// `LEVELMAP_…` variables of the environment ([`mod@env`]). Unknown keys are errors, in the file
-/// when `T` denies them, in the environment always (a typo must not silently become a
-/// default). Errors name the file or the variable.
-pub fn load_toml<T>(path: Option<&Path>) -> anyhow::Result<T>
-where
-    T: DeserializeOwned + Serialize + Default,
-{
-    load_toml_with(path, std::env::vars_os())
-}
-
-/// [`load_toml`] with the environment given: `vars` as `std::env::vars_os` yields them.
-pub fn load_toml_with<T>(
-    path: Option<&Path>,
-    vars: impl IntoIterator<Item = (std::ffi::OsString, std::ffi::OsString)>,
-) -> anyhow::Result<T>
-where
-    T: DeserializeOwned + Serialize + Default,
-{
-    let overrides = env::env_overrides(vars)?;
-    let mut table = match path {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            // The file alone first: its errors keep their line and column.
-            let alone: T =
-                toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            if overrides.is_empty() {
-                return Ok(alone);
-            }
-            toml::from_str::<toml::Table>(&text)?
-        }
-        None => toml::Table::new(),
-    };
-    let defaults = toml::Table::try_from(T::default())?;
-    env::apply_overrides(&mut table, &defaults, &overrides)?;
-    let vars: Vec<&str> = overrides.iter().map(|o| o.var.as_str()).collect();
-    let origin = match path {
-        Some(path) => format!("{} with {}", path.display(), vars.join(", ")),
-        None => vars.join(", "),
-    };
-    let config: T = toml::Value::Table(table)
-        .try_into()
-        .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
-    env::check_taken(&toml::Table::try_from(&config)?, &overrides)?;
-    Ok(config)
-}
 
 /// The largest Zenoh message a levelmap session takes: twice the largest valid node
 /// ([`wire::MAX_NODE_BYTES`]), so every valid node fits with room for its framing.

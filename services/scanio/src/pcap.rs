@@ -173,21 +173,21 @@ impl<R: Read> PcapReader<R> {
         match read_full(&mut self.input, &mut header) {
             Ok(0) => return None,
             Ok(16) => {}
-            Ok(n) => return self.cut(format!("a record header of {n} of 16 bytes")),
-            Err(e) => return self.cut(format!("read error: {e}")),
+            Ok(n) => return self.cut(&format!("a record header of {n} of 16 bytes")),
+            Err(e) => return self.cut(&format!("read error: {e}")),
         }
         let be = self.big_endian;
         let (secs, frac) = (read_u32(&header[0..4], be), read_u32(&header[4..8], be));
         let incl = read_u32(&header[8..12], be) as usize;
         // No link layer frame is near 256 KiB; a bigger length is a corrupt header.
         if incl > 1 << 18 {
-            return self.cut(format!("a record of {incl} bytes (corrupt header)"));
+            return self.cut(&format!("a record of {incl} bytes (corrupt header)"));
         }
         let mut data = vec![0u8; incl];
         match read_full(&mut self.input, &mut data) {
             Ok(n) if n == incl => {}
-            Ok(n) => return self.cut(format!("a record of {n} of {incl} bytes")),
-            Err(e) => return self.cut(format!("read error: {e}")),
+            Ok(n) => return self.cut(&format!("a record of {n} of {incl} bytes")),
+            Err(e) => return self.cut(&format!("read error: {e}")),
         }
         self.offset += 16 + incl as u64;
         let frac_ns = if self.nanos {
@@ -198,7 +198,7 @@ impl<R: Read> PcapReader<R> {
         Some((secs as u64 * 1_000_000_000 + frac_ns, data))
     }
 
-    fn cut<T>(&mut self, what: String) -> Option<T> {
+    fn cut<T>(&mut self, what: &str) -> Option<T> {
         self.truncated = Some(format!(
             "{}: truncated pcap: ends in {what} at byte {} after {} records",
             self.path.display(),

@@ -2,11 +2,8 @@
 //! (`deploy/cluster/make-nats-certs.sh`), the CA and the host's own certificate, which the
 //! servers map to the host's user.
 
-use crate::LogError;
-use async_nats::ConnectOptions;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
-use std::time::Duration;
 
 /// The NATS servers and this host's credentials for them.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -23,15 +20,19 @@ pub struct NatsAccess {
     pub key: Option<PathBuf>,
 }
 
+#[cfg(feature = "client")]
 impl NatsAccess {
     /// JetStream over [`Self::connect`].
-    pub async fn jetstream(&self, name: &str) -> Result<crate::JetStream, LogError> {
+    pub async fn jetstream(&self, name: &str) -> Result<crate::JetStream, crate::LogError> {
         Ok(async_nats::jetstream::new(self.connect(name).await?))
     }
 
     /// Connects as `name` (shown in the servers' connection lists). The first connection
     /// is retried until it succeeds, so hosts and servers may start in any order.
-    pub async fn connect(&self, name: &str) -> Result<async_nats::Client, LogError> {
+    pub async fn connect(&self, name: &str) -> Result<async_nats::Client, crate::LogError> {
+        use crate::LogError;
+        use async_nats::ConnectOptions;
+        use std::time::Duration;
         if self.servers.is_empty() {
             return Err(LogError::JetStream("no NATS servers configured".into()));
         }

@@ -34,6 +34,10 @@ enum Latest {
 /// The header a KV entry names its operation in (`PUT`, `DEL`, `PURGE`).
 const KV_OPERATION: &str = "KV-Operation";
 
+/// The KV bucket of the sites' leases (and the hosts' presence), as the mapper hosts and
+/// the gateways open it.
+pub const LEASES_BUCKET: &str = "levelmap_site_leases";
+
 /// A site held by this host, at the revision it last wrote.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Lease {

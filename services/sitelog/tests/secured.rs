@@ -15,9 +15,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-/// The leases' bucket as the mapper names it (`mapper::cluster::LEASES_BUCKET`): auth.conf
-/// lets a gateway read this one.
-const LEASES_BUCKET: &str = "levelmap_site_leases";
+// The leases' bucket as the hosts and gateways name it: auth.conf lets a gateway read it.
+use sitelog::LEASES_BUCKET;
 
 fn make_certs(out: &Path, nodes: &str, hosts: &str) {
     make_certs_with_gateways(out, nodes, hosts, None);

@@ -7,7 +7,6 @@ use crate::node::{NodeBuilder, NodeError, SensorScan};
 use crate::outbox::Outbox;
 use crate::ros_out::NodeFrame;
 use crate::source::{Source, SourceEvent};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
 use wire::{LiveScan, Node};
@@ -38,10 +37,10 @@ fn offer(
 
 /// The blocking side: paces the source, levels scans, commits nodes.
 pub(super) fn produce(
-    config: EdgeConfig,
+    config: &EdgeConfig,
     mut source: Box<dyn Source>,
-    outbox: Arc<Outbox>,
-    tx: mpsc::Sender<Produced>,
+    outbox: &Outbox,
+    tx: &mpsc::Sender<Produced>,
 ) {
     let numbering = outbox
         .next_node_seq()
@@ -93,7 +92,7 @@ pub(super) fn produce(
                 last_odometry_ns = Some(pose.stamp_ns);
                 Produced::Odometry(pose)
             }
-            SourceEvent::Scan(scan) => match offer(&mut builder, &scan, live_due, &tx) {
+            SourceEvent::Scan(scan) => match offer(&mut builder, &scan, live_due, tx) {
                 Ok(None) => continue,
                 Ok(Some(node)) => {
                     if let Err(e) = outbox.push(&node) {

@@ -6,9 +6,9 @@
 
 use crate::bench_fleet::agent;
 use anyhow::{Context, Result, bail};
+use gateway::GatewayConfig;
 use mapper::MapperConfig;
-use mapper::cluster::ClusterConfig;
-use mapper::gateway::GatewayConfig;
+use mapper::config::ClusterConfig;
 use runtime::session::SessionConfig;
 use sitelog::NatsAccess;
 use sitelog::local::LocalCluster;
@@ -57,7 +57,7 @@ impl Deployment {
             // Each router connects to those started before it: a full mesh, one link a pair.
             config.zenoh.connect = Some(started.iter().map(|h| h.zenoh.clone()).collect());
             // As deploy/cluster/mapper-host.toml: a takeover replays at most this tail.
-            config.store.snapshot_every_nodes = mapper::cluster::SNAPSHOT_EVERY_NODES;
+            config.store.snapshot_every_nodes = cluster::SNAPSHOT_EVERY_NODES;
             config.cluster = Some(ClusterConfig {
                 host: name.clone(),
                 hosts: names.clone(),

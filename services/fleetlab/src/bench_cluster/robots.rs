@@ -42,6 +42,7 @@ pub(super) struct AckState {
 }
 
 /// What an ack says, as the bench reads it.
+#[derive(Clone, Copy)]
 struct Ack {
     chain_id: u64,
     acked: Option<u64>,

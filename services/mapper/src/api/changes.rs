@@ -1,6 +1,6 @@
 //! Changes of a site's record that an operator asks for (versions added or deleted, robots'
 //! modes set): checked here, then handed to the worker, which journals them as it journals
-//! nodes (`crate::journal`). The API never writes the store.
+//! nodes ([`crate::journal`]). The API never writes the store.
 
 use super::{Api, ApiError, Reply};
 use crate::inbox::Work;

@@ -1,4 +1,4 @@
-//! One robot's live feed (`crate::live`) as a WebSocket or as server-sent events.
+//! One robot's live feed ([`crate::views::live`]) as a WebSocket or as server-sent events.
 
 use super::{Api, ApiError, Reply};
 use crate::views::live::LiveSample;

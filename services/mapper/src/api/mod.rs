@@ -69,7 +69,7 @@ struct Api {
     changes_lock: Arc<tokio::sync::Mutex<()>>,
     /// The base map the dashboard may draw (`[http.base_map]`).
     base_map: Option<Arc<crate::config::BaseMap>>,
-    /// The version files and clouds shared beyond this host's store (`crate::blobs`).
+    /// The version files and clouds shared beyond this host's store ([`crate::blobs`]).
     blobs: Arc<dyn Blobs>,
 }
 

@@ -136,7 +136,7 @@ pub(super) async fn node_detail(
 }
 
 /// A node's encoded cloud from the store (a disk read: heavy work), or from the clouds
-/// shared beyond it when the store lacks it (`crate::blobs`).
+/// shared beyond it when the store lacks it ([`crate::blobs`]).
 async fn stored_cloud(api: &Api, fleet: &str, node: usize) -> Reply<Option<Vec<u8>>> {
     // 503 for as long as commits fail, whether or not the file is open between attempts.
     if let Some(fault) = api.shared.store_fault() {

@@ -79,7 +79,7 @@ fn the_document_declares_the_bearer_token_where_it_is_needed() {
 }
 
 /// A router over an empty mapper (no worker: an operator request finds it stopped).
-fn app(config: MapperConfig) -> Router {
+fn app(config: &MapperConfig) -> Router {
     static N: AtomicUsize = AtomicUsize::new(0);
     let path = std::env::temp_dir().join(format!(
         "levelmap-api-{}-{}.redb",
@@ -100,7 +100,7 @@ fn app(config: MapperConfig) -> Router {
         store,
         maps,
         Arc::new(crate::blobs::NotShared),
-        &config,
+        config,
     )
 }
 
@@ -136,7 +136,7 @@ async fn text(r: Response) -> String {
 
 #[tokio::test]
 async fn a_read_token_guards_every_api_route_but_the_token_check() {
-    let app = app(tokens());
+    let app = app(&tokens());
     let doc: serde_json::Value = serde_json::from_str(&super::openapi_json()).unwrap();
     for (template, item) in doc["paths"].as_object().unwrap() {
         let path = template
@@ -202,7 +202,7 @@ async fn a_read_token_guards_every_api_route_but_the_token_check() {
 
 #[tokio::test]
 async fn without_a_read_token_reading_is_open() {
-    let app = app(MapperConfig::default());
+    let app = app(&MapperConfig::default());
     assert_eq!(get(&app, "/api/v1/fleets", None).await.status(), 200);
     assert_eq!(get(&app, "/api/v1/fleets", Some("any")).await.status(), 200);
     let auth = text(get(&app, "/api/v1/auth", None).await).await;
@@ -217,7 +217,7 @@ async fn cors_answers_the_listed_origins_only() {
     let origin = "https://ops.example.org";
     let mut config = tokens();
     config.http.cors_origins = vec![CorsOrigin::try_from(origin.to_owned()).unwrap()];
-    let app = app(config);
+    let app = app(&config);
     // A preflight carries no token: answered before the token check.
     let preflight = [
         ("origin", origin),
@@ -258,7 +258,7 @@ async fn cors_answers_the_listed_origins_only() {
 
 #[tokio::test]
 async fn no_cors_headers_by_default() {
-    let app = app(MapperConfig::default());
+    let app = app(&MapperConfig::default());
     let origin = [("origin", "https://ops.example.org")];
     let r = send(&app, Method::GET, "/api/v1/fleets", &origin).await;
     assert_eq!(r.status(), 200);
@@ -278,7 +278,7 @@ async fn event_streams_are_capped_and_a_closed_one_frees_its_place() {
         event_streams: NonZeroUsize::new(2).unwrap(),
         ..HttpConfig::default()
     };
-    let app = app(config);
+    let app = app(&config);
     let events = "/api/v1/events";
     let first = get(&app, events, Some("r-token")).await;
     let second = get(&app, events, Some("w-token")).await;

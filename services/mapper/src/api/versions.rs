@@ -1,5 +1,5 @@
 //! Map versions: freeze a fleet's map, list, read, export and delete versions, import one
-//! from another mapper's file (`crate::versions`). Making, importing and deleting need the
+//! from another mapper's file ([`crate::versions`]). Making, importing and deleting need the
 //! write token; each is made on the blocking pool, journaled by the worker
 //! ([`Api::change_site`]) and waited for to its end.
 

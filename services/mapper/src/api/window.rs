@@ -1,4 +1,4 @@
-//! The map around a robot, cut from cached tiles (`crate::tiles`).
+//! The map around a robot, cut from cached tiles ([`fleetmap::tiles`]).
 
 use super::map::GridPlacement;
 use super::{Api, ApiError, Reply};

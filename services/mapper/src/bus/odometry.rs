@@ -1,5 +1,5 @@
 //! Live odometry and live scans, handled in their Zenoh callbacks: the robot's latest pose for
-//! `GET …/robots`, its live feed (`crate::live`) and, at most [`POSE_EVENT_PERIOD_NS`] apart
+//! `GET …/robots`, its live feed ([`crate::views::live`]) and, at most [`POSE_EVENT_PERIOD_NS`] apart
 //! per robot, a `pose` event in the map frame.
 
 use crate::views::{LiveOdometry, Metrics, Shared};

@@ -77,7 +77,7 @@ pub fn occupancy_grid_sample(
 /// One fleet's publication: its publisher, the last grid (for queries), when it was made.
 struct FleetMapOut {
     publisher: RosPublisher,
-    last: Arc<Mutex<Option<Arc<Vec<u8>>>>>,
+    last: Arc<Mutex<Option<Arc<[u8]>>>>,
     updated_ns: u64,
     unchanged_periods: u32,
 }
@@ -116,11 +116,11 @@ pub async fn start(config: &RosOutConfig, shared: Arc<Shared>, fleets: &[String]
                 Durability::TransientLocal,
             )
             .await?;
-        let last: Arc<Mutex<Option<Arc<Vec<u8>>>>> = Arc::default();
+        let last: Arc<Mutex<Option<Arc<[u8]>>>> = Arc::default();
         let answer = last.clone();
         ros.answer_queries(publisher.key(), move || {
             let grid = answer.lock().expect("map lock").clone();
-            grid.map(|g| g.as_ref().clone())
+            grid.map(|g| g.to_vec())
         })?;
         tracing::info!(fleet, "ROS 2 out: the map on {}", publisher.key());
         outs.insert(
@@ -170,7 +170,7 @@ async fn publish_fleet(
             out.unchanged_periods = 0;
             let last = out.last.lock().expect("map lock").clone();
             if let Some(grid) = last {
-                out.publisher.put(grid.as_ref().clone());
+                out.publisher.put(grid.to_vec());
             }
         }
         return;
@@ -181,9 +181,9 @@ async fn publish_fleet(
         tokio::task::spawn_blocking(move || occupancy_grid_sample(&view, &frame, values)).await;
     match made {
         Ok(Ok(sample)) => {
-            let sample = Arc::new(sample);
-            *out.last.lock().expect("map lock") = Some(sample.clone());
-            out.publisher.put(sample.as_ref().clone());
+            let kept: Arc<[u8]> = Arc::from(sample.as_slice());
+            *out.last.lock().expect("map lock") = Some(kept);
+            out.publisher.put(sample);
             out.updated_ns = updated_ns;
             out.unchanged_periods = 0;
         }

@@ -62,12 +62,9 @@ impl Worker {
     /// Commits what the maps took, then acks it, shows it and runs the solves that are due.
     /// On a failure it is kept for [`Self::retry_store`]: nothing of it is acked or shown.
     pub(super) fn store_and_ack(&mut self, mut work: Unstored, started: Instant) {
-        let faults = match self.commit(&work) {
-            Ok(faults) => faults,
-            Err(_) => {
-                self.store_failed(work, None);
-                return;
-            }
+        let Ok(faults) = self.commit(&work) else {
+            self.store_failed(work, None);
+            return;
         };
         let mut waiting = BTreeSet::new();
         for (site, fault) in faults {

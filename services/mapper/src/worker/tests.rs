@@ -149,7 +149,7 @@ impl Running {
             Box::new(journal),
         );
         let (work, inbox) = mpsc::sync_channel(64);
-        let thread = std::thread::spawn(move || worker.run(inbox));
+        let thread = std::thread::spawn(move || worker.run(&inbox));
         Running {
             work,
             acks,

@@ -1,6 +1,7 @@
 //! The session's configuration: keys, files, TLS checks, environment overrides.
 
 use super::*;
+use std::path::Path;
 
 // Well-formed PEM around meaningless bytes: what is checked at start is the files, not
 // the cryptography (rustls does that when a link opens).

@@ -107,14 +107,14 @@ impl Mapper2d {
             && path - self.node_path_m[first] >= span
         {
             let nodes = std::mem::take(&mut state.open);
-            self.finish_submap(robot, nodes);
+            self.finish_submap(robot, &nodes);
         }
         let state = &mut self.submaps.robots[robot];
         state.open.push(node);
         state.last_closure_m.get_or_insert(path);
     }
 
-    fn finish_submap(&mut self, robot: usize, nodes: Vec<usize>) {
+    fn finish_submap(&mut self, robot: usize, nodes: &[usize]) {
         let (Some(&anchor), Some(&last)) = (nodes.first(), nodes.last()) else {
             return;
         };

@@ -1,7 +1,7 @@
 //! `levelmap level FILE.pcap --meta FILE.json`: every complete frame of an Ouster capture,
 //! leveled and reported as `level` reports one scan.
 
-use crate::level::{LevelArgs, LevelReport, level_timed, ms, print_text, report};
+use super::{LevelArgs, LevelReport, level_timed, ms, print_text, report};
 use anyhow::{Context, Result, bail};
 use leveling::SegmentParams;
 use scanio::ouster::{OusterCounts, OusterScans};

@@ -2,7 +2,7 @@
 //! for a geographic WGS84 raster: all a map needs, and no more. Read back by GDAL in CI's
 //! geo test (`tests/e2e_geo.rs`).
 
-use crate::georaster::GeoRaster;
+use super::GeoRaster;
 use crate::gridmap::UNKNOWN;
 use std::io::Write as _;
 

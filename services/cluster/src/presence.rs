@@ -8,7 +8,7 @@
 //!
 //! The bucket is the source of truth for ownership already; taking liveness from it too
 //! means a host that cannot reach NATS is not counted alive, whatever else it reaches. What
-//! Zenoh adds (`tokens.rs`): a host whose liveliness token was seen to go is not kept alive
+//! Zenoh adds (the `tokens` module): a host whose liveliness token was seen to go is not kept alive
 //! through a bucket's election on what was known before.
 
 use super::Host;

@@ -1,17 +1,21 @@
-//! Cluster mode (`[cluster]`, docs/cluster.md): the sites (fleets) spread over mapper hosts,
-//! each site's record in a JetStream stream of its own (`sitelog`), one host owning a site
-//! at a time through a lease.
+//! Cluster mode (`[cluster]`, docs/cluster.md): a deployment of the mapper
+//! ([`mapper::deployment::Deployment`]) in which the sites (fleets) are spread over mapper
+//! hosts, each site's record in a JetStream stream of its own (`sitelog`), one host owning a
+//! site at a time through a lease. The mapper is the same one write path and worker; this
+//! crate gives it its journal ([`LogJournal`]), its blobs ([`ClusterBlobs`]) and the keepers
+//! that bring and take its sites ([`start`]). The mapper does not depend on this crate.
 //!
-//! Each site has a keeper task on every host (`cluster/keeper.rs`): while the site's lease
+//! Each site has a keeper task on every host (the driver of the state machine in
+//! [`ownership`]): while the site's lease
 //! is free it claims it (the hosts in the site's rendezvous order, each waiting its rank's
 //! stagger), and the site's standby takes it from a holder whose Zenoh liveliness token went
-//! (`cluster/tokens.rs`: its process is gone); then it takes the site over: the log after what this host's store holds is read
+//! (its process is gone); then it takes the site over: the log after what this host's store holds is read
 //! into the store (the store is the host's cache of the logs), the newest shared snapshot
-//! taken in (`cluster/shelf.rs`), the map restored from them as a start restores a fleet,
+//! taken in ([`shelf`]), the map restored from them as a start restores a fleet,
 //! the log handed to the host's journal ([`LogJournal`]) and the map to the worker
 //! ([`Work::Adopt`]), which from then on journals each of the site's entries to the log
 //! before its commit and ack; the keeper then declares the site's feeds
-//! (`crate::bus::feeds`), held while it owns the site. The keeper renews the
+//! (`mapper::bus::feeds`), held while it owns the site. The keeper renews the
 //! lease every third of its time to live; a lease claimed by another host (or not renewed
 //! for the lease and `renewal_grace_ms`) drops the site at once ([`Work::Drop`]), as does a
 //! fenced append in the journal. A lease that lapsed while the bucket did not answer, and
@@ -21,25 +25,29 @@ pub mod record;
 
 mod blobs;
 mod copies;
-mod journal;
+pub mod journal;
 mod keeper;
-mod ownership;
+pub mod ownership;
 mod presence;
 mod replay;
 mod shelf;
 mod tokens;
 
-pub use crate::config::ClusterConfig;
 pub use blobs::ClusterBlobs;
 pub use journal::{LogInbox, LogJournal};
+pub use mapper::config::ClusterConfig;
 pub use shelf::{Shelf, Shelved, Shelving, shelf};
 
-use crate::config::MapperConfig;
-use crate::inbox::Work;
-use crate::store::Store;
-use crate::views::Shared;
 use anyhow::{Context, Result};
-use sitelog::{CloudRetention, Clouds, Lease, Leases, Snapshots, VersionFiles};
+use futures_util::future::BoxFuture;
+use mapper::blobs::Blobs;
+use mapper::config::MapperConfig;
+use mapper::deployment::{Beside, Deployment};
+use mapper::inbox::Work;
+use mapper::journal::Journal;
+use mapper::store::Store;
+use mapper::views::Shared;
+use sitelog::{CloudRetention, Clouds, LEASES_BUCKET, Lease, Leases, Snapshots, VersionFiles};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
@@ -49,8 +57,6 @@ use std::time::{Duration, Instant};
 /// replays the nodes and solves after it, up to this many (docs/cluster.md).
 pub const SNAPSHOT_EVERY_NODES: u64 = 100;
 
-/// The KV bucket of the sites' leases.
-pub const LEASES_BUCKET: &str = "levelmap_site_leases";
 /// The object store of the sites' map version files (`sitelog::VersionFiles`).
 pub const VERSION_FILES_BUCKET: &str = "levelmap_site_versions";
 
@@ -94,33 +100,107 @@ struct Host {
     /// The nodes' clouds.
     clouds: Clouds,
     /// The versions' localization maps (shared with the worker and the API).
-    maps: Arc<crate::localization::MapCache>,
+    maps: Arc<mapper::localization::MapCache>,
     /// Declares the feeds of each site this host owns.
-    feeds: crate::bus::feeds::Feeds,
+    feeds: mapper::bus::feeds::Feeds,
     /// The log sequence of each site's shared snapshot last looked at (`shelf::take_in`).
     snapshots_seen: Mutex<HashMap<String, u64>>,
 }
 
 /// The clouds' stream keeps what `[clouds]` asks a host's store to keep (its byte bound
 /// for every site together).
-pub fn cloud_retention(clouds: &crate::config::CloudsConfig) -> CloudRetention {
+pub fn cloud_retention(clouds: &mapper::config::CloudsConfig) -> CloudRetention {
     CloudRetention {
         max_age: (clouds.max_age_s > 0).then(|| Duration::from_secs(clouds.max_age_s)),
         max_bytes: (clouds.max_bytes > 0).then_some(clouds.max_bytes),
     }
 }
 
-/// The journal of a host, and where its keepers hand it the sites' logs: appends on
-/// `runtime`, snapshots and clouds shared through `shelf`.
-pub fn journal(
-    config: &MapperConfig,
-    store: Arc<Store>,
-    shared: Arc<Shared>,
-    shelf: Shelf,
-) -> (LogJournal, LogInbox) {
-    let runtime = tokio::runtime::Handle::current();
-    let mapping_version = crate::mapping::mapping_version(config).to_string();
-    LogJournal::new(runtime, store, shared, shelf, mapping_version)
+/// Starts a mapper host of the cluster `config.cluster` names: connects to NATS (retried in
+/// the background until the servers answer), then the mapper with this deployment.
+pub async fn start(config: MapperConfig) -> Result<mapper::Running> {
+    let cluster = config
+        .cluster
+        .clone()
+        .context("no [cluster] in the configuration")?;
+    let js = connect(&cluster).await?;
+    // Boxed: the start's state is large, and is awaited once.
+    Box::pin(mapper::start_deployed(
+        config,
+        Box::new(HostDeployment::new(js)),
+    ))
+    .await
+}
+
+/// A mapper host's deployment: its sites' logs as its journal, the cluster's blobs, and the
+/// keepers beside the worker.
+struct HostDeployment {
+    js: sitelog::JetStream,
+    /// Made with the journal, handed to the keepers when they start.
+    for_keepers: Option<(LogInbox, Shelving)>,
+}
+
+impl HostDeployment {
+    fn new(js: sitelog::JetStream) -> HostDeployment {
+        HostDeployment {
+            js,
+            for_keepers: None,
+        }
+    }
+}
+
+impl Deployment for HostDeployment {
+    fn holds_every_fleet(&self) -> bool {
+        false
+    }
+
+    fn journal(
+        &mut self,
+        config: &MapperConfig,
+        store: &Arc<Store>,
+        shared: &Arc<Shared>,
+    ) -> (Box<dyn Journal>, Arc<dyn Blobs>) {
+        let cluster = config.cluster.clone().unwrap_or_default();
+        let (shelf, shelving) = shelf();
+        let runtime = tokio::runtime::Handle::current();
+        let mapping_version = mapper::mapping::mapping_version(config).to_string();
+        let (journal, logs) = LogJournal::new(
+            runtime,
+            store.clone(),
+            shared.clone(),
+            shelf,
+            mapping_version,
+        );
+        self.for_keepers = Some((logs, shelving));
+        let retention = cloud_retention(&config.clouds);
+        let blobs = ClusterBlobs::new(&cluster.host, self.js.clone(), cluster.replicas, retention);
+        (Box::new(journal), Arc::new(blobs))
+    }
+
+    fn start(
+        self: Box<Self>,
+        ends: mapper::deployment::WorkerEnds,
+    ) -> BoxFuture<'static, Result<Box<dyn Beside>>> {
+        Box::pin(async move {
+            let (logs, shelving) = self.for_keepers.context("the journal was not made")?;
+            let worker = WorkerEnds {
+                work: ends.work,
+                logs,
+                shelving,
+                feeds: ends.feeds,
+                maps: ends.maps,
+            };
+            let cluster =
+                Cluster::start(&ends.config, self.js, ends.store, ends.shared, worker).await?;
+            Ok(Box::new(cluster) as Box<dyn Beside>)
+        })
+    }
+}
+
+impl Beside for Cluster {
+    fn stop(self: Box<Self>) -> BoxFuture<'static, ()> {
+        Box::pin(self.release_all())
+    }
 }
 
 /// Connects to NATS (retried in the background until the servers answer).
@@ -131,24 +211,24 @@ pub async fn connect(cluster: &ClusterConfig) -> Result<sitelog::JetStream> {
 }
 
 /// The cluster's ends of what it shares with the mapper's worker.
-pub struct WorkerEnds {
+struct WorkerEnds {
     /// The worker's queue (takeovers, drops).
-    pub work: mpsc::SyncSender<Work>,
+    work: mpsc::SyncSender<Work>,
     /// Where a site's log goes to the worker's journal.
-    pub logs: LogInbox,
+    logs: LogInbox,
     /// The snapshots the worker stored, to share.
-    pub shelving: Shelving,
+    shelving: Shelving,
     /// Declares a site's feeds, which go to the worker.
-    pub feeds: crate::bus::feeds::Feeds,
+    feeds: mapper::bus::feeds::Feeds,
     /// The versions' localization maps: a site taken over is handed its modes with them.
-    pub maps: Arc<crate::localization::MapCache>,
+    maps: Arc<mapper::localization::MapCache>,
 }
 
 impl Cluster {
     /// Starts a keeper for each site of `config.fleets` (each declares its site's feeds
     /// while it owns the site), and the task that shares the snapshots the worker puts on
     /// the shelf.
-    pub async fn start(
+    async fn start(
         config: &MapperConfig,
         js: sitelog::JetStream,
         store: Arc<Store>,

@@ -6,7 +6,6 @@
 //! that answers. A site without an owner, or whose owner does not answer, is 503 with
 //! `Retry-After`. Any number of gateways may run, and any one may be killed.
 
-use crate::cluster::LEASES_BUCKET;
 use anyhow::{Context, Result};
 use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
@@ -15,7 +14,7 @@ use axum::response::{IntoResponse, Response};
 use hyper_util::client::legacy::{Client, connect::HttpConnector};
 use hyper_util::rt::{TokioExecutor, TokioIo};
 use serde::{Deserialize, Serialize};
-use sitelog::{Leases, NatsAccess};
+use sitelog::{LEASES_BUCKET, Leases, NatsAccess};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -61,7 +60,7 @@ impl GatewayConfig {
     /// Reads a TOML file, then the `LEVELMAP_…` environment variables; unknown keys are
     /// errors.
     pub fn load(path: Option<&std::path::Path>) -> Result<GatewayConfig> {
-        runtime::session::load_toml(path)
+        settings::load_toml(path)
     }
 
     fn check(&self) -> Result<()> {
@@ -128,8 +127,16 @@ pub async fn start(config: GatewayConfig) -> Result<RunningGateway> {
         holders: Default::default(),
     });
     let app = axum::Router::new().fallback(route).with_state(gateway);
-    let (stop, stopping) = tokio::sync::watch::channel(false);
-    let http = crate::server::serve_until_stopped(listener, app, stopping);
+    let (stop, mut stopping) = tokio::sync::watch::channel(false);
+    let http = tokio::spawn(async move {
+        let stopped = async move {
+            let _ = stopping.wait_for(|s| *s).await;
+        };
+        let served = axum::serve(listener, app).with_graceful_shutdown(stopped);
+        if let Err(e) = served.await {
+            tracing::error!("HTTP server: {e}");
+        }
+    });
     Ok(RunningGateway {
         http_addr,
         stop,
@@ -429,7 +436,7 @@ mod tests {
     fn the_deployed_gateway_file_is_whole_and_valid() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../deploy/cluster/gateway.toml");
-        let file: GatewayConfig = runtime::session::load_toml_with(Some(&path), []).unwrap();
+        let file: GatewayConfig = settings::load_toml_with(Some(&path), []).unwrap();
         file.check().unwrap();
         assert_eq!(file.hosts.len(), 3);
         assert!(

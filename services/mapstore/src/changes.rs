@@ -1,6 +1,6 @@
 //! Changes of a site's versions and modes, as the writer journals them
-//! ([`crate::journal`]): stored here on a single machine; in cluster mode the owner appends
-//! one to the site's log (`crate::cluster::record`) and then stores it here, and a standby
+//! (`mapper::journal`): stored here on a single machine; in cluster mode the owner appends
+//! one to the site's log (the `cluster` crate's `record`) and then stores it here, and a standby
 //! or a new owner reads it from the log and stores it the same way. Storing one twice
 //! stores it once, and the site's log sequence only ever moves forward.
 
@@ -82,7 +82,7 @@ mod tests {
 
     #[test]
     fn changes_stored_twice_are_stored_once_and_a_deleted_versions_number_stays_given() {
-        let (dir, store) = crate::store::temp_store("changes");
+        let (dir, store) = crate::temp_store("changes");
         let added = SiteChange::VersionAdded {
             number: 1,
             summary: b"{\"version\":1}".to_vec(),

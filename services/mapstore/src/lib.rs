@@ -1,5 +1,8 @@
-//! The durable store (redb, embedded): every accepted node, as received but for its segmented
-//! cloud, with the edges it added, committed in one transaction before the node is acked. A
+//! The mapper's durable store (redb, embedded), a crate of its own: no Tokio, no Zenoh, no
+//! HTTP (the mapper re-exports it as `mapper::store`).
+//!
+//! The store keeps every accepted node, as received but for its segmented cloud, with the
+//! edges it added, committed in one transaction before the node is acked. A
 //! full replay maps the nodes in their arrival order through the same deterministic mapper,
 //! which restores the graph exactly; the stored edges check that it did. Clouds (tens of KB a
 //! node, for viewing only) are kept in a table of their own, in the node's transaction, and
@@ -10,11 +13,11 @@
 //! rows are damaged does not keep the others from being restored.
 //!
 //! A snapshot of each fleet's map (`snapshots`) spares a restart most of the replay: the map
-//! is restored from it and the nodes after it are replayed ([`crate::restore`]).
+//! is restored from it and the nodes after it are replayed (`mapper::restore`).
 //!
-//! Map versions (`versions`) are kept in tables of their own, written from the HTTP side's
-//! blocking pool: redb runs one write transaction at a time, so they interleave with the
-//! worker's commits without touching its rows.
+//! Map versions and robots' modes are kept in tables of their own. Like every change of a
+//! site's record they are written by the mapper's one writer, its worker, through its
+//! journal (`mapper::journal`); the HTTP side only reads.
 
 pub use fleetmap::SolvePoint;
 use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition, TableHandle};
@@ -51,7 +54,7 @@ const SOLVE_POINTS: TableDefinition<(&str, u64), (u64, u64)> = TableDefinition::
 const PASS_FIXES: TableDefinition<(&str, u64, u64), &[u8]> = TableDefinition::new("pass_fixes");
 /// (fleet, node index) → the node's encoded cloud (`Node.cloud`, a `SegmentedCloud`).
 const CLOUDS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("clouds");
-/// fleet → the sequence of the last record of its cluster log (`crate::cluster`) this store
+/// fleet → the sequence of the last record of its cluster log (the `cluster` crate) this store
 /// holds: in cluster mode the store is the host's cache of the log, and a takeover reads
 /// the log after it. Written in the transaction of the rows it covers.
 const SITE_LOG: TableDefinition<&str, u64> = TableDefinition::new("site_log");
@@ -381,9 +384,10 @@ fn write(db: &Database, batches: &[FleetBatch<'_>]) -> Result<(), StoreError> {
     Ok(())
 }
 
-/// A store in a fresh folder of its own under the temp dir (the folder, the store).
-#[cfg(test)]
-pub(crate) fn temp_store(name: &str) -> (std::path::PathBuf, Store) {
+/// A store in a fresh folder of its own under the temp dir (the folder, the store): for
+/// tests, here and in the crates over the store (feature `testing`).
+#[cfg(any(test, feature = "testing"))]
+pub fn temp_store(name: &str) -> (std::path::PathBuf, Store) {
     let dir = std::env::temp_dir().join(format!("levelmap-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temp dir");

@@ -4,9 +4,9 @@
 
 use super::Host;
 use super::record::{LogRecord, SiteRecord};
-use crate::inbox::Work;
-use crate::store::{SiteChange, Store};
 use anyhow::{Context, Result, bail};
+use mapper::inbox::Work;
+use mapper::store::{SiteChange, Store};
 use sitelog::{RetryPolicy, SiteLog};
 use std::sync::Arc;
 use std::time::Duration;
@@ -103,7 +103,7 @@ async fn catch_up(host: &Arc<Host>, site: &str, log: &mut SiteLog, max: usize) -
         read += entries.len();
         let records = read_records(host, site, &entries).await?;
         let (store, name) = (host.store.clone(), site.to_owned());
-        tokio::task::spawn_blocking(move || commit_records(&store, &name, records)).await??;
+        tokio::task::spawn_blocking(move || commit_records(&store, &name, &records)).await??;
     }
     Ok(read)
 }
@@ -146,9 +146,9 @@ async fn read_records(host: &Host, site: &str, entries: &[sitelog::Entry]) -> Re
 
 /// Stores the log's `records` of `site` as the worker would have: each run of batches in one
 /// commit, each change in its order.
-fn commit_records(store: &Store, site: &str, records: Vec<Read>) -> Result<()> {
+fn commit_records(store: &Store, site: &str, records: &[Read]) -> Result<()> {
     let mut batches = Vec::new();
-    for record in &records {
+    for record in records {
         match record {
             Read::Batch(sequence, record, fixes) => {
                 let mut batch = record.as_batch(site, *sequence);
@@ -199,8 +199,8 @@ pub(super) async fn take_over(host: Arc<Host>, site: String) -> Result<TakenOver
     let (store, shared, config) = (host.store.clone(), host.shared.clone(), host.config.clone());
     let name = site.clone();
     let (map, covered) = tokio::task::spawn_blocking(move || {
-        let unrecorded = crate::restore::Unrecorded::Running;
-        crate::restore::restore_fleet(&config, &store, &shared, &name, unrecorded)
+        let unrecorded = mapper::restore::Unrecorded::Running;
+        mapper::restore::restore_fleet(&config, &store, &shared, &name, unrecorded)
     })
     .await??;
     // Its robots' modes as its log left them, with their versions' maps (built here, off
@@ -209,7 +209,7 @@ pub(super) async fn take_over(host: Arc<Host>, site: String) -> Result<TakenOver
     let (modes, maps) = tokio::task::spawn_blocking(move || -> Result<_> {
         let stored = store.modes()?.into_iter().find(|(fleet, _)| *fleet == name);
         let stored = stored.map(|(_, modes)| modes).unwrap_or_default();
-        Ok(crate::localization::with_maps(
+        Ok(mapper::localization::with_maps(
             &store, &maps, &name, &stored,
         ))
     })

@@ -1,7 +1,7 @@
 //! A site's ownership on one host, as a state machine free of I/O: what the host knows of
 //! the site, what it observes (the lease's holder, the live hosts, the hosts whose process
 //! is gone, the time, the outcome of what it did) and the next thing to do. The keeper
-//! (`keeper.rs`) only reads, writes and sends; every rule of who claims, keeps, drops and
+//! (the `keeper` module) only reads, writes and sends; every rule of who claims, keeps, drops and
 //! hands back a site is here, each with a table test.
 //!
 //! A site is [`Waiting`] on a host that does not hold it, and [`Holding`] on the one that
@@ -15,24 +15,25 @@
 use std::time::{Duration, Instant};
 
 /// How often a site's standby reads what was appended to the site's log since.
-pub(super) const FOLLOW_EVERY: Duration = Duration::from_secs(1);
+pub const FOLLOW_EVERY: Duration = Duration::from_secs(1);
 
 /// The pause before a failed takeover is tried again; doubled after each failure up to
-/// `MAX_TAKEOVER_RETRY`, but for an open of the log given up after its bound.
-pub(super) const FIRST_TAKEOVER_RETRY: Duration = Duration::from_millis(250);
-pub(super) const MAX_TAKEOVER_RETRY: Duration = Duration::from_secs(5);
+/// [`MAX_TAKEOVER_RETRY`], but for an open of the log given up after its bound.
+pub const FIRST_TAKEOVER_RETRY: Duration = Duration::from_millis(250);
+/// The longest pause between failed takeovers.
+pub const MAX_TAKEOVER_RETRY: Duration = Duration::from_secs(5);
 
 /// A host that handed a site back does not claim it again for this long: the site's home
 /// host claims it meanwhile.
-pub(super) const HAND_BACK_HOLD_OFF: Duration = Duration::from_secs(3);
+pub const HAND_BACK_HOLD_OFF: Duration = Duration::from_secs(3);
 
 /// A site is handed back at most this often: a home host that is alive but does not claim
 /// it does not make the site bounce.
-pub(super) const HAND_BACK_EVERY: Duration = Duration::from_secs(60);
+pub const HAND_BACK_EVERY: Duration = Duration::from_secs(60);
 
 /// The times a site's ownership is ruled by (`[cluster]`).
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Times {
+pub struct Times {
     /// A lease's time to live.
     pub ttl: Duration,
     /// Each host before another in a site's order gets this long to claim first.
@@ -45,7 +46,7 @@ pub(super) struct Times {
 }
 
 /// What a waiting host sees on one look.
-pub(super) struct Look<'a> {
+pub struct Look<'a> {
     /// Now.
     pub now: Instant,
     /// This host.
@@ -60,7 +61,7 @@ pub(super) struct Look<'a> {
 
 /// What a waiting host does after a look.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub(super) enum Act {
+pub enum Act {
     /// Nothing this time.
     Wait,
     /// Read what was appended to the site's log since (the standby).
@@ -73,7 +74,7 @@ pub(super) enum Act {
 
 /// What the keeper tells the operator of a look.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub(super) enum Note {
+pub enum Note {
     /// The lease is read again after it could not be.
     ReadAgain,
     /// The lease could not be read (first time since it last was).
@@ -86,7 +87,7 @@ pub(super) enum Note {
 
 /// How a claim went.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub(super) enum Claimed {
+pub enum Claimed {
     /// This host holds the lease now.
     Held,
     /// Another host was first.
@@ -97,7 +98,7 @@ pub(super) enum Claimed {
 
 /// How a host's holding of a site ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Ended {
+pub enum Ended {
     /// The lease was lost (or the site could not be kept): dropped.
     Lost,
     /// Handed back to the site's home host: dropped, the lease released.
@@ -106,7 +107,7 @@ pub(super) enum Ended {
 
 /// A site on a host that does not hold it.
 #[derive(Debug)]
-pub(super) struct Waiting {
+pub struct Waiting {
     times: Times,
     /// Since when the lease has been seen free, this time round.
     free_since: Option<Instant>,
@@ -127,7 +128,7 @@ pub(super) struct Waiting {
 
 impl Waiting {
     /// A site this host has not looked at yet, at `now`.
-    pub(super) fn new(times: Times, now: Instant) -> Waiting {
+    pub fn new(times: Times, now: Instant) -> Waiting {
         Waiting {
             times,
             free_since: None,
@@ -141,7 +142,7 @@ impl Waiting {
     }
 
     /// The next thing to do after `look`, and what to tell of it.
-    pub(super) fn step(&mut self, look: &Look) -> (Act, Vec<Note>) {
+    pub fn step(&mut self, look: &Look) -> (Act, Vec<Note>) {
         let now = look.now;
         let mut notes = Vec::new();
         if self.complained && look.holder.is_ok() {
@@ -219,7 +220,7 @@ impl Waiting {
     }
 
     /// How the claim `act` asked for went; what to tell of it.
-    pub(super) fn claimed(&mut self, act: &Act, claimed: &Claimed) -> Option<Note> {
+    pub fn claimed(&mut self, act: &Act, claimed: &Claimed) -> Option<Note> {
         match claimed {
             Claimed::Held => None,
             Claimed::NotHeld => {
@@ -238,13 +239,13 @@ impl Waiting {
 
     /// Whether a holding that starts at `now` may hand the site back: not within
     /// [`HAND_BACK_EVERY`] of the last hand-back.
-    pub(super) fn may_hand_back(&self, now: Instant) -> bool {
+    pub fn may_hand_back(&self, now: Instant) -> bool {
         self.handed_back
             .is_none_or(|t| now.duration_since(t) >= HAND_BACK_EVERY)
     }
 
     /// This host's holding ended at `now`, as `ended` says.
-    pub(super) fn ended(&mut self, ended: Ended, now: Instant) {
+    pub fn ended(&mut self, ended: Ended, now: Instant) {
         if ended == Ended::HandedBack {
             self.handed_back = Some(now);
             self.claim_from = now + HAND_BACK_HOLD_OFF;
@@ -254,7 +255,7 @@ impl Waiting {
 
 /// How a takeover went.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub(super) enum TakeoverEnded {
+pub enum TakeoverEnded {
     /// The site is the worker's.
     Taken,
     /// The site's log did not open within its bound (it waited that long already).
@@ -265,7 +266,7 @@ pub(super) enum TakeoverEnded {
 
 /// How a renewal went.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub(super) enum Renewal {
+pub enum Renewal {
     /// Renewed (or, lapsed while the bucket did not answer and claimed by nobody, claimed
     /// again).
     Renewed,
@@ -277,7 +278,7 @@ pub(super) enum Renewal {
 
 /// What a holding host does after a renewal.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub(super) enum Keep {
+pub enum Keep {
     /// Goes on holding the site.
     Hold,
     /// A renewal failed and is tried again (told).
@@ -294,7 +295,7 @@ pub(super) enum Keep {
 
 /// A site on the host that holds its lease.
 #[derive(Debug)]
-pub(super) struct Holding {
+pub struct Holding {
     times: Times,
     claimed: Instant,
     renewed: Instant,
@@ -311,7 +312,7 @@ pub(super) struct Holding {
 
 impl Holding {
     /// The lease claimed at `now`: a takeover starts.
-    pub(super) fn new(times: Times, now: Instant, may_hand_back: bool) -> Holding {
+    pub fn new(times: Times, now: Instant, may_hand_back: bool) -> Holding {
         Holding {
             times,
             claimed: now,
@@ -325,7 +326,7 @@ impl Holding {
     }
 
     /// A takeover ended; the pause before the next one when it failed.
-    pub(super) fn takeover_ended(&mut self, ended: TakeoverEnded) -> Option<Duration> {
+    pub fn takeover_ended(&mut self, ended: TakeoverEnded) -> Option<Duration> {
         match ended {
             TakeoverEnded::Taken => {
                 self.taking_over = false;
@@ -348,18 +349,18 @@ impl Holding {
     }
 
     /// Whether the worker holds the site (its feeds may be declared).
-    pub(super) fn taken(&self) -> bool {
+    pub fn taken(&self) -> bool {
         self.taken
     }
 
     /// The site's journal was fenced.
-    pub(super) fn fence_rang(&mut self) {
+    pub fn fence_rang(&mut self) {
         self.fenced = true;
     }
 
     /// After a renewal at `now`, with `home` the first live host before this one in the
     /// site's order that has been alive for `hand_back_after` (if any).
-    pub(super) fn renewed(&mut self, now: Instant, renewal: Renewal, home: Option<&str>) -> Keep {
+    pub fn renewed(&mut self, now: Instant, renewal: Renewal, home: Option<&str>) -> Keep {
         match renewal {
             Renewal::Renewed => self.renewed = now,
             Renewal::Claimed => return Keep::Drop("its lease was claimed by another host".into()),

@@ -1,7 +1,7 @@
 //! The store's account of itself: its format number, and for each fleet the mapping version
 //! that derived its edges and snapshot. The nodes (with spans, chains, modes, versions) are
 //! the record; everything derived from them is derived again when the mapping version that
-//! reads the store is not the one that wrote it (`crate::restore`).
+//! reads the store is not the one that wrote it (`mapper::restore`).
 //!
 //! Formats:
 //! - 0: stores written before the format number (levelmap 0.1.0 up to commit 67c63cc): the

@@ -158,7 +158,7 @@ pub(super) async fn take_in(host: &Arc<Host>, site: &str) -> Result<()> {
         return Ok(());
     }
     // Newer: more of what a restore would otherwise replay (nodes and solves).
-    let running = crate::mapping::mapping_version(&host.config).to_string();
+    let running = mapper::mapping::mapping_version(&host.config).to_string();
     if tag.mapping_version == running && tag.nodes + tag.solves > local_work {
         let Some((tag, bytes)) = host.snapshots.get(site).await? else {
             return Ok(());

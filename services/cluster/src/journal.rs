@@ -4,18 +4,18 @@
 //! does not answer is returned as that site's fault, and the others are committed.
 //!
 //! A site's log comes with the site: the keeper hands it over ([`LogInbox`]) before it sends
-//! the worker [`crate::inbox::Work::Adopt`], and the worker's [`Journal::adopt`] takes it
+//! the worker [`mapper::inbox::Work::Adopt`], and the worker's [`Journal::adopt`] takes it
 //! in. A fence also goes back to the site's keeper, on the alarm handed over with the log,
 //! so that it reads the log again while it still holds the lease.
 
 use super::record::{change_id, encode_change, records_of};
 use super::shelf::{Shelf, Shelved};
-use crate::journal::{ChangeError, Journal, SiteFault};
-use crate::store::{FleetBatch, SiteChange, Store, StoreError};
-use crate::views::Shared;
-use crate::views::instruments::Instruments;
 use bytes::Bytes;
 use fleetmap::SnapshotCovers;
+use mapper::journal::{ChangeError, Journal, SiteFault};
+use mapper::store::{FleetBatch, SiteChange, Store, StoreError};
+use mapper::views::Shared;
+use mapper::views::instruments::Instruments;
 use sitelog::{Appended, LogError, RecordId, SiteLog};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, mpsc};

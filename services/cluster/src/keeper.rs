@@ -1,5 +1,5 @@
 //! One site's keeper on one host: the driver of the site's ownership state machine
-//! (`ownership.rs`). It reads the lease and the live hosts, claims, takes the site over,
+//! ([`crate::ownership`]). It reads the lease and the live hosts, claims, takes the site over,
 //! renews, drops and hands back as the state machine says; the rules are all there.
 
 use super::Host;
@@ -7,8 +7,8 @@ use super::ownership::{
     Act, Claimed, Ended, Holding, Keep, Look, Note, Renewal, TakeoverEnded, Times, Waiting,
 };
 use super::replay::{LogNotOpened, TakenOver, follow_round, take_over, take_over_after};
-use crate::inbox::Work;
 use anyhow::Result;
+use mapper::inbox::Work;
 use sitelog::{Lease, SiteLog};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -163,7 +163,7 @@ async fn own(
                 let ended = match done {
                     Ok(Ok((records, alarm))) => {
                         fence_alarm = Some(alarm);
-                        crate::views::instruments::Instruments::time(
+                        mapper::views::instruments::Instruments::time(
                             &host.shared.instruments.takeover,
                             claimed.elapsed(),
                         );

@@ -3,8 +3,8 @@
 //! are opened on first use, as the servers may come up after the host.
 
 use super::VERSION_FILES_BUCKET;
-use crate::blobs::Blobs;
 use futures_util::future::BoxFuture;
+use mapper::blobs::Blobs;
 use sitelog::{CloudRetention, Clouds, VersionFiles};
 use tokio::sync::OnceCell;
 

@@ -9,7 +9,7 @@
 //! self-describing: a change of [`SiteRecord`]'s fields is a new format number, and every
 //! later release reads every format it ever wrote (a log outlives the release that wrote it).
 
-use crate::store::{FleetBatch, SiteChange, SolvePoint};
+use mapper::store::{FleetBatch, SiteChange, SolvePoint};
 use serde::{Deserialize, Serialize};
 use sitelog::RecordId;
 
@@ -361,7 +361,7 @@ mod tests {
                 (11, vec![0x08, 0x01]),
             ],
             first_edge: 7,
-            edges: crate::store::encode_edges(std::slice::from_ref(&edge)),
+            edges: mapper::store::encode_edges(std::slice::from_ref(&edge)),
             solved: Some((3, 9, 11)),
             pass_fixes: vec![serde_json::to_vec(&fix).unwrap()],
             localized: vec![
