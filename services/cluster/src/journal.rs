@@ -21,6 +21,13 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
+/// How long the worker waits, in one turn, for the appends of a site whose log failed to take
+/// its last entries (a stream electing a leader takes 4–9 s): the site's entries are tried
+/// again every second, and each try holds the worker, and so the other sites' acks, at most
+/// this long. Well above a healthy append (milliseconds), well under a lease. A site whose
+/// log answered last time is given the log's own retry deadline (the lease's time).
+const WAITING_SITE_BOUND: Duration = Duration::from_millis(250);
+
 /// A batch's records, by its index among the turn's batches.
 type BatchRecords = (usize, Vec<(RecordId, Bytes)>);
 
@@ -34,7 +41,7 @@ pub struct HandedLog {
 
 impl HandedLog {
     /// `site`'s `log`, read to its end; a fence is told on the receiver returned.
-    pub(super) fn new(site: &str, log: SiteLog) -> (HandedLog, tokio::sync::oneshot::Receiver<()>) {
+    pub fn new(site: &str, log: SiteLog) -> (HandedLog, tokio::sync::oneshot::Receiver<()>) {
         let (fence_alarm, fenced) = tokio::sync::oneshot::channel();
         let handed = HandedLog {
             site: site.to_owned(),
@@ -75,6 +82,9 @@ pub struct LogJournal {
     shelf: Shelf,
     /// Tags the snapshots shared.
     mapping_version: String,
+    /// Sites whose log did not take their last entries: their next appends are bounded by
+    /// [`WAITING_SITE_BOUND`] per turn.
+    waiting_sites: std::collections::HashSet<String>,
 }
 
 impl LogJournal {
@@ -97,6 +107,7 @@ impl LogJournal {
             waiting: HashMap::new(),
             shelf,
             mapping_version,
+            waiting_sites: Default::default(),
         };
         (journal, inbox)
     }
@@ -128,7 +139,11 @@ impl Journal for LogJournal {
         let mut appends = Vec::new();
         for (site, held) in self.logs.iter_mut() {
             if let Some(records) = by_site.remove(site.as_str()) {
-                appends.push(append_site(site.as_str(), held, records));
+                let bound = self
+                    .waiting_sites
+                    .contains(site.as_str())
+                    .then_some(WAITING_SITE_BOUND);
+                appends.push(append_site(site.as_str(), held, records, bound));
             }
         }
         for site in by_site.keys() {
@@ -143,6 +158,7 @@ impl Journal for LogJournal {
         for (site, result) in appended {
             match result {
                 Ok((took, sites_sequences)) => {
+                    self.waiting_sites.remove(&site);
                     Instruments::time(&self.shared.instruments.log_append, took);
                     sequences.extend(sites_sequences);
                 }
@@ -152,7 +168,10 @@ impl Journal for LogJournal {
                     fenced.push(site.clone());
                     faults.push((site, SiteFault::Fenced(detail)));
                 }
-                Err(e) => faults.push((site, SiteFault::Unavailable(e.to_string()))),
+                Err(e) => {
+                    self.waiting_sites.insert(site.clone());
+                    faults.push((site, SiteFault::Unavailable(e.to_string())));
+                }
             }
         }
         for site in fenced {
@@ -227,6 +246,7 @@ impl Journal for LogJournal {
 
     fn drop_site(&mut self, site: &str) {
         self.logs.remove(site);
+        self.waiting_sites.remove(site);
     }
 
     fn snapshot(
@@ -264,8 +284,33 @@ impl Journal for LogJournal {
 /// record, or the failure that stopped them.
 type SiteAppended = (String, Result<(Duration, Vec<(usize, u64)>), LogError>);
 
-/// Appends a site's batches' records in order.
-async fn append_site(site: &str, held: &mut HeldLog, batches: Vec<BatchRecords>) -> SiteAppended {
+/// Appends a site's batches' records in order, within `bound` if one is given. An append
+/// given up on at the bound may still land: its retry carries the same record ids, which
+/// the log takes as duplicates.
+async fn append_site(
+    site: &str,
+    held: &mut HeldLog,
+    batches: Vec<BatchRecords>,
+    bound: Option<Duration>,
+) -> SiteAppended {
+    let Some(bound) = bound else {
+        return append_site_unbounded(site, held, batches).await;
+    };
+    match tokio::time::timeout(bound, append_site_unbounded(site, held, batches)).await {
+        Ok(appended) => appended,
+        Err(_) => {
+            let why = format!("no ack within {bound:?} while the site's log recovers");
+            (site.to_owned(), Err(LogError::Unavailable(bound, why)))
+        }
+    }
+}
+
+/// [`append_site`] without a bound of its own (each append is bounded by the log's deadline).
+async fn append_site_unbounded(
+    site: &str,
+    held: &mut HeldLog,
+    batches: Vec<BatchRecords>,
+) -> SiteAppended {
     let started = Instant::now();
     let mut sequences = Vec::new();
     for (i, records) in batches {

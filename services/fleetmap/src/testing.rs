@@ -7,8 +7,13 @@ use wire::{Node, NodeParts};
 
 const S: u64 = 1_000_000_000;
 
-/// Node `seq` of `robot`'s chain `chain`, the robot `x` m along, at `seq` s.
+/// Node `seq` of `robot`'s chain `chain` in fleet `site`, the robot `x` m along, at `seq` s.
 pub fn node(robot: &str, chain: u64, seq: u64, held_from: u64, x: f64) -> Node {
+    node_of("site", robot, chain, seq, held_from, x)
+}
+
+/// [`node`] of fleet `fleet`.
+pub fn node_of(fleet: &str, robot: &str, chain: u64, seq: u64, held_from: u64, x: f64) -> Node {
     let beams = (0..90)
         .map(|k| Beam {
             bearing_rad: k as f32 * 0.07,
@@ -18,7 +23,7 @@ pub fn node(robot: &str, chain: u64, seq: u64, held_from: u64, x: f64) -> Node {
         })
         .collect();
     Node::new(NodeParts {
-        fleet: "site".into(),
+        fleet: fleet.into(),
         robot: robot.into(),
         node_seq: seq,
         chain_id: chain,

@@ -9,12 +9,9 @@ use crate::journal::{ChangeError, Journal, SiteFault};
 use crate::store::{FleetBatch, SiteChange, StoreError};
 use crate::views::{Metrics, Shared};
 use fleetmap::{FleetMap, SnapshotCovers};
-use leveling::{Beam, LeveledScan, TimedPose};
-use nalgebra::{Isometry3, Translation3};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
-use wire::NodeParts;
 
 /// What the worker did, in its order: entries journaled and acks sent.
 #[derive(Clone, Debug, PartialEq)]
@@ -197,39 +194,9 @@ impl Running {
     }
 }
 
-/// Node `seq` of robot r0 of `site`, `seq` m along, its scan a fan of returns, encoded.
+/// Node `seq` of robot r0 of `site`, `seq` m along, encoded.
 fn node(site: &str, seq: u64) -> Vec<u8> {
-    let stamp_ns = (seq + 1) * 1_000_000_000;
-    let beams = (0..90)
-        .map(|k| Beam {
-            bearing_rad: k as f32 * 0.07,
-            range_m: (k % 11 != 0).then_some(5.0 + (k % 7) as f32),
-            sensor_xy_m: [0.0, 0.0],
-            ground_to_m: None,
-        })
-        .collect();
-    NodeParts {
-        fleet: site.into(),
-        robot: "r0".into(),
-        node_seq: seq,
-        chain_id: 7,
-        held_from_seq: 0,
-        stamp_ns,
-        scan: LeveledScan { stamp_ns, beams },
-        counts: None,
-        odometry: TimedPose {
-            stamp_ns,
-            pose: Isometry3::from_parts(
-                Translation3::new(seq as f64, 0.0, 0.0),
-                Default::default(),
-            ),
-        },
-        odometry_delta: None,
-        scan_origin: slam::Pose2::IDENTITY,
-        gps: Vec::new(),
-        cloud: None,
-    }
-    .encode()
+    fleetmap::testing::node_of(site, "r0", 7, seq, 0, seq as f64).encode()
 }
 
 /// Every arrival index journaled for `site`, in order.
