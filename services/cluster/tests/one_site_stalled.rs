@@ -37,11 +37,19 @@ impl Outbound for CountingBus {
     fn publish_poses(&self, _: &fleetmap::FleetMap, _: &[(String, u64)]) {}
 }
 
-/// The stream's leader, as its info says.
+/// The stream's leader, as its info says (asked again for up to 10 s while it has none).
 async fn leader(js: &sitelog::JetStream, site: &str) -> Option<String> {
-    let mut stream = js.get_stream(format!("LEVELMAP_SITE_{site}")).await.ok()?;
-    let info = stream.info().await.ok()?;
-    info.cluster.clone()?.leader
+    let started = Instant::now();
+    while started.elapsed() < Duration::from_secs(10) {
+        if let Ok(mut stream) = js.get_stream(format!("LEVELMAP_SITE_{site}")).await
+            && let Ok(info) = stream.info().await
+            && let Some(leader) = info.cluster.clone().and_then(|c| c.leader)
+        {
+            return Some(leader);
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    None
 }
 
 /// A site's log, opened once the cluster answers (a minute at most).
