@@ -50,7 +50,7 @@ pub enum Work {
         /// Where the report goes.
         reply: OptimizeReply,
     },
-    /// New modes of a fleet's robots (stored already), with the maps of the versions they
+    /// New modes of a fleet's robots (journaled already), with the maps of the versions they
     /// localize on (built off the worker).
     SetModes {
         /// The fleet.
@@ -81,7 +81,7 @@ pub enum Work {
         site: String,
         /// The change (boxed: it is the largest of the work).
         change: Box<crate::store::SiteChange>,
-        /// An added version's file (in the version files already).
+        /// An added version's file (shared beyond the store already: `crate::blobs`).
         file: Option<Vec<u8>>,
         /// When the operator asked (names a change of modes in the log).
         asked_ns: u64,

@@ -5,28 +5,11 @@
 //! its nodes are committed, and makes it in one piece, so the version is a consistent
 //! snapshot of what the store holds, and freezing never waits on the worker.
 
-use crate::store::{AddVersionError, Store, VersionRows};
+use crate::store::VersionRows;
 pub use fleetmap::versions::{
     ImportedFrom, VersionError, VersionGrid, VersionSummary, freeze, import, summary_of,
 };
 use wire::MapVersion;
-
-/// Stores `version` in its fleet under the next number (unless the fleet keeps `max`
-/// versions already) and returns its summary.
-pub fn store(
-    store: &Store,
-    max: usize,
-    version: MapVersion,
-) -> Result<VersionSummary, AddVersionError<VersionError>> {
-    let fleet = version.fleet.clone();
-    let mut summary = None;
-    store.add_version(&fleet, max, |number| {
-        let (made, rows) = numbered(version, number)?;
-        summary = Some(made);
-        Ok(rows)
-    })?;
-    Ok(summary.expect("made with the rows"))
-}
 
 /// `version` under `number`: its summary, and its rows as the store keeps them.
 pub fn numbered(
@@ -48,12 +31,31 @@ pub fn numbered(
 mod tests {
     use super::*;
     use crate::config::MapperConfig;
+    use crate::store::{AddVersionError, Store};
     use fleetmap::FleetView;
     use leveling::{Beam, LeveledScan, TimedPose};
     use nalgebra::{Isometry3, Translation3};
     use slam::geodesy::Geodetic;
     use std::sync::Arc;
     use wire::{Node, NodeParts};
+
+    /// Stores `version` in its fleet under the next number (unless the fleet keeps `max`
+    /// versions already) and returns its summary. The API numbers a version
+    /// ([`numbered`]) and the worker journals it; the test stores it straight.
+    fn store(
+        store: &Store,
+        max: usize,
+        version: MapVersion,
+    ) -> Result<VersionSummary, AddVersionError<VersionError>> {
+        let fleet = version.fleet.clone();
+        let mut summary = None;
+        store.add_version(&fleet, max, |number| {
+            let (made, rows) = numbered(version, number)?;
+            summary = Some(made);
+            Ok(rows)
+        })?;
+        Ok(summary.expect("made with the rows"))
+    }
 
     /// Node `seq` of robot r0, `seq` m along, its scan a fan of returns.
     fn node(seq: u64) -> Node {

@@ -359,12 +359,10 @@ impl Worker {
     /// Whether `key` is a node of a site whose last entries are not durable yet (all of
     /// them, when the store failed).
     fn waits(&self, key: &str) -> bool {
-        self.unstored
-            .as_ref()
-            .is_some_and(|u| match wire::parse_robot_key(key) {
-                Ok(k) => u.holds(k.fleet),
-                Err(_) => u.holds(""),
-            })
+        match wire::parse_robot_key(key) {
+            Ok(k) => self.site_waits(k.fleet),
+            Err(_) => self.store_stalled(),
+        }
     }
 
     /// Whether `key` is a node of a quarantined fleet.

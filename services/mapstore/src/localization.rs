@@ -149,27 +149,6 @@ pub(super) fn span_fleets(txn: &ReadTransaction) -> Result<Vec<String>, StoreErr
 }
 
 impl Store {
-    /// Sets the mode of `robots` (every robot, with `None`: the fleet's setting, and each
-    /// robot's own removed) to localize on `version`, or to map with 0. A version must
-    /// exist: checked in the same transaction, under the versions' lock, so a delete cannot
-    /// come between.
-    pub fn set_modes(
-        &self,
-        fleet: &str,
-        robots: Option<&[String]>,
-        version: u64,
-    ) -> Result<(), ModeError> {
-        let _one_at_a_time = self.versions.lock().expect("versions lock");
-        self.mode_version_exists(fleet, version)?;
-        self.write(|db| {
-            let txn = db.begin_write()?;
-            write_modes(&txn, fleet, robots, version)?;
-            txn.commit()?;
-            Ok(())
-        })?;
-        Ok(())
-    }
-
     /// Refuses a mode on a version `fleet` does not have (0, to map, always exists).
     pub fn mode_version_exists(&self, fleet: &str, version: u64) -> Result<(), ModeError> {
         if version != 0 && self.version_summary(fleet, version)?.is_none() {

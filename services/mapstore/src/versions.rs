@@ -83,7 +83,9 @@ pub enum AddVersionError<E> {
 impl Store {
     /// Adds a version to `fleet` under the next number, unless it keeps `max` already:
     /// `make` gets the number and makes the rows (outside any transaction: it may take a
-    /// while), then they are written in one transaction. Returns the number.
+    /// while), then they are written in one transaction. Returns the number. For tests: the
+    /// mapper numbers a version with [`Self::next_version_number`] and journals it.
+    #[cfg(any(test, feature = "testing"))]
     pub fn add_version<E>(
         &self,
         fleet: &str,
@@ -140,7 +142,9 @@ impl Store {
     }
 
     /// Deletes a version; false when there is none. Its number is not given again. Refused
-    /// while robots localize on it (`[super::ModeError::InUse]`).
+    /// while robots localize on it (`[super::ModeError::InUse]`). For tests: the mapper
+    /// journals a deletion (`Store::apply_site_change`).
+    #[cfg(any(test, feature = "testing"))]
     pub fn delete_version(&self, fleet: &str, number: u64) -> Result<bool, super::ModeError> {
         let _one_at_a_time = self.versions.lock().expect("versions lock");
         self.deletable(fleet, number)?;

@@ -36,17 +36,16 @@ fn look<'a>(
     }
 }
 
-/// The first time at or after `from`, in steps of 10 ms up to `within`, that `this` claims
-/// the free lease; `None` if it does not.
+/// How long after `from`, in steps of 10 ms, `this` claims the free lease; `None` if it does
+/// not within 5 s.
 fn claims_after(
     waiting: &mut Waiting,
     this: &str,
     from: Instant,
-    within: Duration,
     gone: &dyn Fn(&str) -> bool,
 ) -> Option<Duration> {
     let mut t = from;
-    while t <= from + within {
+    while t <= from + Duration::from_secs(5) {
         if waiting.step(&look(this, t, None, gone)).0 == Act::Claim {
             return Some(t - from);
         }
@@ -62,13 +61,7 @@ fn a_free_site_is_claimed_in_its_order_each_host_a_stagger_after_the_one_before(
     for (host, after_ms) in table {
         let start = Instant::now();
         let mut waiting = Waiting::new(TIMES, start);
-        let at = claims_after(
-            &mut waiting,
-            host,
-            start,
-            Duration::from_secs(5),
-            &none_gone,
-        );
+        let at = claims_after(&mut waiting, host, start, &none_gone);
         assert_eq!(at, Some(after_ms * MS), "{host}");
     }
 }
@@ -82,13 +75,7 @@ fn the_last_holder_is_left_out_of_the_order_so_its_standby_claims_first() {
         let start = Instant::now();
         let mut waiting = Waiting::new(TIMES, start);
         waiting.step(&look(host, start, Some("h1"), &none_gone));
-        let at = claims_after(
-            &mut waiting,
-            host,
-            start,
-            Duration::from_secs(5),
-            &none_gone,
-        );
+        let at = claims_after(&mut waiting, host, start, &none_gone);
         assert_eq!(at, Some(after_ms * MS), "{host}");
     }
 }
@@ -111,13 +98,7 @@ fn after_an_unread_lease_a_live_holder_gets_a_leases_time_to_claim_again() {
             (act, notes),
             (Act::Wait, vec![Note::Unread("no leader".into())])
         );
-        let at = claims_after(
-            &mut waiting,
-            host,
-            start,
-            Duration::from_secs(5),
-            &none_gone,
-        );
+        let at = claims_after(&mut waiting, host, start, &none_gone);
         assert_eq!(at, Some(after_ms * MS), "{host}");
     }
 }
@@ -142,7 +123,7 @@ fn after_an_unread_lease_only_the_standby_skips_the_wait_for_a_gone_holder() {
         assert!(notes.contains(&Note::ReadAgain), "{host}: {notes:?}");
         let at = match act {
             Act::Claim => Some(Duration::ZERO),
-            _ => claims_after(&mut waiting, host, start, Duration::from_secs(5), &h1_gone),
+            _ => claims_after(&mut waiting, host, start, &h1_gone),
         };
         assert_eq!(at, Some(after_ms * MS), "{host}");
     }
@@ -203,13 +184,7 @@ fn a_host_that_handed_a_site_back_holds_off_and_hands_back_at_most_once_a_minute
     assert!(waiting.may_hand_back(start));
     waiting.ended(Ended::HandedBack, start);
     // h1 ranks first, yet it does not claim the site it gave away for the hold-off.
-    let at = claims_after(
-        &mut waiting,
-        "h1",
-        start,
-        Duration::from_secs(5),
-        &none_gone,
-    );
+    let at = claims_after(&mut waiting, "h1", start, &none_gone);
     assert_eq!(at, Some(HAND_BACK_HOLD_OFF));
     // (s after the hand-back, whether a holding that starts then may hand back)
     let table = [(1, false), (59, false), (60, true)];
@@ -220,7 +195,7 @@ fn a_host_that_handed_a_site_back_holds_off_and_hands_back_at_most_once_a_minute
     // A holding lost (not handed back) sets no hold-off.
     let mut lost = Waiting::new(TIMES, start);
     lost.ended(Ended::Lost, start);
-    let at = claims_after(&mut lost, "h1", start, Duration::from_secs(5), &none_gone);
+    let at = claims_after(&mut lost, "h1", start, &none_gone);
     assert_eq!(at, Some(Duration::ZERO));
 }
 

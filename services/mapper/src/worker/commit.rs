@@ -38,24 +38,29 @@ impl Unstored {
         let of = |fleet: &str| sites.contains(fleet);
         let batch = &mut self.batch;
         let taken = Batch {
-            accepted: drain_where(&mut batch.accepted, |a| of(&a.fleet)),
-            reacks: drain_where(&mut batch.reacks, |r| of(&r.fleet)),
-            localized: drain_where(&mut batch.localized, |l| of(&l.fleet)),
+            accepted: batch.accepted.extract_if(.., |a| of(&a.fleet)).collect(),
+            reacks: batch.reacks.extract_if(.., |r| of(&r.fleet)).collect(),
+            localized: batch.localized.extract_if(.., |l| of(&l.fleet)).collect(),
             ..Batch::default()
         };
         Unstored {
             batch: taken,
-            solves: drain_where(&mut self.solves, |(fleet, ..)| of(fleet)),
+            solves: self
+                .solves
+                .extract_if(.., |(fleet, ..)| of(fleet))
+                .collect(),
             sites: Some(sites.clone()),
         }
     }
-}
 
-/// The items of `items` that `take` picks, removed from it, in their order.
-fn drain_where<T>(items: &mut Vec<T>, take: impl Fn(&T) -> bool) -> Vec<T> {
-    let (taken, kept) = std::mem::take(items).into_iter().partition(|i| take(i));
-    *items = kept;
-    taken
+    /// Whether nothing is kept: no node, re-ack or solve, and no site waits.
+    pub(super) fn is_empty(&self) -> bool {
+        self.sites.as_ref().is_some_and(|s| s.is_empty())
+            && self.batch.accepted.is_empty()
+            && self.batch.reacks.is_empty()
+            && self.batch.localized.is_empty()
+            && self.solves.is_empty()
+    }
 }
 
 impl Worker {
@@ -74,7 +79,7 @@ impl Worker {
                     self.drop_site(&site, "another host appended to its log", &mut work.batch);
                 }
                 SiteFault::Unavailable(why) => {
-                    if !self.unstored.as_ref().is_some_and(|u| u.holds(&site)) {
+                    if !self.site_waits(&site) {
                         tracing::warn!(
                             site,
                             "the site's entries are not durable; its nodes wait: {why}"
