@@ -88,14 +88,14 @@ for host in "${hosts[@]}" "${gateways[@]}"; do
 done
 
 # What a mapper host may do: the JetStream API, its replies, the site logs (levelmap.site.*),
-# the KV buckets (leases) and object stores (snapshots). Users are named by their
-# certificate's subject (verify_and_map).
+# the nodes' clouds (levelmap.cloud.*), the KV buckets (leases) and object stores
+# (snapshots). Users are named by their certificate's subject (verify_and_map).
 {
   echo "# Written by deploy/cluster/make-nats-certs.sh; include it in every server's config."
   echo "authorization {"
   echo "  mapper_host = {"
-  echo '    publish = ["$JS.API.>", "$JS.ACK.>", "$KV.>", "$O.>", "levelmap.site.>", "_INBOX.>"]'
-  echo '    subscribe = ["$KV.>", "$O.>", "levelmap.site.>", "_INBOX.>"]'
+  echo '    publish = ["$JS.API.>", "$JS.ACK.>", "$KV.>", "$O.>", "levelmap.site.>", "levelmap.cloud.>", "_INBOX.>"]'
+  echo '    subscribe = ["$KV.>", "$O.>", "levelmap.site.>", "levelmap.cloud.>", "_INBOX.>"]'
   echo "  }"
   # A gateway reads who holds each site (the leases' bucket, levelmap_site_leases, as the
   # mapper names it) and whether a site's stream exists; it reads no record and writes nothing.

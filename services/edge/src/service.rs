@@ -1,6 +1,6 @@
 //! The edge service: source → nodes → outbox → Zenoh, until the mapper acks.
 //!
-//! Measurements are paced in (scaled) real time on a blocking thread (`service/produce.rs`),
+//! Measurements are paced in (scaled) real time on a blocking thread ([`produce`](mod@produce)),
 //! which also levels the scans and commits each node to the outbox before it is sent. The async loop publishes new
 //! nodes in order, live odometry best effort, takes the mapper's acks, and re-sends every
 //! unacked node, in order, when no ack progress was seen for `resend_after_ms` (a put made

@@ -38,7 +38,8 @@ pub struct GatewayConfig {
     pub hosts: BTreeMap<String, String>,
     /// The NATS servers and the gateway's credentials (`[nats]`): it reads the leases.
     pub nats: NatsAccess,
-    /// How long a mapper host may take to answer (ms) before the gateway answers 504.
+    /// How long a mapper host may take to answer (ms) before the gateway answers 503
+    /// with `Retry-After`.
     pub request_timeout_ms: u64,
     /// `Retry-After` (s) of a 503 for a site without an owner: about a lease's time.
     pub retry_after_s: u64,

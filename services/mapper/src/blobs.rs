@@ -1,6 +1,6 @@
 //! What a host keeps beside its record and shares with other hosts: the files of map
 //! versions and the nodes' clouds. On a single machine nothing is shared ([`NotShared`]): the
-//! store holds both. In cluster mode (`crate::cluster::ClusterBlobs`) an added version's
+//! store holds both. In cluster mode (the `cluster` crate's `ClusterBlobs`) an added version's
 //! file is put in the cluster's object store before its record is journaled (a host reading
 //! the site's log fetches it from there), and a cloud this host's store lacks (its node came
 //! before a takeover) is read from the clouds' stream.

@@ -81,7 +81,7 @@ pub enum Work {
         site: String,
         /// The change (boxed: it is the largest of the work).
         change: Box<crate::store::SiteChange>,
-        /// An added version's file (shared beyond the store already: `crate::blobs`).
+        /// An added version's file (shared beyond the store already: [`crate::blobs`]).
         file: Option<Vec<u8>>,
         /// When the operator asked (names a change of modes in the log).
         asked_ns: u64,

@@ -4,7 +4,7 @@
 //! set ([`SiteChange`]). The worker makes the entries; a [`Journal`] makes them durable.
 //!
 //! On a single machine the journal is the store itself ([`StoreJournal`]): an entry is
-//! durable once redb committed it. In cluster mode (`crate::cluster::LogJournal`) each site's
+//! durable once redb committed it. In cluster mode (the `cluster` crate's `LogJournal`) each site's
 //! entries are first appended to the site's log in JetStream (fenced, deduplicated; the sites'
 //! appends go out in parallel), then committed to the host's store, its cache of the logs. A
 //! site whose log does not take its entries fails alone ([`SiteFault`]): the other sites'

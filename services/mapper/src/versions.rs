@@ -3,7 +3,8 @@
 //!
 //! A version is made from the fleet's current view: the worker publishes a view only after
 //! its nodes are committed, and makes it in one piece, so the version is a consistent
-//! snapshot of what the store holds, and freezing never waits on the worker.
+//! snapshot of what the store holds; freezing it waits on nothing (recording it is a change
+//! the worker journals).
 
 use crate::store::VersionRows;
 pub use fleetmap::versions::{

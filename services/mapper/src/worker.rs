@@ -247,7 +247,7 @@ impl Worker {
             return None;
         }
         if !self.owns(parsed.fleet) {
-            // Cluster mode: another host's site (every host hears every node). Counted only.
+            // Another host's site (a node that reached this host as the site moved). Counted only.
             self.shared.metrics.reject("node", "not_owner");
             return None;
         }

@@ -129,11 +129,11 @@ type SeedRun = (u64, Vec<(usize, f64)>, MapperStats);
 ///
 /// Each robot drives its whole loop once (the longest loop's lap, 146 s, not the demo's
 /// 120 s), so every place where two loops come close has been driven by both robots: their
-/// paths overlap as far as the park lets them, whatever the seed. Measured (docs/slam.md):
-/// all ten seeds end in one part (fitted ATE 0.075–0.179 m). In 120 s seeds 1 and 4 leave one
-/// robot alone: its path and another's come within 10 m for 10–23 m, which gives one or two
-/// matches from one submap, and a wrong match 81–96 m off in the same park is as well
-/// supported (docs/slam.md, first contact).
+/// paths overlap as far as the park lets them, whatever the seed. Measured
+/// (docs/measurements/slam.md): all ten seeds end in one part (fitted ATE 0.075–0.179 m). In
+/// 120 s seeds 1 and 4 leave one robot alone: its path and another's come within 10 m for
+/// 10–23 m, which gives one or two matches from one submap, and a wrong match 81–96 m off in
+/// the same park is as well supported (docs/measurements/slam.md, "First contact").
 #[test]
 fn robots_without_gps_or_a_known_start_meet_without_a_wrong_contact() {
     let world = World::park();

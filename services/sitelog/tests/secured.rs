@@ -1,16 +1,16 @@
-//! NATS secured like the robot link (issue 26, item 5): three servers with TLS on clients and
-//! routes, certificates and authorization from `deploy/cluster/make-nats-certs.sh`. A mapper
-//! host with its certificate writes and reads a site's log; a client without a certificate,
-//! with one from another CA, or with this CA's certificate for a name that is not a mapper
-//! host can neither read nor write it. The host's permissions cover the leases' bucket; a
-//! gateway's certificate reads the leases and no record.
+//! NATS secured like the robot link: three servers with TLS on clients and routes,
+//! certificates and authorization from `deploy/cluster/make-nats-certs.sh`. A mapper host
+//! with its certificate writes and reads a site's log; a client without a certificate, with
+//! one from another CA, or with this CA's certificate for a name that is not a mapper host
+//! can neither read nor write it. The host's permissions cover the leases' bucket and the
+//! nodes' clouds; a gateway's certificate reads the leases and no record.
 
 mod common;
 
 use async_nats::{ConnectOptions, jetstream};
 use bytes::Bytes;
 use common::{Cluster, TempDir, open_when_ready};
-use sitelog::{Appended, Leases, RecordId, RetryPolicy, SiteLog};
+use sitelog::{Appended, CloudRetention, Clouds, Leases, RecordId, RetryPolicy, SiteLog};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
@@ -92,6 +92,25 @@ async fn only_a_mapper_host_with_its_certificate_reads_or_writes_a_site_log() {
         Appended::New(1)
     );
     assert_eq!(log.read_from(1).await.unwrap().len(), 1);
+    // And the nodes' clouds (levelmap.cloud.*): a put is stored and reads back.
+    let clouds = Clouds::open(
+        js.clone(),
+        3,
+        CloudRetention {
+            max_age: None,
+            max_bytes: None,
+        },
+    )
+    .await
+    .expect("the clouds' stream under h1's permissions");
+    clouds
+        .put("park", 0, Bytes::from_static(b"cloud"))
+        .await
+        .expect("h1 puts a node's cloud");
+    assert_eq!(
+        clouds.get("park", 0).await.unwrap().as_deref(),
+        Some(&b"cloud"[..])
+    );
 
     let refused: [(&str, ConnectOptions); 3] = [
         ("no client certificate", tls_options(certs.path(), None)),

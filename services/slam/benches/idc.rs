@@ -1,7 +1,7 @@
 //! Speed of IDC scan matching on one core: two 360-beam scans, from an initial guess off by
 //! about 0.3 m and 3–5°. Target: ≤ 0.5 ms per match (release). Measured (divan medians, a
 //! shared machine): 0.25 ms synthetic, 0.31 ms Freiburg (from 0.30 and 0.36 ms before the
-//! contour's per-segment data and branch work; docs/slam.md).
+//! contour's per-segment data and branch work; docs/measurements/slam.md).
 //!
 //!     cargo bench -p slam --bench idc
 //!

@@ -6,14 +6,14 @@
 //! Several robots share one network: each has its own chain of nodes, its first node at its
 //! odometry pose (robots start with odometry in the map frame, as from a known dock, or GPS
 //! pulls them in), and loop-closure candidates include the other robots' nodes, so robots
-//! that meet share one map. GPS fixes become GPS edges with a robust kernel; while a part of
-//! the network has fixes at fewer than two nodes and no link to the first robot's chain, it
-//! is not optimized yet (it keeps its dead-reckoned estimates).
+//! that meet share one map. GPS fixes become GPS edges with a robust kernel. A part of the
+//! network that neither GPS nor a link to another part anchors is optimized with its first
+//! node held where it is (its own gauge, [`Optimizer::for_parts`]).
 //!
 //! Loop-closure candidates are earlier nodes whose current estimate lies within a search
 //! radius of the new node's, excluding its recent predecessors; a candidate becomes an edge
 //! only when IDC matches it, the gate accepts the match and the pairwise consistency check
-//! (`closures.rs`, `consistency.rs`) lets it through, and then with a soft robust
+//! ([`closures`], [`consistency`]) lets it through, and then with a soft robust
 //! kernel (Cauchy, c = 10): a closure that slips through wrongly is down-weighted, while a
 //! right one that arrives after much drift still pulls the map. (DCS was measured on ACES:
 //! it discarded the right closures too, and the relation error tripled.)
@@ -135,7 +135,7 @@ struct Chain {
     last_odometry: Pose2,
     /// Nodes in the chain so far.
     length: usize,
-    /// Nodes passed since the last (`coverage.rs`).
+    /// Nodes passed since the last ([`coverage`]).
     passed: coverage::Passed,
 }
 
@@ -173,7 +173,7 @@ pub struct Mapper2d {
     /// The nodes filed by their estimates.
     near: near::NodeGrid,
     /// GPS edges that passes brought, waiting for the next solve applied (not saved: the
-    /// caller's store keeps them with that solve; `coverage.rs`).
+    /// caller's store keeps them with that solve; [`coverage`]).
     #[serde(skip)]
     pass_fixes: Vec<crate::GpsEdge>,
 }

@@ -205,7 +205,7 @@ pub(super) fn cors(origins: &[CorsOrigin]) -> Option<CorsLayer> {
         CorsLayer::new()
             .allow_origin(AllowOrigin::list(origins))
             // DELETE and a Content-Type: a map version's delete and import.
-            .allow_methods([Method::GET, Method::POST, Method::DELETE])
+            .allow_methods([Method::GET, Method::POST, Method::PUT, Method::DELETE])
             .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE])
             // What a page of another origin may read besides the simple headers.
             .expose_headers([

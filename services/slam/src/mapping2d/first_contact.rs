@@ -11,11 +11,11 @@
 //! Outdoors a place holds few landmarks, and the park's lamp posts stand in rows: a submap's
 //! best pose is often wrong, and its score does not tell (wrong poses of the park scored up
 //! to 0.86, true ones 0.20–0.69). What tells is the robots' longer stretches of path around the
-//! match (`contact_check.rs`): placed by the match, each robot's returns near the other's
+//! match ([`super::contact_check`]): placed by the match, each robot's returns near the other's
 //! path must fall on the other's returns. Even then a match is only a hypothesis (where one
 //! part lies in the other) until a second, from another pair of submaps, places the two parts
 //! the same way (`agree_m` plus `agree_drift` of the path between them, `agree_rad`). Then
-//! both become inter-robot closures and one part is moved onto the other (`parts.rs`); from
+//! both become inter-robot closures and one part is moved onto the other ([`super::parts`]); from
 //! then on the ordinary searches find its closures.
 
 use super::Mapper2d;

@@ -1,7 +1,7 @@
 //! Global loop search: every finished submap is searched for in the robot's other finished
 //! submaps (and those of robots it already shares a frame with), whole and at every heading,
 //! whatever the estimate says, so a loop closes at any drift. The local searches
-//! (`edges.rs`, `submap_search.rs`) look only near the estimate; after a long loop the
+//! ([`super::edges`], [`super::submap_search`]) look only near the estimate; after a long loop the
 //! place is tens of metres from where the estimate puts it (fr-clinic: 64 m).
 //!
 //! Cartographer's constraint builder does the same with a scan against every submap at a
@@ -16,7 +16,7 @@
 //! elsewhere scores nearly as well), its returns must not land where the target saw free
 //! space (`max_free_share`), IDC must confirm it against the target's nearest node through
 //! the quality gate, and it then waits in the consistency check like every closure, whose
-//! neighbours' matches (`support.rs`) must agree with it.
+//! neighbours' matches ([`super::support`]) must agree with it.
 
 use super::Mapper2d;
 use crate::grid::{CellState, GridParams, OccupancyGrid};

@@ -133,7 +133,7 @@ impl Mapper2dParams {
             fuse_odometry: true,
             // Off for now: on the simulated fleet it rejects the fixed 2D scanner's two wrong
             // closures, and the demo's comparison (leveled ≥ 3× better) no longer holds
-            // (docs/slam.md).
+            // (docs/measurements/slam.md, "Consistency of loop closures").
             loop_consistency: ConsistencyParams {
                 enabled: false,
                 ..ConsistencyParams::default()
@@ -147,7 +147,7 @@ impl Mapper2dParams {
     }
 }
 
-/// Tunables of the loop closures' pairwise consistency check (PCM, see `consistency.rs`).
+/// Tunables of the loop closures' pairwise consistency check (PCM, see [`super::consistency`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct ConsistencyParams {

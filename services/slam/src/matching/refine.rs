@@ -35,8 +35,8 @@ pub struct RefineParams {
     /// node). Default true.
     pub enabled: bool,
     /// In the 2D mapper, the reference scans: the last node and this many nodes before it
-    /// on its chain, at their current estimates (0: scan-to-scan). Default 1 (docs/slam.md
-    /// has the figures for 0, 1 and 2).
+    /// on its chain, at their current estimates (0: scan-to-scan). Default 1
+    /// (docs/measurements/slam.md has the figures for 0, 1 and 2).
     pub submap_extra_nodes: usize,
     /// Pair the reference scans' points with the current scan's surfaces too (both ways).
     /// Default false.

@@ -118,9 +118,8 @@ fn node_to_wire(node: &NodeParts) -> v1::Node {
 
 /// Checks that a node at `next` (stamp in ns, odometry x and y in m) can follow one at
 /// `previous` in one chain: a later stamp, and a step no faster than [`MAX_SPEED_M_PER_S`]
-/// (plus a robot's length, so a node after a long stop is not fast). The edge runs it before
-/// it commits a node (a failing step starts a new chain: an odometry reset), the mapper
-/// before it takes one.
+/// (plus a robot's length, so a node after a long stop is not fast). The mapper runs it on
+/// each node it takes: a failing step starts a new odometry chain (an odometry reset).
 pub fn check_step(previous: (u64, [f64; 2]), next: (u64, [f64; 2])) -> Result<(), WireError> {
     let ((t0, [x0, y0]), (t1, [x1, y1])) = (previous, next);
     if t1 <= t0 {
