@@ -80,3 +80,23 @@ fn robots_without_gps_or_a_known_start_meet_in_one_map() {
     let ate = report["ate_rmse_m"].as_f64().unwrap();
     assert!(ate <= 0.15, "ATE after an SE(2) fit {ate:.3} m");
 }
+
+/// `--dir` naming a folder that holds a user's file: refused at once, the file untouched.
+#[test]
+fn a_dir_holding_a_users_file_is_refused_and_left_as_it_is() {
+    let dir = temp_dir("demo-users-dir");
+    std::fs::write(dir.join("notes.txt"), b"mine").unwrap();
+    let out = levelmap()
+        .args(["demo", "--duration", "5", "--speed", "0", "--dir"])
+        .arg(&dir)
+        .output()
+        .expect("levelmap runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "the demo ran in a user's folder");
+    assert!(
+        stderr.contains("did not make") && stderr.contains(".levelmap-lab"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(dir.join("notes.txt")).unwrap(), b"mine");
+    std::fs::remove_dir_all(&dir).ok();
+}

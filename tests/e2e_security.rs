@@ -27,6 +27,7 @@ fn make_certs(dir: &Path, name: &str) -> PathBuf {
 fn make_certs_for(dir: &Path, name: &str, robots: &[&str]) -> PathBuf {
     let out = dir.join(name);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/zenoh/make-certs.sh");
+    testdata::debian::require(&[("openssl", "openssl")]);
     let run = Command::new("bash")
         .arg(&script)
         .arg(&out)

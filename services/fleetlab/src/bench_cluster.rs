@@ -67,7 +67,8 @@ pub struct BenchClusterArgs {
     /// The nats-server binary (2.15); default: `NATS_SERVER_BIN`.
     #[arg(long, value_name = "FILE")]
     pub nats_server: Option<PathBuf>,
-    /// Folder of the run's processes: configs, stores, logs (emptied at start, kept after).
+    /// Folder of the run's processes: configs, stores, logs (new, empty or an earlier run's,
+    /// emptied at start; any other is refused; kept after).
     #[arg(long, default_value = "levelmap-bench-cluster")]
     pub dir: PathBuf,
     /// Print one JSON object of figures.

@@ -49,7 +49,8 @@ pub struct BenchFleetArgs {
     /// The mapper's HTTP address (port 0: any free one).
     #[arg(long, default_value = "127.0.0.1:0")]
     pub http: String,
-    /// Folder for the mapper's store (emptied at start).
+    /// Folder for the mapper's store (new, empty or an earlier run's, emptied at start; any other
+    /// is refused).
     #[arg(long, default_value = "levelmap-bench-fleet")]
     pub dir: std::path::PathBuf,
     /// Print one JSON object of figures.

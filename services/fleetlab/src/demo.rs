@@ -44,7 +44,8 @@ pub struct DemoArgs {
     /// The mapper's Zenoh router endpoint; robots connect to it.
     #[arg(long, default_value = "tcp/127.0.0.1:7447")]
     pub zenoh: String,
-    /// Folder for the mapper's store and the robots' outboxes (emptied at start).
+    /// Folder for the mapper's store and the robots' outboxes (new, empty or an earlier run's,
+    /// emptied at start; any other is refused).
     #[arg(long, value_name = "DIR", default_value = "levelmap-demo")]
     pub dir: PathBuf,
     /// Seed of the sensors' noise (and of the scattered starts).

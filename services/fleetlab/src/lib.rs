@@ -10,6 +10,7 @@ pub mod bench_fleet;
 pub mod bench_incremental;
 pub mod demo;
 pub mod fixed2d;
+pub mod lab_dir;
 pub mod localize_demo;
 pub mod map_score;
 
@@ -29,7 +30,8 @@ pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
         .build()?)
 }
 
-/// A mapper of the park for a lab run: its store in `dir` (emptied first, made if missing),
+/// A mapper of the park for a lab run: its store in `dir` (made, or emptied if a lab run made
+/// it: [`lab_dir::prepare`]),
 /// the park's datum, the simulated robots' mapping ([`sim_mapping_params`]), HTTP on `http`,
 /// a Zenoh router on `zenoh`. Callers add their tokens.
 pub fn park_mapper_config(
@@ -37,11 +39,7 @@ pub fn park_mapper_config(
     http: &str,
     zenoh: &str,
 ) -> anyhow::Result<mapper::MapperConfig> {
-    use anyhow::Context;
-    if dir.exists() {
-        std::fs::remove_dir_all(dir).with_context(|| format!("{}: cannot empty", dir.display()))?;
-    }
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    lab_dir::prepare(dir)?;
     Ok(mapper::MapperConfig {
         zenoh: runtime::session::SessionConfig::router(zenoh),
         http_listen: http.to_owned(),

@@ -288,13 +288,12 @@ fn over_fleet_mapping<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Mapper2d
     merged.try_into().map_err(D::Error::custom)
 }
 
-/// `over` laid on `base`, table by table. A table that shares no key with the one it lands
-/// on (an enum's other variant: `{ Huber = … }` for `{ Cauchy = … }`) replaces it.
+/// `over` laid on `base`, table by table, so a key no table knows stays and is refused. A
+/// table that names its kernel (`{ kernel = "huber", delta = 1.5 }` for a Cauchy one)
+/// replaces the one it lands on: another kernel's parameters come with it.
 fn merge_over(base: &mut toml::Value, over: toml::Value) {
     match (base, over) {
-        (toml::Value::Table(base), toml::Value::Table(over))
-            if over.keys().any(|k| base.contains_key(k)) =>
-        {
+        (toml::Value::Table(base), toml::Value::Table(over)) if !over.contains_key("kernel") => {
             for (key, value) in over {
                 match base.get_mut(&key) {
                     Some(slot) => merge_over(slot, value),
@@ -325,6 +324,26 @@ pub fn fleet_mapping_params() -> Mapper2dParams {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every table of the config, the unset ones too, refuses a misspelt key, naming the
+    /// file, the line and the keys expected (a typo must not silently become a default).
+    #[test]
+    fn a_misspelt_key_in_any_table_is_refused_with_its_file_and_line() {
+        let dir = std::env::temp_dir().join(format!("mapper-typos-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("config.toml");
+        let files = settings::typos::misspelt_files::<MapperConfig>(&["cluster", "cluster.nats"]);
+        assert!(files.len() > 20, "{files:?}");
+        for (table, text) in files {
+            std::fs::write(&path, text).unwrap();
+            let error = match MapperConfig::load(Some(&path)) {
+                Ok(_) => panic!("[{table}] took a misspelt key"),
+                Err(e) => format!("{e:#}"),
+            };
+            settings::typos::assert_refused(&table, &path, &error);
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn the_deploy_file_states_the_defaults() {
@@ -399,12 +418,17 @@ mod tests {
     #[test]
     fn a_variable_that_names_no_key_is_an_error() {
         let load = |pairs| runtime::session::load_toml_with::<MapperConfig>(None, env(pairs));
-        // A typo among the denied keys, and one among the mapping's (which serde ignores).
+        // A typo at the top and one in the mapping's parameters.
         let e = load(&[("LEVELMAP_HTTP_LISTN", "x")]).unwrap_err();
         assert!(e.to_string().contains("LEVELMAP_HTTP_LISTN"), "{e}");
         assert!(e.to_string().contains("http_listn"), "{e}");
         let e = load(&[("LEVELMAP_MAPPING__ODOMETRY_SIGMA", "0.1")]).unwrap_err();
-        assert!(e.to_string().contains("mapping.odometry_sigma"), "{e}");
+        let e = e.to_string();
+        assert!(e.contains("LEVELMAP_MAPPING__ODOMETRY_SIGMA"), "{e}");
+        assert!(
+            e.contains("odometry_sigma") && e.contains("expected"),
+            "{e}"
+        );
         // A value of the wrong type, as in the file.
         let e = load(&[("LEVELMAP_SOLVE_INTERVAL_MS", "soon")]).unwrap_err();
         assert!(e.to_string().contains("LEVELMAP_SOLVE_INTERVAL_MS"), "{e}");

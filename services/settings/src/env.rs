@@ -10,7 +10,8 @@ use toml::{Table, Value};
 pub const ENV_PREFIX: &str = "LEVELMAP_";
 
 /// `LEVELMAP_…` variables that are not config keys: the test data's folder and list, the
-/// scripts' shared folder, the dashboard's files, binary, artifacts and URL. They are never
+/// scripts' shared folder, the dashboard's files, binary, artifacts and URL, the kill-loop
+/// drill's seed. The certificate scripts' variables are `MAKE_CERTS_…`, not these. They are never
 /// taken as keys, so the services start in the shells and CI jobs that set them.
 pub const NOT_CONFIG_VARS: &[&str] = &[
     "LEVELMAP_DATA",
@@ -20,6 +21,7 @@ pub const NOT_CONFIG_VARS: &[&str] = &[
     "LEVELMAP_WEB_ARTIFACTS",
     "LEVELMAP_BIN",
     "LEVELMAP_URL",
+    "LEVELMAP_DRILL_SEED",
 ];
 
 /// One config key set from the environment.
@@ -149,6 +151,44 @@ fn lookup<'a>(table: &'a Table, path: &[String]) -> Option<&'a Value> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Exported in an operator's shell, a script's variable must not stop a service: every
+    /// `LEVELMAP_…` name the shipped scripts and the CI read is one the loader leaves alone.
+    #[test]
+    fn the_scripts_read_no_variable_the_services_take_for_a_key() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let mut read = Vec::new();
+        for dir in ["deploy", "deploy/zenoh", "deploy/cluster", "scripts", ".ci"] {
+            for entry in std::fs::read_dir(root.join(dir)).unwrap() {
+                let path = entry.unwrap().path();
+                if !path.is_file() {
+                    continue;
+                }
+                let Ok(text) = std::fs::read_to_string(&path) else {
+                    continue;
+                };
+                for (i, _) in text.match_indices("${LEVELMAP_") {
+                    let name: String = text[i + 2..]
+                        .chars()
+                        .take_while(|c| c.is_ascii_uppercase() || *c == '_')
+                        .collect();
+                    read.push((path.display().to_string(), name));
+                }
+            }
+        }
+        assert!(
+            !read.is_empty(),
+            "no script reads LEVELMAP_DATA: the scan is broken"
+        );
+        let taken: Vec<_> = read
+            .iter()
+            .filter(|(_, name)| !NOT_CONFIG_VARS.contains(&name.as_str()))
+            .collect();
+        assert!(
+            taken.is_empty(),
+            "read by scripts, taken as config keys: {taken:?}"
+        );
+    }
 
     fn vars(pairs: &[(&str, &str)]) -> Vec<(OsString, OsString)> {
         pairs

@@ -8,6 +8,8 @@ use serde::de::DeserializeOwned;
 use std::path::Path;
 
 pub mod env;
+#[cfg(feature = "testing")]
+pub mod typos;
 
 /// Reads a service's config: its TOML file (none: every key at its default), then the
 /// `LEVELMAP_…` variables of the environment ([`mod@env`]). Unknown keys are errors, in the file
@@ -55,4 +57,36 @@ where
         .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
     env::check_taken(&toml::Table::try_from(&config)?, &overrides)?;
     Ok(config)
+}
+
+/// The line (from 1) of the key at `path` (`["source", "mcap", "cloud_topc"]`) in the TOML
+/// `text`: for the errors of checks made after the file is read.
+pub fn line_of(text: &str, path: &[&str]) -> Option<usize> {
+    let root = toml::de::DeTable::parse(text).ok()?;
+    let mut table = root.get_ref();
+    let mut start = None;
+    for (depth, key) in path.iter().enumerate() {
+        let (name, value) = table.iter().find(|(name, _)| name.get_ref() == key)?;
+        start = Some(name.span().start);
+        if depth + 1 < path.len() {
+            match value.get_ref() {
+                toml::de::DeValue::Table(inner) => table = inner,
+                _ => return None,
+            }
+        }
+    }
+    Some(text[..start?].matches('\n').count() + 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_keys_line_is_found_in_tables_and_dotted_headers() {
+        let text = "fleet = \"park\"\n\n[source.mcap]\npath = \"a.mcap\"\ncloud_topc = \"/x\"\n";
+        assert_eq!(line_of(text, &["fleet"]), Some(1));
+        assert_eq!(line_of(text, &["source", "mcap", "cloud_topc"]), Some(5));
+        assert_eq!(line_of(text, &["source", "mcap", "nothing"]), None);
+    }
 }

@@ -236,11 +236,33 @@ impl LocalCluster {
     }
 }
 
+impl LocalCluster {
+    /// The last `lines` lines of each server's log, headed by its path.
+    pub fn log_tails(&self, lines: usize) -> String {
+        let mut out = String::new();
+        for launch in &self.launches {
+            let text = std::fs::read_to_string(&launch.log).unwrap_or_default();
+            let all: Vec<&str> = text.lines().collect();
+            let tail = &all[all.len().saturating_sub(lines)..];
+            out += &format!("--- {} (last {} lines)\n", launch.log.display(), tail.len());
+            for line in tail {
+                out += line;
+                out.push('\n');
+            }
+        }
+        out
+    }
+}
+
 impl Drop for LocalCluster {
     fn drop(&mut self) {
         for child in self.servers.iter_mut().flatten() {
             let _ = child.kill();
             let _ = child.wait();
+        }
+        // A test failed with the servers running: what they said last, where it fails.
+        if std::thread::panicking() {
+            eprintln!("{}", self.log_tails(20));
         }
     }
 }

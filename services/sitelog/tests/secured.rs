@@ -25,6 +25,7 @@ fn make_certs(out: &Path, nodes: &str, hosts: &str) {
 fn make_certs_with_gateways(out: &Path, nodes: &str, hosts: &str, gateways: Option<&str>) {
     let script =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../deploy/cluster/make-nats-certs.sh");
+    testdata::debian::require(&[("openssl", "openssl")]);
     let status = Command::new("bash")
         .arg(&script)
         .arg(out)

@@ -28,7 +28,7 @@ use tiles::{NodeIndex, Tile};
 /// How a map is rasterized and a scan searched in it. The defaults suit leveled scans of an
 /// outdoor site (landmarks within 20 m, nodes about a metre apart).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct LocalizeParams {
     /// Rasterization and search: cell size, hit blur, range used.
     pub grid: CorrelativeParams,

@@ -25,7 +25,7 @@ pub enum Method {
 
 /// Stopping rules and method.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct OptimizeParams {
     /// Gauss-Newton or Levenberg-Marquardt.
     pub method: Method,

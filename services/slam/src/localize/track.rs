@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 /// How a robot is followed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct TrackParams {
     /// The window around the odometry's prediction, right after a fix (m, in x and in y)…
     pub window_m: f64,

@@ -14,7 +14,7 @@ use std::collections::HashSet;
 
 /// How two robots' stretches of path around a match must agree.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct ContactCheckParams {
     /// Each robot's nodes within this much path (m) either side of the match's node: two
     /// submaps each way, so a stretch holds the match's submap and what lies around it

@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 /// When a place counts as covered, and how a pass is located.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct CoverageParams {
     /// Pass over covered places at all (the fleet's map decides; the mapper only answers).
     pub enabled: bool,

@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 
 /// How parts that share no frame are searched for one another.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct FirstContactParams {
     /// Search at all.
     pub enabled: bool,

@@ -29,7 +29,7 @@ use serde::{Deserialize, Serialize};
 
 /// The global loop search's parameters, each default with its reason.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct GlobalSearchParams {
     /// Search at all.
     pub enabled: bool,

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 /// Tunables of the 2D mapper, each with its unit.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct Mapper2dParams {
     /// A new node after this much travel (m)…
     pub node_distance_m: f64,
@@ -149,7 +149,7 @@ impl Mapper2dParams {
 
 /// Tunables of the loop closures' pairwise consistency check (PCM, see [`super::consistency`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct ConsistencyParams {
     /// Off: every closure the quality gate accepts becomes an edge at once.
     pub enabled: bool,

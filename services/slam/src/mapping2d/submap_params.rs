@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 /// pose, if it scores well enough, is refined by IDC against the submap's nearest node and
 /// gated like any closure.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct SubmapSearchParams {
     /// Search submaps at all.
     pub enabled: bool,

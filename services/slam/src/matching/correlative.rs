@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 /// How submaps are rasterized and scans thinned for the search.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct CorrelativeParams {
     /// Cell size (m). The translation is found to within a cell, the rotation to within the
     /// step that moves the farthest return by a cell.

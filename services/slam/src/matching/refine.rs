@@ -29,7 +29,7 @@ use solve::Solver;
 
 /// Tunables of the point-to-line refinement, with units and defaults.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct RefineParams {
     /// Refine matches at all (sequential matches and the offsets of scans that hang off a
     /// node). Default true.

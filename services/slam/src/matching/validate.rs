@@ -213,7 +213,7 @@ fn ratio(part: usize, whole: usize) -> f64 {
 
 /// The thresholds a match must pass to become a constraint.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct QualityGate {
     /// Lowest [`Match::quality`] accepted. Default 0.5.
     pub min_quality: f64,

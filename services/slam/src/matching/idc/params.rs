@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 /// Every tunable of IDC and of the validation of its result, with its unit and default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct IdcParams {
     /// Outlier distance of the first iteration (m): a pair further apart is dropped. Covers
     /// the error of the initial guess. Default 1.0.
