@@ -200,6 +200,7 @@ fn the_deployed_server_configs_are_valid() {
         let text = std::fs::read_to_string(deploy.join(format!("nats{i}.conf")))
             .expect("a deployed config");
         assert!(text.contains("sync_interval: always"), "nats{i}.conf");
+        assert!(text.contains("http: 127.0.0.1:8222"), "nats{i}.conf: its monitoring");
         let text = text
             .replace("/etc/levelmap/nats/", &format!("{}/", dir.path().display()))
             .replace(
