@@ -1,7 +1,8 @@
 //! The systemd units of `deploy/systemd/`: `systemd-analyze verify` passes on each (the edge's
-//! template as an instance), with ExecStart at the built binary, and their hardening scores
-//! at most 2.0 on `systemd-analyze security`. systemd only warns about an unknown key, so any
-//! output fails the check: a unit with a typo'd key is shown to fail it. And the services take
+//! and the NATS servers' templates as instances), with ExecStart at the built binary (the
+//! tests' nats-server for NATS), and their hardening scores at most 2.0 on `systemd-analyze
+//! security`. systemd only warns about an unknown key, so any output fails the check: a unit
+//! with a typo'd key is shown to fail it. And the services take
 //! their whole config from `LEVELMAP_…` variables, as the units set the robot id, through
 //! the binary; a variable that names no key stops the start.
 
@@ -25,6 +26,22 @@ fn unit_text(name: &str) -> String {
         "{name}"
     );
     text.replace(INSTALLED_AT, env!("CARGO_BIN_EXE_levelmap"))
+}
+
+/// The NATS servers' unit, with ExecStart at the tests' nats-server (2.15, as shipped).
+fn nats_unit_text() -> String {
+    const NATS_AT: &str = "/usr/local/bin/nats-server";
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/systemd/levelmap-nats@.service");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
+    assert!(
+        text.contains(&format!("ExecStart={NATS_AT} ")),
+        "levelmap-nats@.service"
+    );
+    text.replace(
+        NATS_AT,
+        &testdata::nats::nats_server().display().to_string(),
+    )
 }
 
 fn write_unit(dir: &Path, name: &str, text: &str) -> PathBuf {
@@ -81,9 +98,24 @@ fn every_unit_verifies_and_is_hardened() {
         "levelmap-gateway.service",
         &unit_text("levelmap-gateway.service"),
     );
-    // The template is loaded for an instance named after a robot.
+    write_unit(&dir, "levelmap-nats@.service", &nats_unit_text());
+    // Every unit shipped is one of these.
+    let shipped: Vec<String> =
+        std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/systemd"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|name| name.ends_with(".service"))
+            .collect();
+    for name in &shipped {
+        assert!(
+            dir.join(name).is_file(),
+            "{name} is shipped but not checked"
+        );
+    }
+    // The templates are loaded for an instance: a robot's, a NATS server's.
     let edge = dir.join("levelmap-edge@robot3.service");
-    for unit in [&mapper, &edge, &gateway] {
+    let nats = dir.join("levelmap-nats@nats1.service");
+    for unit in [&mapper, &edge, &gateway, &nats] {
         verify(unit).unwrap_or_else(|e| panic!("{e}"));
         // Exposure 0..10 as the tool prints it; the threshold is in tenths.
         analyze(&["security", "--offline=yes", "--threshold=20"], unit)

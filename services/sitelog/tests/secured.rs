@@ -200,8 +200,19 @@ fn the_deployed_server_configs_are_valid() {
         let text = std::fs::read_to_string(deploy.join(format!("nats{i}.conf")))
             .expect("a deployed config");
         assert!(text.contains("sync_interval: always"), "nats{i}.conf");
-        assert!(text.contains("http: 127.0.0.1:8222"), "nats{i}.conf: its monitoring");
+        assert!(
+            text.contains("http: 127.0.0.1:8222"),
+            "nats{i}.conf: its monitoring"
+        );
+        // The unit's credential (deploy/systemd/levelmap-nats@.service) is the node's key.
+        let credential = format!("/run/credentials/levelmap-nats@nats{i}.service/nats.key");
+        assert!(
+            text.contains(&credential),
+            "nats{i}.conf: its key as the unit's credential"
+        );
+        let key = dir.path().join(format!("nats{i}.key"));
         let text = text
+            .replace(&credential, &key.display().to_string())
             .replace("/etc/levelmap/nats/", &format!("{}/", dir.path().display()))
             .replace(
                 "/var/lib/levelmap-nats",
