@@ -16,7 +16,7 @@ pub mod source;
 pub use cloud::CloudParams;
 pub use config::{EdgeConfig, SourceConfig};
 pub use node::{GpsReading, NodeBuilder, NodeError, NodeParams, PlanarScan, SensorScan};
-pub use outbox::{Outbox, OutboxError};
+pub use outbox::{OUTBOX_FORMAT, Outbox, OutboxError};
 pub use service::{EdgeReport, ResendBackoff, run};
 pub use source::{
     FilesSource, FilesSourceConfig, McapSource, McapSourceConfig, Ros2Source, Ros2SourceConfig,

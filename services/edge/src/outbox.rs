@@ -6,23 +6,41 @@ use std::path::Path;
 
 /// Nodes by node_seq, encoded once, here ([`wire::NodeParts::encode`]).
 const NODES: TableDefinition<u64, &[u8]> = TableDefinition::new("nodes");
-/// `next_node_seq` (the next number to give), `acked` (highest node_seq acked + 1) and
-/// `chain_id` (drawn when the outbox is made: `Node.chain_id`).
+/// `format` ([`OUTBOX_FORMAT`]), `next_node_seq` (the next number to give), `acked`
+/// (highest node_seq acked + 1) and `chain_id` (drawn when the outbox is made:
+/// `Node.chain_id`).
 const META: TableDefinition<&str, u64> = TableDefinition::new("meta");
 /// Nodes the robot made but must not send (they fail the wire's checks), with why, by
 /// arrival; they take no node_seq, so they never block the nodes after them.
 const QUARANTINE: TableDefinition<u64, (&str, &[u8])> = TableDefinition::new("quarantine");
 
-/// A failure of the outbox's file (redb).
+/// The outbox's format, kept in `meta` as `format`: what a later release reads to know how
+/// the nodes were written. An outbox without one is format 0 (the releases before the
+/// number; the same tables and encoding), which this release reads and marks as 1.
+pub const OUTBOX_FORMAT: u64 = 1;
+
+/// A failure of the outbox's file (redb), or an outbox this release cannot read.
 #[derive(Debug, thiserror::Error)]
-#[error("outbox: {0}")]
-pub struct OutboxError(#[from] redb::Error);
+pub enum OutboxError {
+    /// The file or its tables.
+    #[error("outbox: {0}")]
+    Store(#[from] redb::Error),
+    /// Written by a later release: left as it is, for that release to send.
+    #[error(
+        "outbox: format {found}, written by a later release (this one reads up to \
+         {OUTBOX_FORMAT}); its nodes are kept: run the release that wrote it"
+    )]
+    Newer {
+        /// The outbox's format.
+        found: u64,
+    },
+}
 
 macro_rules! from_redb {
     ($($t:ty),*) => {$(
         impl From<$t> for OutboxError {
             fn from(e: $t) -> Self {
-                OutboxError(e.into())
+                OutboxError::Store(e.into())
             }
         }
     )*};
@@ -49,6 +67,15 @@ impl Outbox {
         txn.open_table(QUARANTINE)?;
         {
             let mut meta = txn.open_table(META)?;
+            let format = meta.get("format")?.map(|v| v.value());
+            match format {
+                Some(found) if found > OUTBOX_FORMAT => return Err(OutboxError::Newer { found }),
+                Some(OUTBOX_FORMAT) => {}
+                // New, or format 0: the same tables, now numbered.
+                _ => {
+                    meta.insert("format", OUTBOX_FORMAT)?;
+                }
+            }
             if meta.get("chain_id")?.is_none() {
                 // An outbox from before chains that already numbered nodes keeps chain 0 (the
                 // mapper's legacy chain), so its numbering still fits what the mapper took.
@@ -59,6 +86,11 @@ impl Outbox {
         }
         txn.commit()?;
         Ok(Outbox { db })
+    }
+
+    /// The outbox's format ([`OUTBOX_FORMAT`] once opened by this release).
+    pub fn format(&self) -> Result<u64, OutboxError> {
+        self.meta("format")
     }
 
     /// The chain this outbox's nodes belong to (`Node.chain_id`).
@@ -228,6 +260,39 @@ mod tests {
         std::fs::remove_file(&path).unwrap();
         let fresh = Outbox::open(&path).unwrap();
         assert_ne!(fresh.chain_id().unwrap(), chain_id);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn an_outbox_of_a_later_format_is_refused_and_left_as_it_is() {
+        let dir = std::env::temp_dir().join(format!("levelmap-outbox-new-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("outbox.redb");
+        let _ = std::fs::remove_file(&path);
+        {
+            let outbox = Outbox::open(&path).unwrap();
+            outbox.push_encoded(0, b"node").unwrap();
+            let txn = outbox.db.begin_write().unwrap();
+            txn.open_table(META)
+                .unwrap()
+                .insert("format", OUTBOX_FORMAT + 1)
+                .unwrap();
+            txn.commit().unwrap();
+        }
+        let e = Outbox::open(&path)
+            .err()
+            .expect("a later format is refused");
+        assert!(
+            matches!(e, OutboxError::Newer { found } if found == OUTBOX_FORMAT + 1),
+            "{e}"
+        );
+        assert!(e.to_string().contains("later release"), "{e}");
+        // Nothing was changed: the node is still there for the release that wrote it.
+        let db = Database::create(&path).unwrap();
+        let txn = db.begin_read().unwrap();
+        assert_eq!(txn.open_table(NODES).unwrap().len().unwrap(), 1);
+        drop(txn);
+        drop(db);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
