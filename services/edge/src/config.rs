@@ -160,25 +160,11 @@ mod tests {
     /// file, the line and the keys expected (a typo must not silently become a default).
     #[test]
     fn a_misspelt_key_in_any_table_is_refused_with_its_file_and_line() {
-        let dir = std::env::temp_dir().join(format!("edge-typos-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("config.toml");
-        let files = settings::typos::misspelt_files::<EdgeConfig>(&[
-            "ros2_out",
-            "source.files",
-            "source.mcap",
-            "source.ros2",
-        ]);
-        assert!(files.len() > 8, "{files:?}");
-        for (table, text) in files {
-            std::fs::write(&path, text).unwrap();
-            let error = match EdgeConfig::load(Some(&path)) {
-                Ok(_) => panic!("[{table}] took a misspelt key"),
-                Err(e) => format!("{e:#}"),
-            };
-            settings::typos::assert_refused(&table, &path, &error);
-        }
-        std::fs::remove_dir_all(&dir).unwrap();
+        settings::typos::assert_every_table_refuses::<EdgeConfig, _>(
+            &["ros2_out", "source.files", "source.mcap", "source.ros2"],
+            8,
+            |path| EdgeConfig::load(Some(path)),
+        );
     }
 
     #[test]

@@ -424,20 +424,9 @@ mod tests {
     /// file, the line and the keys expected (a typo must not silently become a default).
     #[test]
     fn a_misspelt_key_in_any_table_is_refused_with_its_file_and_line() {
-        let dir = std::env::temp_dir().join(format!("gateway-typos-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("config.toml");
-        let files = settings::typos::misspelt_files::<GatewayConfig>(&[]);
-        assert!(files.len() > 1, "{files:?}");
-        for (table, text) in files {
-            std::fs::write(&path, text).unwrap();
-            let error = match GatewayConfig::load(Some(&path)) {
-                Ok(_) => panic!("[{table}] took a misspelt key"),
-                Err(e) => format!("{e:#}"),
-            };
-            settings::typos::assert_refused(&table, &path, &error);
-        }
-        std::fs::remove_dir_all(&dir).unwrap();
+        settings::typos::assert_every_table_refuses::<GatewayConfig, _>(&[], 1, |path| {
+            GatewayConfig::load(Some(path))
+        });
     }
 
     #[test]

@@ -329,20 +329,11 @@ mod tests {
     /// file, the line and the keys expected (a typo must not silently become a default).
     #[test]
     fn a_misspelt_key_in_any_table_is_refused_with_its_file_and_line() {
-        let dir = std::env::temp_dir().join(format!("mapper-typos-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("config.toml");
-        let files = settings::typos::misspelt_files::<MapperConfig>(&["cluster", "cluster.nats"]);
-        assert!(files.len() > 20, "{files:?}");
-        for (table, text) in files {
-            std::fs::write(&path, text).unwrap();
-            let error = match MapperConfig::load(Some(&path)) {
-                Ok(_) => panic!("[{table}] took a misspelt key"),
-                Err(e) => format!("{e:#}"),
-            };
-            settings::typos::assert_refused(&table, &path, &error);
-        }
-        std::fs::remove_dir_all(&dir).unwrap();
+        settings::typos::assert_every_table_refuses::<MapperConfig, _>(
+            &["cluster", "cluster.nats"],
+            20,
+            |path| MapperConfig::load(Some(path)),
+        );
     }
 
     #[test]

@@ -54,3 +54,34 @@ pub fn assert_refused(table: &str, file: &std::path::Path, error: &str) {
          expected: {error}"
     );
 }
+
+/// Writes each of [`misspelt_files`]'s files for `T` in a scratch folder and loads it with
+/// `load`: every one must be refused as [`assert_refused`] says. Panics naming the table that
+/// took a misspelt key. `min_tables` guards the walk itself (a config whose defaults
+/// serialize to fewer tables than that is a broken walk, not a pass).
+pub fn assert_every_table_refuses<T, C>(
+    absent: &[&str],
+    min_tables: usize,
+    load: impl Fn(&std::path::Path) -> anyhow::Result<C>,
+) where
+    T: Serialize + Default,
+{
+    let dir = std::env::temp_dir().join(format!(
+        "settings-typos-{}-{}",
+        std::any::type_name::<T>().replace("::", "-"),
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("config.toml");
+    let files = misspelt_files::<T>(absent);
+    assert!(files.len() >= min_tables, "{files:?}");
+    for (table, text) in files {
+        std::fs::write(&path, text).unwrap();
+        let error = match load(&path) {
+            Ok(_) => panic!("[{table}] took a misspelt key"),
+            Err(e) => format!("{e:#}"),
+        };
+        assert_refused(&table, &path, &error);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
