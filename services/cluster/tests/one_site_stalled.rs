@@ -100,7 +100,7 @@ async fn one_sites_log_without_a_leader_stalls_only_that_site() {
         ..Default::default()
     };
     let js = access.jetstream("one-site-stalled").await.unwrap();
-    let log_a = open(&js, "a", 3).await;
+    open(&js, "a", 3).await;
     let a_leader = leader(&js, "a").await.expect("a's leader");
     // b: one copy, on a server that does not lead a's stream (an R1 stream lands on any).
     let mut b = None;
@@ -113,8 +113,25 @@ async fn one_sites_log_without_a_leader_stalls_only_that_site() {
             break;
         }
     }
-    let (b, log_b, b_server) = b.expect("an R1 stream off a's leader within 12 tries");
+    let (b, _, b_server) = b.expect("an R1 stream off a's leader within 12 tries");
     eprintln!("a's stream led by {a_leader}; {b}'s one copy on {b_server}");
+    // The host's own connection goes to the servers that stay: losing the server a host is
+    // connected to is the host's link failing (every site waits for the reconnect), another
+    // drill's fault, not one site's stream without a leader.
+    let staying: Vec<String> = servers
+        .names()
+        .iter()
+        .zip(servers.client_urls())
+        .filter(|(name, _)| **name != b_server)
+        .map(|(_, url)| url)
+        .collect();
+    let host = sitelog::NatsAccess {
+        servers: staying,
+        ..Default::default()
+    };
+    let host_js = host.jetstream("one-site-stalled-host").await.unwrap();
+    let log_a = open(&host_js, "a", 3).await;
+    let log_b = open(&host_js, &b, 1).await;
 
     let config = MapperConfig {
         fleets: vec!["a".into(), b.clone()],
