@@ -217,12 +217,18 @@ fn new_chain_id() -> u64 {
 mod tests {
     use super::*;
 
-    #[test]
-    fn nodes_stay_until_acked_and_survive_reopening() {
-        let dir = std::env::temp_dir().join(format!("levelmap-outbox-{}", std::process::id()));
+    /// A scratch folder for `name`'s test and the path of a fresh outbox in it.
+    fn scratch(name: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+        let dir = std::env::temp_dir().join(format!("levelmap-{name}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("outbox.redb");
         let _ = std::fs::remove_file(&path);
+        (dir, path)
+    }
+
+    #[test]
+    fn nodes_stay_until_acked_and_survive_reopening() {
+        let (dir, path) = scratch("outbox");
         let chain_id;
         {
             let outbox = Outbox::open(&path).unwrap();
@@ -265,10 +271,7 @@ mod tests {
 
     #[test]
     fn an_outbox_of_a_later_format_is_refused_and_left_as_it_is() {
-        let dir = std::env::temp_dir().join(format!("levelmap-outbox-new-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("outbox.redb");
-        let _ = std::fs::remove_file(&path);
+        let (dir, path) = scratch("outbox-new");
         {
             let outbox = Outbox::open(&path).unwrap();
             outbox.push_encoded(0, b"node").unwrap();
