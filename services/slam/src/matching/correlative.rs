@@ -34,7 +34,9 @@ pub struct CorrelativeParams {
     /// Returns farther than this (m) are neither rasterized nor matched: they are sparse,
     /// noisy, and make the angular step small.
     pub max_range_m: f64,
-    /// Levels of the pooled stack: the coarsest covers 2^depth cells a side.
+    /// Levels of the pooled stack: the coarsest covers 2^depth cells a side. A search starts
+    /// from the level whose squares are the first to reach half its window (a wider start
+    /// bounds too loosely, a narrower one scores more roots), this one at most.
     pub max_depth: u32,
     /// A submap grid larger than this many cells is not built.
     pub max_cells: usize,
@@ -46,7 +48,7 @@ impl Default for CorrelativeParams {
             resolution_m: 0.05,
             hit_sigma_m: 0.05,
             max_range_m: 30.0,
-            max_depth: 7,
+            max_depth: 9,
             max_cells: 1 << 24,
         }
     }

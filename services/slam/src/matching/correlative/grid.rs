@@ -189,6 +189,69 @@ impl Level {
         }
         self.cells[j as usize * self.width + i as usize]
     }
+
+    /// The sum of `cells.cells` shifted by (dx, dy). A shift that keeps the cells' box
+    /// inside this level is summed without a test per cell (the common case, and the
+    /// search's innermost loop); one that takes it wholly outside is 0.
+    fn sum(&self, cells: &Cells, dx: i64, dy: i64) -> u32 {
+        let (ox, oy) = (dx + self.pad, dy + self.pad);
+        let (w, h) = (self.width as i64, self.height as i64);
+        // Saturating: a localize request's prior may put cells 10¹⁸ away (the fuzz target).
+        let shifted = |c: i64, o: i64| c.saturating_add(o);
+        let ([i0, j0], [i1, j1]) = (cells.lo, cells.hi);
+        if shifted(i1, ox) < 0
+            || shifted(j1, oy) < 0
+            || shifted(i0, ox) >= w
+            || shifted(j0, oy) >= h
+        {
+            return 0;
+        }
+        if shifted(i0, ox) < 0
+            || shifted(j0, oy) < 0
+            || shifted(i1, ox) >= w
+            || shifted(j1, oy) >= h
+        {
+            return cells
+                .cells
+                .iter()
+                .map(|&(i, j)| u32::from(self.get(i + dx, j + dy)))
+                .sum();
+        }
+        // The box is inside: every index lies in 0..w·h.
+        let base = oy * w + ox;
+        cells
+            .cells
+            .iter()
+            .map(|&(i, j)| u32::from(self.cells[(base + j * w + i) as usize]))
+            .sum()
+    }
+}
+
+/// A scan's returns as cells of the grid (at zero offset), with their bounding box.
+#[derive(Clone, Debug)]
+pub(super) struct Cells {
+    cells: Vec<(i64, i64)>,
+    lo: [i64; 2],
+    hi: [i64; 2],
+}
+
+impl Cells {
+    pub(super) fn new(cells: Vec<(i64, i64)>) -> Cells {
+        let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
+        for &(i, j) in &cells {
+            lo = [lo[0].min(i), lo[1].min(j)];
+            hi = [hi[0].max(i), hi[1].max(j)];
+        }
+        Cells { cells, lo, hi }
+    }
+
+    pub(super) fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    pub(super) fn iter(&self) -> impl Iterator<Item = &(i64, i64)> {
+        self.cells.iter()
+    }
 }
 
 /// `out[n] = max(line[n − half], line[n])`, a missing cell counting 0; `out` is `half` longer.
@@ -262,8 +325,15 @@ impl PrecomputedGrids {
     }
 
     /// The largest value of cells (i..i+2ʰ, j..j+2ʰ); 0 beyond the grid.
+    #[cfg(test)]
     pub(super) fn get(&self, level: u32, i: i64, j: i64) -> u8 {
         self.levels[level as usize].get(i, j)
+    }
+
+    /// The sum over `cells`, shifted by (dx, dy), of each one's value on `level` (0 beyond
+    /// the grid).
+    pub(super) fn sum(&self, level: u32, cells: &Cells, dx: i64, dy: i64) -> u32 {
+        self.levels[level as usize].sum(cells, dx, dy)
     }
 }
 

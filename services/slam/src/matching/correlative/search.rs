@@ -4,7 +4,7 @@
 //! pooled level h. Candidates are taken best first, and a branch whose bound cannot beat the
 //! best leaf so far is cut, so the result is the exact best of the discretized window.
 
-use super::grid::{FULL, PrecomputedGrids};
+use super::grid::{Cells, FULL, PrecomputedGrids};
 use super::{CorrelativeMatch, SearchWindow};
 use crate::Pose2;
 use std::collections::HashSet;
@@ -60,7 +60,7 @@ pub(super) struct Problem<'a> {
     grids: &'a PrecomputedGrids,
     angles: Vec<f64>,
     /// Per angle, the cell of each return at zero offset.
-    cells: Vec<Vec<(i64, i64)>>,
+    cells: Vec<Cells>,
     initial: Pose2,
     /// Offsets searched: −reach..=reach cells in x and in y.
     reach: i64,
@@ -87,14 +87,16 @@ impl<'a> Problem<'a> {
         let r = grids.grid().resolution_m();
         let max_range = points.iter().map(|p| p[0].hypot(p[1])).fold(0.0, f64::max);
         let angles = angles(initial.theta, window, r, max_range);
-        let cells: Vec<Vec<(i64, i64)>> = angles
+        let cells: Vec<Cells> = angles
             .iter()
             .map(|&theta| {
                 let pose = Pose2::new(initial.x, initial.y, theta);
-                points
-                    .iter()
-                    .map(|&p| grids.grid().cell_of(pose.transform_point(p)))
-                    .collect()
+                Cells::new(
+                    points
+                        .iter()
+                        .map(|&p| grids.grid().cell_of(pose.transform_point(p)))
+                        .collect(),
+                )
             })
             .collect();
         let full = FULL as f64 * points.len() as f64;
@@ -107,7 +109,7 @@ impl<'a> Problem<'a> {
         let (width, height) = (width as i64, height as i64);
         let useful = cells
             .iter()
-            .flatten()
+            .flat_map(Cells::iter)
             .map(|&(i, j)| {
                 let far = |c: i64, n: i64| {
                     c.saturating_abs()
@@ -148,10 +150,7 @@ impl<'a> Problem<'a> {
 
     fn score(&mut self, level: u32, angle: usize, dx: i64, dy: i64) -> Candidate {
         self.nodes += 1;
-        let sum = self.cells[angle]
-            .iter()
-            .map(|&(i, j)| u32::from(self.grids.get(level, i + dx, j + dy)))
-            .sum();
+        let sum = self.grids.sum(level, &self.cells[angle], dx, dy);
         Candidate { angle, dx, dy, sum }
     }
 
@@ -170,9 +169,13 @@ impl<'a> Problem<'a> {
         })
     }
 
-    /// Branch and bound from the deepest level.
+    /// Branch and bound from the level that fits the window.
     pub(super) fn branch_and_bound(mut self) -> Option<CorrelativeMatch> {
-        let depth = self.grids.depth();
+        // The level whose squares first reach half the window: 2 × 2 roots per angle.
+        let half_window = (self.reach.max(1) as u64)
+            .next_power_of_two()
+            .trailing_zeros();
+        let depth = self.grids.depth().min(half_window);
         let step = 1usize << depth;
         let mut roots = Vec::new();
         for angle in 0..self.angles.len() {
