@@ -296,6 +296,17 @@ impl MapperProcess {
         zenoh: String,
         config: PathBuf,
     ) -> MapperProcess {
+        Self::spawn_with_args(net, http, zenoh, config, &[])
+    }
+
+    /// [`Self::spawn_in`] with more arguments for `levelmap mapper`.
+    fn spawn_with_args(
+        net: Option<&dyn netns::Namespace>,
+        http: String,
+        zenoh: String,
+        config: PathBuf,
+        args: &[&std::ffi::OsStr],
+    ) -> MapperProcess {
         // Its log beside its config (appended to across restarts), read when it fails to start.
         let log_path = config.with_extension("log");
         let log = std::fs::OpenOptions::new()
@@ -304,7 +315,7 @@ impl MapperProcess {
             .open(&log_path)
             .expect("mapper log");
         let mut command = levelmap();
-        command.args(["mapper", "--config"]).arg(&config);
+        command.args(["mapper", "--config"]).arg(&config).args(args);
         if let Some(net) = net {
             command = net.wrap(&command);
         }
@@ -366,6 +377,14 @@ impl MapperProcess {
             config: self.config.clone(),
             ns: self.ns.clone(),
         }
+    }
+
+    /// The same mapper (ports, config, namespace) started from a backup
+    /// (`levelmap mapper --restore`): its store must be gone.
+    pub fn restore(stopped: Stopped, backup: &Path) -> MapperProcess {
+        let net = stopped.ns.as_ref().map(|ns| ns as &dyn netns::Namespace);
+        let args = [std::ffi::OsStr::new("--restore"), backup.as_os_str()];
+        Self::spawn_with_args(net, stopped.http, stopped.zenoh, stopped.config, &args)
     }
 
     /// The same mapper (ports, store, namespace) started again.

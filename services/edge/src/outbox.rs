@@ -1,5 +1,7 @@
 //! The on-disk outbox: every node stays in it, committed, from the moment it is made until the
 //! mapper's ack covers it, so neither a radio outage nor a crash of either side loses one.
+//! The newest acked nodes stay too, up to a count ([`Outbox::keeping_acked`]): a mapper
+//! started from a backup asks for the nodes it acked after the backup, and gets them.
 
 use redb::{Database, ReadableDatabase, ReadableTable, ReadableTableMetadata, TableDefinition};
 use std::path::Path;
@@ -53,9 +55,12 @@ from_redb!(
     redb::CommitError
 );
 
-/// The robot's nodes not acked yet, on disk (redb), and the node numbering.
+/// The robot's nodes not acked yet (and the newest acked ones), on disk (redb), and the node
+/// numbering.
 pub struct Outbox {
     db: Database,
+    /// Acked nodes kept, newest first, for a mapper that asks for them again.
+    keep_acked: u64,
 }
 
 impl Outbox {
@@ -85,7 +90,15 @@ impl Outbox {
             }
         }
         txn.commit()?;
-        Ok(Outbox { db })
+        Ok(Outbox { db, keep_acked: 0 })
+    }
+
+    /// Keeps the newest `nodes` acked nodes (the older ones go at the next ack).
+    pub fn keeping_acked(self, nodes: u64) -> Outbox {
+        Outbox {
+            keep_acked: nodes,
+            ..self
+        }
     }
 
     /// The outbox's format ([`OUTBOX_FORMAT`] once opened by this release).
@@ -154,16 +167,19 @@ impl Outbox {
         Ok(())
     }
 
-    /// Drops every node up to and including `acked_node_seq`; returns how many went.
+    /// Marks every node up to and including `acked_node_seq` acked and drops the acked ones
+    /// beyond those kept; returns how many went. An ack below the mark changes nothing.
     pub fn ack(&self, acked_node_seq: u64) -> Result<usize, OutboxError> {
         if acked_node_seq < self.acked_below()? {
             return Ok(0);
         }
+        let acked = acked_node_seq + 1;
         let txn = self.db.begin_write()?;
         let removed;
         {
             let mut nodes = txn.open_table(NODES)?;
-            let mut gone = nodes.extract_from_if(..=acked_node_seq, |_, _| true)?;
+            let kept_from = acked.saturating_sub(self.keep_acked);
+            let mut gone = nodes.extract_from_if(..kept_from, |_, _| true)?;
             let mut n = 0;
             for entry in gone.by_ref() {
                 entry?;
@@ -172,13 +188,23 @@ impl Outbox {
             drop(gone);
             removed = n;
             let mut meta = txn.open_table(META)?;
-            meta.insert("acked", acked_node_seq + 1)?;
+            meta.insert("acked", acked)?;
         }
         txn.commit()?;
         Ok(removed)
     }
 
-    /// Up to `limit` unacked nodes from `from_seq` on, in order.
+    /// The oldest node the outbox still holds, acked or not (`Node.held_from_seq`): what a
+    /// mapper may ask for again.
+    pub fn held_from(&self) -> Result<u64, OutboxError> {
+        let acked = self.acked_below()?;
+        let txn = self.db.begin_read()?;
+        let first = txn.open_table(NODES)?.first()?.map(|(k, _)| k.value());
+        Ok(first.map_or(acked, |f| f.min(acked)))
+    }
+
+    /// Up to `limit` nodes from `from_seq` on, in order (acked ones kept included, when
+    /// `from_seq` is below [`Self::acked_below`]).
     pub fn pending(&self, from_seq: u64, limit: usize) -> Result<Vec<(u64, Vec<u8>)>, OutboxError> {
         let txn = self.db.begin_read()?;
         let nodes = txn.open_table(NODES)?;
@@ -192,8 +218,15 @@ impl Outbox {
 
     /// Nodes waiting for their ack.
     pub fn len(&self) -> Result<u64, OutboxError> {
+        let acked = self.acked_below()?;
         let txn = self.db.begin_read()?;
-        Ok(txn.open_table(NODES)?.len()?)
+        let nodes = txn.open_table(NODES)?;
+        let mut n = 0;
+        for entry in nodes.range(acked..)? {
+            entry?;
+            n += 1;
+        }
+        Ok(n)
     }
 
     /// Whether every node is acked.
@@ -266,6 +299,30 @@ mod tests {
         std::fs::remove_file(&path).unwrap();
         let fresh = Outbox::open(&path).unwrap();
         assert_ne!(fresh.chain_id().unwrap(), chain_id);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A mapper started from a backup asks again for nodes it acked after the backup: the
+    /// newest acked ones are kept for it, and older ones go.
+    #[test]
+    fn the_newest_acked_nodes_are_kept_for_a_mapper_that_asks_again() {
+        let (dir, path) = scratch("outbox-keep");
+        let outbox = Outbox::open(&path).unwrap().keeping_acked(2);
+        for seq in 0..6 {
+            outbox.push_encoded(seq, &[seq as u8]).unwrap();
+        }
+        assert_eq!(outbox.held_from().unwrap(), 0);
+        assert_eq!(outbox.ack(3).unwrap(), 2, "0 and 1 go; 2 and 3 are kept");
+        assert_eq!(outbox.held_from().unwrap(), 2);
+        assert_eq!(outbox.acked_below().unwrap(), 4);
+        assert_eq!(outbox.len().unwrap(), 2, "only 4 and 5 wait for an ack");
+        let seqs: Vec<u64> = outbox.pending(2, 10).unwrap().iter().map(|p| p.0).collect();
+        assert_eq!(seqs, [2, 3, 4, 5]);
+        assert_eq!(outbox.ack(1).unwrap(), 0, "an older ack changes nothing");
+        assert_eq!(outbox.acked_below().unwrap(), 4);
+        assert_eq!(outbox.ack(5).unwrap(), 2);
+        assert_eq!(outbox.held_from().unwrap(), 4);
+        assert!(outbox.is_empty().unwrap());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -281,7 +281,8 @@ impl Sending {
             self.outbox.ack(seq)?;
             self.next_to_send = self.next_to_send.max(seq + 1);
         }
-        let held = self.outbox.acked_below()?;
+        // Acked nodes kept count: a mapper started from a backup asks for them again.
+        let held = self.outbox.held_from()?;
         if let Some(from) = ack.resend_from.filter(|&f| f >= held && f < made)
             && self
                 .last_gap_resend
@@ -445,10 +446,9 @@ pub async fn run(
 ) -> Result<EdgeReport> {
     wire::validate_id("fleet", &config.fleet)?;
     wire::validate_id("robot", &config.robot)?;
-    let outbox =
-        Arc::new(Outbox::open(&config.outbox_path).with_context(|| {
-            format!("{}: cannot open the outbox", config.outbox_path.display())
-        })?);
+    let outbox = Outbox::open(&config.outbox_path)
+        .with_context(|| format!("{}: cannot open the outbox", config.outbox_path.display()))?;
+    let outbox = Arc::new(outbox.keeping_acked(config.outbox_keep_acked));
     let (tx, mut rx) = mpsc::channel::<Produced>(256);
     let producer = {
         let outbox = outbox.clone();
@@ -573,7 +573,7 @@ async fn send_pending(
     report: &mut EdgeReport,
 ) -> Result<u64> {
     let mut next = from;
-    let held_from = outbox.acked_below()?;
+    let held_from = outbox.held_from()?;
     for (seq, bytes) in outbox.pending(from, RESEND_WINDOW)? {
         *header_seq += 1;
         publisher

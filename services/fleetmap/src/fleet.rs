@@ -4,7 +4,9 @@
 //! must arrive in node_seq order without gaps, from the first the robot holds
 //! (`Node.held_from_seq`) when the map does not know the chain yet; a duplicate (a re-send) or
 //! a node after a gap is not taken, and the sender learns from the ack the highest node taken
-//! and where to re-send from. Each chain is its own odometry chain in the pose network.
+//! and where to re-send from. When the robot no longer holds the missing nodes (its
+//! `held_from_seq` is past them: a map restored from an old backup), the chain goes on from
+//! the oldest it holds. Each chain is its own odometry chain in the pose network.
 
 use leveling::{ClassCounts, LeveledScan};
 use serde::Serialize;
@@ -294,6 +296,15 @@ impl FleetMap {
         match node.node_seq {
             seq if seq <= last => Sequence::Duplicate,
             seq if seq == last + 1 => Sequence::Next,
+            // The robot no longer holds the nodes after `last` (a map restored from a backup
+            // older than what its outbox keeps): they are lost, and the chain goes on from the
+            // oldest it holds rather than wait for them for good.
+            seq if node.held_from_seq > last + 1 => match seq == node.held_from_seq {
+                true => Sequence::Next,
+                false => Sequence::Gap {
+                    expected: node.held_from_seq,
+                },
+            },
             _ => Sequence::Gap { expected: last + 1 },
         }
     }

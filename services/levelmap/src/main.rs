@@ -5,6 +5,8 @@
 //! the fleet lab: demo, bench-fleet, simulate, pavilion, level's sim format). `level` is in
 //! every build. A command not compiled in is not in `--help` either.
 
+#[cfg(feature = "mapper")]
+mod backup;
 mod level;
 #[cfg(feature = "mapper")]
 mod map_versions;
@@ -36,6 +38,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    #[cfg(feature = "mapper")]
+    Backup(backup::BackupArgs),
     #[cfg(feature = "lab")]
     BenchCluster(fleetlab::BenchClusterArgs),
     #[cfg(feature = "lab")]
@@ -73,6 +77,8 @@ enum Command {
 
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
+        #[cfg(feature = "mapper")]
+        Command::Backup(args) => backup::run(&args),
         #[cfg(feature = "lab")]
         Command::BenchCluster(args) => fleetlab::bench_cluster::run(&args),
         #[cfg(feature = "lab")]

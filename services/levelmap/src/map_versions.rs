@@ -62,17 +62,18 @@ pub struct ImportArgs {
 
 /// Where the mapper is, and the token it wants.
 #[derive(Args, Debug)]
-struct MapperArgs {
+pub(crate) struct MapperArgs {
     /// The mapper's HTTP API (plain HTTP).
     #[arg(long, value_name = "URL", default_value = DEFAULT_MAPPER)]
     mapper: String,
-    /// Bearer token: the read (or write) token to export, the write token to import.
+    /// Bearer token: the read (or write) token to export, the write token to import or to
+    /// take a backup.
     #[arg(long, value_name = "TOKEN")]
-    token: Option<String>,
+    pub(crate) token: Option<String>,
 }
 
 impl MapperArgs {
-    fn url(&self, path: &str) -> String {
+    pub(crate) fn url(&self, path: &str) -> String {
         let base = self.mapper.trim_end_matches('/');
         match base.contains("://") {
             true => format!("{base}{path}"),
@@ -132,7 +133,7 @@ pub fn run(args: &MapArgs) -> Result<()> {
     }
 }
 
-fn agent() -> ureq::Agent {
+pub(crate) fn agent() -> ureq::Agent {
     ureq::Agent::config_builder()
         .http_status_as_error(false)
         .timeout_connect(Some(Duration::from_secs(10)))
@@ -152,7 +153,7 @@ fn answer(response: ureq::http::Response<ureq::Body>) -> Result<(u16, Vec<u8>)> 
     Ok((status, body))
 }
 
-fn refused(url: &str, status: u16, body: &[u8]) -> anyhow::Error {
+pub(crate) fn refused(url: &str, status: u16, body: &[u8]) -> anyhow::Error {
     let why = String::from_utf8_lossy(body);
     anyhow::anyhow!("{url}: the mapper answered {status}: {}", why.trim())
 }

@@ -27,6 +27,12 @@ pub struct MapperArgs {
     /// of it matches, 1 otherwise.
     #[arg(long, conflicts_with = "from_recording")]
     pub verify_store: bool,
+    /// Start from a backup (`levelmap backup`): the file is checked (it opens as a store)
+    /// and put in place as the config's store_path, which must not exist. The robots'
+    /// outboxes then bring back the nodes acked after the backup (docs/services.md,
+    /// "Backup and restore").
+    #[arg(long, value_name = "BACKUP.redb", conflicts_with = "verify_store")]
+    pub restore: Option<PathBuf>,
     /// With --verify-store: print the report as JSON.
     #[arg(long, requires = "verify_store")]
     pub json: bool,
@@ -78,6 +84,17 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
     let config = mapper::MapperConfig::load(args.config.as_deref())?;
     if args.verify_store {
         return verify_store(&config, args.json);
+    }
+    if let Some(backup) = &args.restore {
+        let put = mapper::store::restore_backup(backup, &config.store_path)?;
+        let fleets: Vec<String> = put.fleets.iter().map(|(f, n)| format!("{f}={n}")).collect();
+        tracing::info!(
+            bytes = put.bytes,
+            "{} restored as {} (nodes: {})",
+            backup.display(),
+            config.store_path.display(),
+            fleets.join(", ")
+        );
     }
     // A bad Zenoh or TLS setting stops the mapper here, before its store is opened.
     let zenoh = config.zenoh.to_zenoh(runtime::session::Role::Router)?;

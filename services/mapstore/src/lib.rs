@@ -25,11 +25,13 @@ use std::ops::Bound;
 use std::path::Path;
 use std::sync::{Mutex, RwLock};
 
+mod backup;
 mod changes;
 mod localization;
 mod meta;
 mod retention;
 mod versions;
+pub use backup::{BackupReport, restore_backup};
 pub use changes::SiteChange;
 pub use localization::{ModeError, StoredModes};
 pub use meta::{MappingVersion, STORE_FORMAT};
@@ -77,6 +79,9 @@ pub enum StoreError {
     /// A store format this build cannot read (`store::STORE_FORMAT`).
     #[error("store: {0}")]
     Format(String),
+    /// A backup that could not be written (its file, or a table it does not know).
+    #[error("backup: {0}")]
+    Backup(String),
 }
 
 macro_rules! from_redb {

@@ -10,11 +10,11 @@ use redb::{ReadTransaction, ReadableTable, TableDefinition, WriteTransaction};
 /// over covered ground (not localized on a version) the chain's passes: how many, their
 /// path (m), the last one's odometry (x, y, θ); NaN path for a localized run.
 type SpanRow = (u64, u64, f64, f64, f64, f64);
-const LOCALIZED: TableDefinition<(&str, &str, u64, u64), SpanRow> =
+pub(super) const LOCALIZED: TableDefinition<(&str, &str, u64, u64), SpanRow> =
     TableDefinition::new("localized_spans");
 /// (fleet, robot) → the version the robot localizes on, 0 to map; robot "" is the fleet's
 /// setting for robots without one of their own.
-const MODES: TableDefinition<(&str, &str), u64> = TableDefinition::new("robot_modes");
+pub(super) const MODES: TableDefinition<(&str, &str), u64> = TableDefinition::new("robot_modes");
 
 /// A fleet's modes: the fleet's and each robot's own, by version (0: map).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]

@@ -18,9 +18,10 @@ use serde::{Deserialize, Serialize};
 pub const STORE_FORMAT: u64 = 1;
 
 /// "format" → the store's format number.
-const STORE_META: TableDefinition<&str, u64> = TableDefinition::new("store_meta");
+pub(super) const STORE_META: TableDefinition<&str, u64> = TableDefinition::new("store_meta");
 /// fleet → the [`MappingVersion`] that derived its edges and snapshot, as JSON.
-const FLEET_MAPPING: TableDefinition<&str, &[u8]> = TableDefinition::new("fleet_mapping");
+pub(super) const FLEET_MAPPING: TableDefinition<&str, &[u8]> =
+    TableDefinition::new("fleet_mapping");
 
 /// What derives a fleet's edges, solves and snapshot from its nodes: the mapping code's
 /// version and a digest of the parameters it ran with. Two equal versions map the same

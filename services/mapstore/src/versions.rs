@@ -6,12 +6,13 @@ use super::{Store, StoreError};
 use redb::{Database, ReadTransaction, ReadableDatabase, ReadableTable, TableDefinition};
 
 /// (fleet, number) → the version's file (a `MapVersionFile`, encoded).
-const VERSIONS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("versions");
+pub(super) const VERSIONS: TableDefinition<(&str, u64), &[u8]> = TableDefinition::new("versions");
 /// (fleet, number) → the version's summary, as JSON.
-const VERSION_SUMMARIES: TableDefinition<(&str, u64), &[u8]> =
+pub(super) const VERSION_SUMMARIES: TableDefinition<(&str, u64), &[u8]> =
     TableDefinition::new("version_summaries");
 /// fleet → the last number given in it.
-const VERSION_NUMBERS: TableDefinition<&str, u64> = TableDefinition::new("version_numbers");
+pub(super) const VERSION_NUMBERS: TableDefinition<&str, u64> =
+    TableDefinition::new("version_numbers");
 
 /// Makes the tables when missing (with the others, when the store opens).
 pub(super) fn open_tables(txn: &redb::WriteTransaction) -> Result<(), StoreError> {

@@ -25,6 +25,15 @@ fn a_new_chain_starts_where_its_robot_holds_nodes() {
         map.sequence(&node("r", 7, 3, 0, 3.0)),
         Sequence::Gap { expected: 2 }
     );
+    // A map restored from an old backup: the robot holds nodes from 6 on, so 2–5 are lost
+    // and the chain goes on from 6, not waiting for them for good.
+    assert_eq!(
+        map.sequence(&node("r", 7, 9, 6, 9.0)),
+        Sequence::Gap { expected: 6 }
+    );
+    assert_eq!(map.sequence(&node("r", 7, 6, 6, 6.0)), Sequence::Next);
+    map.ingest(&node("r", 7, 6, 6, 6.0)).unwrap();
+    assert_eq!(map.chain_acked("r", 7), Some(6));
     // A mapper that lost its store meets a chain whose first nodes were acked long ago.
     let mut fresh = self::map();
     fresh.ingest(&node("r", 7, 40, 40, 40.0)).unwrap();
@@ -117,8 +126,8 @@ fn localized_nodes_are_taken_in_sequence_without_growing_the_network() {
     assert_eq!((last.first_seq, last.last_seq), (3, 5));
     assert_eq!(map.sequence(&node("r", 7, 4, 3, 4.0)), Sequence::Duplicate);
     assert!(
-        map.take_localized(&node("r", 7, 7, 7, 7.0), false).is_err(),
-        "a gap"
+        map.take_localized(&node("r", 7, 7, 6, 7.0), false).is_err(),
+        "a gap: the robot holds node 6 still"
     );
     // Mapping again: node 6 is taken, as a new part of the network (its odometry link
     // would span the drive the network never saw), however far the robot went.

@@ -6,6 +6,7 @@
 //! work through `limits`; `access` holds the tokens and CORS.
 
 mod access;
+mod backup;
 mod changes;
 mod events;
 mod faults;
@@ -37,6 +38,7 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+pub use backup::BACKUP_FLEETS;
 pub use faults::Degraded;
 pub use web::WEB_DIR_ENV;
 
@@ -71,6 +73,8 @@ struct Api {
     base_map: Option<Arc<crate::config::BaseMap>>,
     /// The version files and clouds shared beyond this host's store ([`crate::blobs`]).
     blobs: Arc<dyn Blobs>,
+    /// Backups of the store, one at a time.
+    backups: Arc<backup::Backups>,
 }
 
 /// An error answer: its status and a one-line reason as plain text.
@@ -272,6 +276,7 @@ fn guarded_routes() -> OpenApiRouter<Api> {
         .routes(routes!(localize::robot_localizations))
         .routes(routes!(localize::localize))
         .routes(routes!(events::events))
+        .routes(routes!(backup::store_backup))
 }
 
 /// The router (guarded routes behind the read check when `api` is given) and its document.
@@ -320,6 +325,7 @@ pub fn router(
         maps,
         changes_lock: Arc::default(),
         base_map: config.http.base_map.clone().map(Arc::new),
+        backups: Arc::new(backup::Backups::beside(&config.store_path)),
     };
     let (router, doc) = parts(Some(&api));
     let _ = api
