@@ -419,7 +419,16 @@ fn a_gateway_answers_for_the_sites_owner_and_follows_it_to_another_host() {
     let status = |path: &str| http_get(&gateway.http, path).map(|(status, _)| status);
     assert_eq!(status("/api/v1/fleets/nowhere/summary"), Some(404));
     assert_eq!(status("/api/v1/openapi.json"), Some(200));
-    assert_eq!(status("/metrics"), Some(404), "a gateway keeps no metrics");
+    // The gateway's own metrics: its answers by route and status.
+    let answers = |code: &str| {
+        let text = http_get(&gateway.http, "/metrics")
+            .expect("the gateway's metrics")
+            .1;
+        let series = format!("levelmap_gateway_answers_total{{route=\"site\",code=\"{code}\"}}");
+        metric(&text, &series)
+    };
+    assert!(answers("200") >= 1, "the summary counted");
+    assert_eq!(answers("404"), 1, "the site nowhere counted");
     // The event stream, every host's merged: the robots' nodes come on it.
     let mut events = common::sse::Sse::open(&gateway.http, "/api/v1/events");
     let node = wait_for(Duration::from_secs(10), || {
@@ -465,6 +474,10 @@ fn a_gateway_answers_for_the_sites_owner_and_follows_it_to_another_host() {
         served.as_secs_f64()
     );
     assert!(unavailable > 0, "503 while nobody serves the site");
+    assert!(
+        answers("503") >= unavailable,
+        "each 503 counted by the gateway"
+    );
     // The gateway killed and another started: it keeps nothing, and answers at once.
     drop(gateway);
     let gateway = GatewayProcess::start(&hosts, "g2");

@@ -20,6 +20,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::OnceCell;
 
+mod metrics;
+
 /// The largest request body the gateway buffers to try it on several hosts.
 const MAX_BUFFERED_BODY: usize = 1 << 20;
 
@@ -86,6 +88,8 @@ struct Gateway {
     client: Client<HttpConnector, Body>,
     /// Who held each site when its lease was last read, and when.
     holders: std::sync::Mutex<std::collections::HashMap<String, (String, Instant)>>,
+    /// Its answers, for `/metrics`.
+    metrics: metrics::GatewayMetrics,
 }
 
 /// A GET goes to the site's holder as read this recently without reading the lease again;
@@ -126,6 +130,7 @@ pub async fn start(config: GatewayConfig) -> Result<RunningGateway> {
         leases: OnceCell::new(),
         client,
         holders: Default::default(),
+        metrics: Default::default(),
     });
     let app = axum::Router::new().fallback(route).with_state(gateway);
     let (stop, mut stopping) = tokio::sync::watch::channel(false);
@@ -145,34 +150,47 @@ pub async fn start(config: GatewayConfig) -> Result<RunningGateway> {
     })
 }
 
-/// Every request: to the site's owner, the union of the fleet lists, or any host.
+/// Every request: to the site's owner, the union of the fleet lists, or any host; each
+/// answer counted and timed by its route.
 async fn route(State(gateway): State<Arc<Gateway>>, request: Request) -> Response {
     let path = request.uri().path().to_owned();
-    if path == "/healthz" {
-        return "ok\n".into_response();
-    }
-    if path == "/metrics" {
-        return answer(
-            StatusCode::NOT_FOUND,
-            "each mapper host serves its own /metrics; the gateway keeps none",
-        );
-    }
-    if request.method() == Method::GET {
-        match path.as_str() {
-            "/api/v1/fleets" => return gateway.fleet_list(request).await,
-            "/api/v1/events" => return gateway.events(request).await,
-            _ => {}
+    match path.as_str() {
+        "/healthz" => return "ok\n".into_response(),
+        "/metrics" => {
+            let text = gateway.metrics.encode();
+            let kind = "application/openmetrics-text; version=1.0.0; charset=utf-8";
+            return ([(header::CONTENT_TYPE, kind)], text).into_response();
         }
+        _ => {}
     }
-    match path
-        .strip_prefix("/api/v1/fleets/")
-        .map(|rest| rest.split('/').next())
-    {
-        Some(Some(site)) if !site.is_empty() => {
-            let site = site.to_owned();
-            gateway.to_owner(&site, request).await
+    let started = Instant::now();
+    let (route, response) = gateway.answer(&path, request).await;
+    gateway
+        .metrics
+        .answered(route, response.status(), started.elapsed());
+    response
+}
+
+impl Gateway {
+    /// The answer to a request of `path`, and its route kind.
+    async fn answer(&self, path: &str, request: Request) -> (metrics::Route, Response) {
+        if request.method() == Method::GET {
+            match path {
+                "/api/v1/fleets" => return ("fleets", self.fleet_list(request).await),
+                "/api/v1/events" => return ("events", self.events(request).await),
+                _ => {}
+            }
         }
-        _ => gateway.to_any(request).await,
+        match path
+            .strip_prefix("/api/v1/fleets/")
+            .map(|rest| rest.split('/').next())
+        {
+            Some(Some(site)) if !site.is_empty() => {
+                let site = site.to_owned();
+                ("site", self.to_owner(&site, request).await)
+            }
+            _ => ("other", self.to_any(request).await),
+        }
     }
 }
 

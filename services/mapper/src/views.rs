@@ -25,6 +25,8 @@ pub struct LiveOdometry {
 /// Counters for `/metrics`.
 #[derive(Debug, Default)]
 pub struct Metrics {
+    /// Node messages from robots (re-sends included), before any check.
+    pub nodes_received: AtomicU64,
     /// Nodes mapped and stored.
     pub nodes_accepted: AtomicU64,
     /// Re-sent nodes taken already (re-acked).

@@ -69,6 +69,11 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
     let mut out = String::new();
     let counters = [
         (
+            "levelmap_nodes_received_total",
+            "Node messages received from robots (re-sends included), before any check.",
+            &m.nodes_received,
+        ),
+        (
             "levelmap_nodes_accepted_total",
             "Nodes mapped and stored.",
             &m.nodes_accepted,
@@ -144,6 +149,7 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
             v.poses.len()
         );
     }
+    fault_metrics(&api, &mut out);
     http_metrics(&api, &mut out);
     api.shared.instruments.encode(&mut out);
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response()
@@ -156,6 +162,37 @@ pub(super) async fn metrics(State(api): State<Api>) -> Response {
 pub(super) async fn openapi(State(api): State<Api>) -> Response {
     let doc = api.openapi.get().cloned().unwrap_or_default();
     ([(header::CONTENT_TYPE, "application/json")], doc).into_response()
+}
+
+/// What an operator must act on (deploy/prometheus/levelmap-alerts.yml): a store that does
+/// not commit, quarantined fleets, and the fleets this mapper serves.
+fn fault_metrics(api: &Api, out: &mut String) {
+    let store_fault = u8::from(api.shared.store_fault().is_some());
+    let quarantined = api
+        .shared
+        .quarantined
+        .read()
+        .expect("quarantine lock")
+        .clone();
+    let _ = writeln!(
+        out,
+        "# HELP levelmap_store_fault 1 while the store does not commit (a full disk, a failed          write): nodes wait unacked in the robots' outboxes.
+# TYPE levelmap_store_fault          gauge
+levelmap_store_fault {store_fault}
+         # HELP levelmap_fleets_served Fleets (sites) this mapper serves ([fleets]).
+         # TYPE levelmap_fleets_served gauge
+levelmap_fleets_served {}
+         # HELP levelmap_fleets_quarantined Fleets whose stored rows cannot be read or mapped:          their routes answer 503 and their robots' nodes wait.
+         # TYPE levelmap_fleets_quarantined gauge
+levelmap_fleets_quarantined {}
+         # HELP levelmap_fleet_quarantined 1 for each quarantined fleet.
+         # TYPE levelmap_fleet_quarantined gauge",
+        api.served.len(),
+        quarantined.len()
+    );
+    for fleet in quarantined.keys() {
+        let _ = writeln!(out, "levelmap_fleet_quarantined{{fleet=\"{fleet}\"}} 1");
+    }
 }
 
 /// The HTTP limits: what is in use, and what was refused by cause.

@@ -18,7 +18,7 @@ fn the_document_lists_every_route_with_its_parameters() {
     let paths = doc["paths"].as_object().unwrap();
     let mut listed: Vec<&str> = paths.keys().map(String::as_str).collect();
     listed.sort_unstable();
-    assert_eq!(listed.len(), 35, "{listed:?}");
+    assert_eq!(listed.len(), 36, "{listed:?}");
     // Operation ids are the handlers' names: two modules' `summary` would clash.
     let mut ids = std::collections::HashSet::new();
     for (path, item) in paths {
@@ -80,6 +80,11 @@ fn the_document_declares_the_bearer_token_where_it_is_needed() {
 
 /// A router over an empty mapper (no worker: an operator request finds it stopped).
 fn app(config: &MapperConfig) -> Router {
+    app_over(config, Arc::new(Shared::new(config.token.clone(), 0)))
+}
+
+/// [`app`] over views the test holds.
+fn app_over(config: &MapperConfig, shared: Arc<Shared>) -> Router {
     static N: AtomicUsize = AtomicUsize::new(0);
     let path = std::env::temp_dir().join(format!(
         "levelmap-api-{}-{}.redb",
@@ -89,7 +94,6 @@ fn app(config: &MapperConfig) -> Router {
     let store = Arc::new(Store::open(&path).unwrap());
     // The file can go: the open database keeps what it needs.
     std::fs::remove_file(&path).ok();
-    let shared = Arc::new(Shared::new(config.token.clone(), 0));
     let maps = Arc::new(crate::localization::MapCache::new(
         &config.localization,
         config.max_range_m,
@@ -298,4 +302,56 @@ async fn event_streams_are_capped_and_a_closed_one_frees_its_place() {
         metrics.contains("levelmap_http_refused_total{reason=\"streams\"} 1"),
         "{metrics}"
     );
+}
+
+/// Every metric the shipped alert rules name is on `/metrics` (the cluster's too: their
+/// instruments are always registered), and the faults they watch show there.
+#[tokio::test]
+async fn the_alert_rules_metrics_are_served_and_show_the_faults() {
+    let rules = include_str!("../../../../deploy/prometheus/levelmap-alerts.yml");
+    let config = MapperConfig {
+        fleets: vec!["park".into(), "campus".into()],
+        ..MapperConfig::default()
+    };
+    let shared = Arc::new(Shared::new(String::new(), 0));
+    *shared.store_fault.write().unwrap() = Some("No space left on device".into());
+    let why = "store: node 1 of fleet campus is unreadable".to_owned();
+    shared
+        .quarantined
+        .write()
+        .unwrap()
+        .insert("campus".into(), why);
+    // A cluster host's site log with a copy down (a family shows once it has a member).
+    let site = vec![("site".to_owned(), "park".to_owned())];
+    shared
+        .instruments
+        .log_copies_current
+        .get_or_create(&site)
+        .set(2);
+    let app = app_over(&config, shared);
+    let metrics = text(get(&app, "/metrics", None).await).await;
+    let mut named: Vec<&str> = rules
+        .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .filter(|w| w.starts_with("levelmap_"))
+        .collect();
+    named.sort_unstable();
+    named.dedup();
+    assert!(named.len() >= 6, "{named:?}");
+    for name in named {
+        let family = name.strip_suffix("_total").unwrap_or(name);
+        let typed = |n: &str| metrics.contains(&format!("# TYPE {n} "));
+        assert!(
+            typed(name) || typed(family),
+            "{name} is not on /metrics:\n{metrics}"
+        );
+    }
+    for line in [
+        "levelmap_store_fault 1",
+        "levelmap_fleets_served 2",
+        "levelmap_fleets_quarantined 1",
+        "levelmap_fleet_quarantined{fleet=\"campus\"} 1",
+        "levelmap_site_log_copies_current{site=\"park\"} 2",
+    ] {
+        assert!(metrics.lines().any(|l| l == line), "{line}:\n{metrics}");
+    }
 }

@@ -5,7 +5,7 @@
 //! it drops it, so the routers carry a site's messages to its owner only.
 
 use crate::inbox::Work;
-use crate::views::Shared;
+use crate::views::{Metrics, Shared};
 use anyhow::Result;
 use std::sync::{Arc, mpsc};
 use wire::Topic;
@@ -59,6 +59,7 @@ impl Feeds {
             .session
             .declare_subscriber(node_keys)
             .callback(move |sample| {
+                Metrics::bump(&shed.metrics.nodes_received);
                 let payload = sample.payload().to_bytes().into_owned();
                 let node = Work::node(sample.key_expr().as_str(), payload);
                 // Behind by a full queue: the node stays in its robot's outbox and comes
