@@ -174,24 +174,36 @@ fn fault_metrics(api: &Api, out: &mut String) {
         .read()
         .expect("quarantine lock")
         .clone();
+    let gauges = [
+        (
+            "levelmap_store_fault",
+            "1 while the store does not commit (a full disk, a failed write): nodes wait unacked in the robots' outboxes.",
+            u64::from(store_fault),
+        ),
+        (
+            "levelmap_fleets_served",
+            "Fleets (sites) this mapper serves ([fleets]).",
+            api.served.len() as u64,
+        ),
+        (
+            "levelmap_fleets_quarantined",
+            "Fleets whose stored rows cannot be read or mapped: their routes answer 503 and their robots' nodes wait.",
+            quarantined.len() as u64,
+        ),
+    ];
+    for (name, help, value) in gauges {
+        let _ = writeln!(
+            out,
+            "# HELP {name} {help}\n# TYPE {name} gauge\n{name} {value}"
+        );
+    }
+    let name = "levelmap_fleet_quarantined";
     let _ = writeln!(
         out,
-        "# HELP levelmap_store_fault 1 while the store does not commit (a full disk, a failed          write): nodes wait unacked in the robots' outboxes.
-# TYPE levelmap_store_fault          gauge
-levelmap_store_fault {store_fault}
-         # HELP levelmap_fleets_served Fleets (sites) this mapper serves ([fleets]).
-         # TYPE levelmap_fleets_served gauge
-levelmap_fleets_served {}
-         # HELP levelmap_fleets_quarantined Fleets whose stored rows cannot be read or mapped:          their routes answer 503 and their robots' nodes wait.
-         # TYPE levelmap_fleets_quarantined gauge
-levelmap_fleets_quarantined {}
-         # HELP levelmap_fleet_quarantined 1 for each quarantined fleet.
-         # TYPE levelmap_fleet_quarantined gauge",
-        api.served.len(),
-        quarantined.len()
+        "# HELP {name} 1 for each quarantined fleet.\n# TYPE {name} gauge"
     );
     for fleet in quarantined.keys() {
-        let _ = writeln!(out, "levelmap_fleet_quarantined{{fleet=\"{fleet}\"}} 1");
+        let _ = writeln!(out, "{name}{{fleet=\"{fleet}\"}} 1");
     }
 }
 

@@ -339,7 +339,11 @@ async fn the_alert_rules_metrics_are_served_and_show_the_faults() {
     assert!(named.len() >= 6, "{named:?}");
     for name in named {
         let family = name.strip_suffix("_total").unwrap_or(name);
-        let typed = |n: &str| metrics.contains(&format!("# TYPE {n} "));
+        let typed = |n: &str| {
+            metrics
+                .lines()
+                .any(|l| l.starts_with(&format!("# TYPE {n} ")))
+        };
         assert!(
             typed(name) || typed(family),
             "{name} is not on /metrics:\n{metrics}"
@@ -353,5 +357,9 @@ async fn the_alert_rules_metrics_are_served_and_show_the_faults() {
         "levelmap_site_log_copies_current{site=\"park\"} 2",
     ] {
         assert!(metrics.lines().any(|l| l == line), "{line}:\n{metrics}");
+    }
+    // The text format: every line a comment, a sample or empty, none indented.
+    for line in metrics.lines() {
+        assert!(!line.starts_with(char::is_whitespace), "{line:?}");
     }
 }
