@@ -3,7 +3,7 @@
 //! beside OUT, synced, checked (it opens as a store; each fleet's nodes counted) and only
 //! then renamed to OUT. `levelmap mapper --restore OUT` starts a mapper from it.
 
-use crate::map_versions::{MapperArgs, agent, refused};
+use crate::mapper_http::{MapperArgs, agent, refused};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use serde::Serialize;

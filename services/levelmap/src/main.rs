@@ -11,6 +11,8 @@ mod level;
 #[cfg(feature = "mapper")]
 mod map_versions;
 #[cfg(feature = "mapper")]
+mod mapper_http;
+#[cfg(feature = "mapper")]
 mod optimize;
 #[cfg(feature = "lab")]
 mod pavilion;

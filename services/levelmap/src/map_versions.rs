@@ -6,11 +6,9 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 use wire::MAX_MAP_VERSION_BYTES;
 
-/// The mapper's HTTP API by default (deploy/mapper.toml's http_listen).
-const DEFAULT_MAPPER: &str = "http://127.0.0.1:8080";
+use crate::mapper_http::{MapperArgs, agent, refused};
 
 /// Map versions (a fleet's map frozen: POST /api/v1/fleets/{fleet}/versions) between a
 /// running mapper and one file: export from one mapper, import into another.
@@ -60,57 +58,33 @@ pub struct ImportArgs {
     json: bool,
 }
 
-/// Where the mapper is, and the token it wants.
-#[derive(Args, Debug)]
-pub(crate) struct MapperArgs {
-    /// The mapper's HTTP API (plain HTTP).
-    #[arg(long, value_name = "URL", default_value = DEFAULT_MAPPER)]
-    mapper: String,
-    /// Bearer token: the read (or write) token to export, the write token to import or to
-    /// take a backup.
-    #[arg(long, value_name = "TOKEN")]
-    pub(crate) token: Option<String>,
-}
-
-impl MapperArgs {
-    pub(crate) fn url(&self, path: &str) -> String {
-        let base = self.mapper.trim_end_matches('/');
-        match base.contains("://") {
-            true => format!("{base}{path}"),
-            false => format!("http://{base}{path}"),
-        }
+/// Asks the mapper whether the token may write before a file is sent: a mapper refuses
+/// an upload before reading it, which the client would see as a broken pipe, not why.
+fn may_write(mapper: &MapperArgs) -> Result<()> {
+    let url = mapper.url("/api/v1/auth");
+    let mut request = agent().get(&url);
+    if let Some(t) = &mapper.token {
+        request = request.header("Authorization", format!("Bearer {t}"));
     }
-}
-
-impl MapperArgs {
-    /// Asks the mapper whether the token may write before a file is sent: a mapper refuses
-    /// an upload before reading it, which the client would see as a broken pipe, not why.
-    fn may_write(&self) -> Result<()> {
-        let url = self.url("/api/v1/auth");
-        let mut request = agent().get(&url);
-        if let Some(t) = &self.token {
-            request = request.header("Authorization", format!("Bearer {t}"));
-        }
-        let (status, body) = answer(
-            request
-                .call()
-                .with_context(|| format!("{url}: no answer"))?,
-        )?;
-        let state: serde_json::Value = match status {
-            200 => serde_json::from_slice(&body).unwrap_or_default(),
-            // An older mapper: its answer to the upload will say.
-            _ => return Ok(()),
-        };
-        match state["authorized"].as_bool() {
-            Some(false) => bail!(
-                "{}: {}; nothing sent",
-                self.mapper,
-                state["reason"]
-                    .as_str()
-                    .unwrap_or("the token may not write")
-            ),
-            _ => Ok(()),
-        }
+    let (status, body) = answer(
+        request
+            .call()
+            .with_context(|| format!("{url}: no answer"))?,
+    )?;
+    let state: serde_json::Value = match status {
+        200 => serde_json::from_slice(&body).unwrap_or_default(),
+        // An older mapper: its answer to the upload will say.
+        _ => return Ok(()),
+    };
+    match state["authorized"].as_bool() {
+        Some(false) => bail!(
+            "{}: {}; nothing sent",
+            mapper.mapper,
+            state["reason"]
+                .as_str()
+                .unwrap_or("the token may not write")
+        ),
+        _ => Ok(()),
     }
 }
 
@@ -133,14 +107,6 @@ pub fn run(args: &MapArgs) -> Result<()> {
     }
 }
 
-pub(crate) fn agent() -> ureq::Agent {
-    ureq::Agent::config_builder()
-        .http_status_as_error(false)
-        .timeout_connect(Some(Duration::from_secs(10)))
-        .build()
-        .into()
-}
-
 /// The answer's status and body, read up to a version file's bound.
 fn answer(response: ureq::http::Response<ureq::Body>) -> Result<(u16, Vec<u8>)> {
     let status = response.status().as_u16();
@@ -151,11 +117,6 @@ fn answer(response: ureq::http::Response<ureq::Body>) -> Result<(u16, Vec<u8>)> 
         .read_to_vec()
         .context("reading the mapper's answer")?;
     Ok((status, body))
-}
-
-pub(crate) fn refused(url: &str, status: u16, body: &[u8]) -> anyhow::Error {
-    let why = String::from_utf8_lossy(body);
-    anyhow::anyhow!("{url}: the mapper answered {status}: {}", why.trim())
 }
 
 fn export(args: &ExportArgs) -> Result<()> {
@@ -229,7 +190,7 @@ fn import(args: &ImportArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("{name}: not a map version file: {e}; nothing sent"))?;
     let fleet = args.fleet.as_deref().unwrap_or(&version.fleet);
     wire::validate_id("fleet", fleet)?;
-    args.mapper.may_write()?;
+    may_write(&args.mapper)?;
     let url = args
         .mapper
         .url(&format!("/api/v1/fleets/{fleet}/versions/import"));

@@ -143,6 +143,11 @@ impl Shared {
         self.store_fault.read().expect("fault lock").clone()
     }
 
+    /// Every quarantined fleet with why, by fleet.
+    pub fn quarantined_fleets(&self) -> BTreeMap<String, String> {
+        self.quarantined.read().expect("quarantine lock").clone()
+    }
+
     /// Why a fleet is quarantined, if it is.
     pub fn quarantine(&self, fleet: &str) -> Option<String> {
         self.quarantined

@@ -21,6 +21,13 @@ pub struct BackupReport {
     pub fleets: Vec<(String, u64)>,
 }
 
+impl StoreError {
+    /// A backup's file that could not be written or read.
+    pub fn backup_file(path: &Path, e: &std::io::Error) -> StoreError {
+        StoreError::Backup(format!("{}: {e}", path.display()))
+    }
+}
+
 impl Store {
     /// Writes a consistent copy of the store to `path` (which must not exist), while it
     /// stays open for the writer. The copy is made as `path` + `.partial` and renamed once
@@ -48,7 +55,7 @@ impl Store {
                 return Err(e);
             }
         };
-        let io = |e: std::io::Error| StoreError::Backup(format!("{}: {e}", partial.display()));
+        let io = |e| StoreError::backup_file(&partial, &e);
         std::fs::File::open(&partial)
             .and_then(|f| f.sync_all())
             .map_err(io)?;
@@ -78,8 +85,7 @@ pub fn restore_backup(backup: &Path, store_path: &Path) -> Result<BackupReport, 
     let mut partial = store_path.as_os_str().to_owned();
     partial.push(".restoring");
     let partial = std::path::PathBuf::from(partial);
-    let io =
-        |what: &Path, e: std::io::Error| StoreError::Backup(format!("{}: {e}", what.display()));
+    let io = |what: &Path, e| StoreError::backup_file(what, &e);
     std::fs::copy(backup, &partial).map_err(|e| io(backup, e))?;
     let checked = Store::open(&partial).and_then(|store| {
         let db = store.db.read().expect("store lock");

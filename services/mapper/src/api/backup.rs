@@ -15,7 +15,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// The media type of a backup: a redb file, a store the mapper opens as its own.
 const STORE_FILE: &str = "application/vnd.levelmap.store";
 /// The answer's header that names each fleet's nodes in the copy (`park=1200,campus=40`).
-pub const BACKUP_FLEETS: HeaderName = HeaderName::from_static("levelmap-backup-fleets");
+const BACKUP_FLEETS: HeaderName = HeaderName::from_static("levelmap-backup-fleets");
 /// Bytes read and sent at a time; at most [`CHUNKS_AHEAD`] wait in memory.
 const CHUNK: usize = 256 * 1024;
 const CHUNKS_AHEAD: usize = 4;
@@ -101,8 +101,7 @@ fn copy_and_open(
     let report = store.backup_to(path)?;
     let file = std::fs::File::open(path);
     let _ = std::fs::remove_file(path);
-    let file =
-        file.map_err(|e| crate::store::StoreError::Backup(format!("{}: {e}", path.display())))?;
+    let file = file.map_err(|e| crate::store::StoreError::backup_file(path, &e))?;
     Ok((report, file))
 }
 

@@ -47,10 +47,8 @@ pub(super) async fn fleets(State(api): State<Api>) -> Json<FleetList> {
     fleets.sort();
     let quarantined = api
         .shared
-        .quarantined
-        .read()
-        .expect("quarantine lock")
-        .iter()
+        .quarantined_fleets()
+        .into_iter()
         .map(|(fleet, reason)| QuarantinedFleet {
             fleet: fleet.clone(),
             reason: reason.clone(),

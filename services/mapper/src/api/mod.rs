@@ -38,7 +38,6 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
-pub use backup::BACKUP_FLEETS;
 pub use faults::Degraded;
 pub use web::WEB_DIR_ENV;
 

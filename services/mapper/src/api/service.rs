@@ -33,12 +33,7 @@ pub(super) struct Health {
 ))]
 pub(super) async fn healthz(State(api): State<Api>) -> Response {
     let store = api.shared.store_fault();
-    let quarantined = api
-        .shared
-        .quarantined
-        .read()
-        .expect("quarantine lock")
-        .clone();
+    let quarantined = api.shared.quarantined_fleets();
     let (code, retry) = match store {
         Some(_) => {
             let retry = [(header::RETRY_AFTER, super::faults::RETRY_AFTER_S)];
@@ -168,12 +163,7 @@ pub(super) async fn openapi(State(api): State<Api>) -> Response {
 /// not commit, quarantined fleets, and the fleets this mapper serves.
 fn fault_metrics(api: &Api, out: &mut String) {
     let store_fault = u8::from(api.shared.store_fault().is_some());
-    let quarantined = api
-        .shared
-        .quarantined
-        .read()
-        .expect("quarantine lock")
-        .clone();
+    let quarantined = api.shared.quarantined_fleets();
     let gauges = [
         (
             "levelmap_store_fault",
