@@ -17,17 +17,6 @@ fn mapped(http: &str) -> u64 {
     get_json(http, "/api/v1/fleets/park/summary").map_or(0, |s| s["nodes"].as_u64().unwrap_or(0))
 }
 
-fn backup(http: &str, out: &std::path::Path, token: Option<&str>) -> std::process::Output {
-    let mut command = levelmap();
-    command
-        .args(["backup", "--json", "--mapper", http])
-        .arg(out);
-    if let Some(token) = token {
-        command.args(["--token", token]);
-    }
-    command.output().expect("levelmap backup runs")
-}
-
 #[test]
 fn a_backup_of_a_running_mapper_restored_after_its_store_is_lost_loses_nothing() {
     let dir = temp_dir("backup");
@@ -51,15 +40,7 @@ fn a_backup_of_a_running_mapper_restored_after_its_store_is_lost_loses_nothing()
     assert!(why.contains("401"), "{why}");
     assert!(!out.exists());
 
-    let taken = backup(&http, &out, Some(TOKEN));
-    assert!(
-        taken.status.success(),
-        "{}",
-        String::from_utf8_lossy(&taken.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_slice(&taken.stdout).expect("JSON");
-    let in_backup = report["fleets"][0][1].as_u64().expect("park's nodes");
-    assert_eq!(report["fleets"][0][0], "park", "{report}");
+    let (report, in_backup) = backed_up(&backup(&http, &out, Some(TOKEN)));
     assert!(in_backup >= 10, "{report}");
     // A backup does not overwrite a file.
     let again = backup(&http, &out, Some(TOKEN));

@@ -208,6 +208,53 @@ pub fn node_seqs_with(http: &str, fleet: &str, robot: &str, token: Option<&str>)
         .unwrap_or_default()
 }
 
+/// A cluster mapper host's config: site `park` among `hosts`, the write token `token`, its
+/// Zenoh router listening on `zenoh` and connecting to `connect`, the NATS servers at
+/// `servers`, the lease 3 s; a snapshot every 5 nodes, so that the drills' takeovers restore
+/// from shared snapshots.
+pub fn cluster_host_config(
+    dir: &Path,
+    (host, hosts): (&str, &[&str]),
+    token: &str,
+    (zenoh, connect): (&str, &[String]),
+    servers: &[String],
+) -> String {
+    format!(
+        "store_path = {store:?}\nfleets = [\"park\"]\ntoken = {token:?}\n\
+         [store]\nsnapshot_every_nodes = 5\n\n\
+         [mapping.coverage]\nenabled = false\n\n\
+         [zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\nconnect = {connect:?}\n\n\
+         [cluster]\nhost = {host:?}\nhosts = {hosts:?}\nlease_ttl_ms = 3000\n\n\
+         [cluster.nats]\nservers = {servers:?}\n",
+        store = dir.join("mapper.redb"),
+    )
+}
+
+/// `levelmap backup --json OUT` of the mapper at `http`, with `token` if given.
+pub fn backup(http: &str, out: &Path, token: Option<&str>) -> std::process::Output {
+    let mut command = levelmap();
+    command
+        .args(["backup", "--json", "--mapper", http])
+        .arg(out);
+    if let Some(token) = token {
+        command.args(["--token", token]);
+    }
+    command.output().expect("levelmap backup runs")
+}
+
+/// A backup that succeeded: its JSON report and the nodes of `park` in it.
+pub fn backed_up(taken: &std::process::Output) -> (Value, u64) {
+    assert!(
+        taken.status.success(),
+        "{}",
+        String::from_utf8_lossy(&taken.stderr)
+    );
+    let report: Value = serde_json::from_slice(&taken.stdout).expect("JSON");
+    assert_eq!(report["fleets"][0][0], "park", "{report}");
+    let nodes = report["fleets"][0][1].as_u64().expect("park's nodes");
+    (report, nodes)
+}
+
 pub fn levelmap() -> Command {
     Command::new(env!("CARGO_BIN_EXE_levelmap"))
 }

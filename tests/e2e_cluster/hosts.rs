@@ -16,24 +16,14 @@ pub(crate) const TOKEN: &str = "s3cret";
 /// The mapper hosts, each in a namespace of its own.
 pub(crate) const HOSTS: [&str; 5] = ["h1", "h2", "h3", "h4", "h5"];
 
-/// A mapper host's config: site `park`, hosts h1–h5, its Zenoh listening and connecting,
-/// the NATS servers at `servers`; a snapshot every 5 nodes, so that every drill's takeovers
-/// restore from shared snapshots.
+/// A mapper host's config: site `park`, hosts h1–h5 ([`cluster_host_config`]).
 pub(crate) fn host_config(
     dir: &Path,
     host: &str,
-    (zenoh, connect): (&str, &[String]),
+    router: (&str, &[String]),
     servers: &[String],
 ) -> String {
-    format!(
-        "store_path = {store:?}\nfleets = [\"park\"]\ntoken = {TOKEN:?}\n\
-         [store]\nsnapshot_every_nodes = 5\n\n\
-         [mapping.coverage]\nenabled = false\n\n\
-         [zenoh]\nmode = \"router\"\nlisten = [{zenoh:?}]\nconnect = {connect:?}\n\n\
-         [cluster]\nhost = {host:?}\nhosts = {HOSTS:?}\nlease_ttl_ms = 3000\n\n\
-         [cluster.nats]\nservers = {servers:?}\n",
-        store = dir.join("mapper.redb"),
-    )
+    cluster_host_config(dir, (host, &HOSTS), TOKEN, router, servers)
 }
 
 pub(crate) fn summary_nodes(http: &str) -> Option<u64> {

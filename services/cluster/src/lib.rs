@@ -29,6 +29,7 @@ pub mod journal;
 mod keeper;
 pub mod ownership;
 mod presence;
+pub mod rebuild;
 mod replay;
 mod shelf;
 mod tokens;

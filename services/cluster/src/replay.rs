@@ -87,12 +87,26 @@ async fn follow(host: &Arc<Host>, site: &str, follower: &mut Option<SiteLog>) ->
 async fn catch_up(host: &Arc<Host>, site: &str, log: &mut SiteLog, max: usize) -> Result<usize> {
     let store = host.store.clone();
     let name = site.to_owned();
-    let have = tokio::task::spawn_blocking(move || store.site_log_sequence(&name)).await??;
-    let last = log.stream_last_sequence().await?;
+    let mut have = tokio::task::spawn_blocking(move || store.site_log_sequence(&name)).await??;
+    let (first, last) = log.bounds().await?;
+    if first > have + 1 {
+        // A log rebuilt from a host's store (`levelmap site-log rebuild`) starts past every
+        // record of the one it replaced: what this store holds of the site is of that one.
+        tracing::warn!(
+            site,
+            "cluster: the site's log was rebuilt (its first record is {first}, this host's \
+             store held records up to {have}): the site's rows here are dropped and the log \
+             read from its start"
+        );
+        let (store, name) = (host.store.clone(), site.to_owned());
+        tokio::task::spawn_blocking(move || store.forget_site(&name)).await??;
+        have = 0;
+    }
     if last < have {
         bail!(
             "its log ends at {last} but this host's store holds records up to {have}: the log \
-             was replaced; move this host's store aside and start it again"
+             was lost and made anew; write it again from a store with `levelmap site-log \
+             rebuild {site}` (docs/cluster.md, \"A site's log lost\")"
         );
     }
     let (mut next, mut read) = (have + 1, 0);
@@ -109,7 +123,7 @@ async fn catch_up(host: &Arc<Host>, site: &str, log: &mut SiteLog, max: usize) -
 }
 
 /// A record of the log as this host stores it.
-enum Read {
+pub(crate) enum Read {
     /// A batch, at its sequence, with its passes' GPS fixes.
     Batch(u64, SiteRecord, Vec<slam::GpsEdge>),
     /// A change, at its sequence, with an added version's file (`None`: deleted since).
@@ -146,7 +160,7 @@ async fn read_records(host: &Host, site: &str, entries: &[sitelog::Entry]) -> Re
 
 /// Stores the log's `records` of `site` as the worker would have: each run of batches in one
 /// commit, each change in its order.
-fn commit_records(store: &Store, site: &str, records: &[Read]) -> Result<()> {
+pub(crate) fn commit_records(store: &Store, site: &str, records: &[Read]) -> Result<()> {
     let mut batches = Vec::new();
     for record in records {
         match record {

@@ -23,6 +23,8 @@ mod services;
 #[cfg(feature = "lab")]
 mod simulate;
 #[cfg(feature = "mapper")]
+mod site_log;
+#[cfg(feature = "mapper")]
 mod slam2d;
 mod svg;
 
@@ -74,6 +76,8 @@ enum Command {
     #[cfg(feature = "lab")]
     Simulate(simulate::SimulateArgs),
     #[cfg(feature = "mapper")]
+    SiteLog(site_log::SiteLogArgs),
+    #[cfg(feature = "mapper")]
     Slam2d(slam2d::Slam2dArgs),
 }
 
@@ -113,6 +117,8 @@ fn main() -> ExitCode {
         Command::Record(args) => record::run(&args),
         #[cfg(feature = "lab")]
         Command::Simulate(args) => simulate::run(&args),
+        #[cfg(feature = "mapper")]
+        Command::SiteLog(args) => site_log::run(&args),
         #[cfg(feature = "mapper")]
         Command::Slam2d(args) => slam2d::run(&args),
     };

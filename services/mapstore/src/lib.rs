@@ -27,6 +27,7 @@ use std::sync::{Mutex, RwLock};
 
 mod backup;
 mod changes;
+mod forget;
 mod localization;
 mod meta;
 mod retention;

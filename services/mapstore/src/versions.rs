@@ -128,6 +128,11 @@ impl Store {
         Ok(last + 1)
     }
 
+    /// The last number given in `fleet` (0: none), whether its version is kept or deleted.
+    pub fn last_version_number(&self, fleet: &str) -> Result<u64, StoreError> {
+        Ok(self.version_count(fleet)?.1)
+    }
+
     /// Whether version `number` of `fleet` exists and may be deleted: refused while robots
     /// localize on it.
     pub fn deletable(&self, fleet: &str, number: u64) -> Result<bool, super::ModeError> {

@@ -146,33 +146,48 @@ impl SiteLog {
         replicas: usize,
         retry: RetryPolicy,
     ) -> Result<SiteLog, LogError> {
-        let ok = !site.is_empty()
-            && site
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
-        if !ok {
-            return Err(LogError::BadSite(site.to_owned()));
-        }
-        let subject = format!("levelmap.site.{site}.log");
-        let config = Config {
-            name: stream_name(site),
-            subjects: vec![subject.clone()],
-            storage: StorageType::File,
-            num_replicas: replicas,
-            // Ids are remembered this long: a retry after a lost ack comes within seconds.
-            duplicate_window: Duration::from_secs(120),
-            ..Default::default()
-        };
-        let mut stream = js
+        check_site(site)?;
+        let config = log_config(site, replicas, None);
+        let stream = js
             .get_or_create_stream(config)
             .await
             .map_err(LogError::jetstream)?;
+        SiteLog::writer(js, stream, site, retry).await
+    }
+
+    /// Creates site `site`'s log anew, its first record to be at `first_sequence`: a log
+    /// rebuilt from a host's store (`levelmap site-log rebuild`), numbered past every record
+    /// of the one it replaces, so that every host's store finds a gap before it
+    /// ([`SiteLog::bounds`]) and reads it from its start. Refused while the site has a log.
+    pub async fn create_rebuilt(
+        js: Context,
+        site: &str,
+        replicas: usize,
+        retry: RetryPolicy,
+        first_sequence: u64,
+    ) -> Result<SiteLog, LogError> {
+        check_site(site)?;
+        let config = log_config(site, replicas, Some(first_sequence));
+        let stream = js
+            .create_stream(config)
+            .await
+            .map_err(LogError::jetstream)?;
+        SiteLog::writer(js, stream, site, retry).await
+    }
+
+    /// The writer of `stream`, starting from its last sequence.
+    async fn writer(
+        js: Context,
+        mut stream: Stream,
+        site: &str,
+        retry: RetryPolicy,
+    ) -> Result<SiteLog, LogError> {
         let info = stream.info().await.map_err(LogError::jetstream)?;
         let last_sequence = info.state.last_sequence;
         Ok(SiteLog {
             js,
             stream,
-            subject,
+            subject: log_subject(site),
             last_sequence,
             retry,
         })
@@ -243,7 +258,7 @@ impl SiteLog {
     /// The records from sequence `from` on, in order, at most `max` of them: fewer than
     /// `max` when the log ends.
     pub async fn read_some(&self, from: u64, max: usize) -> Result<Vec<Entry>, LogError> {
-        let (first, last) = self.stream_bounds().await?;
+        let (first, last) = self.bounds().await?;
         let mut entries = Vec::new();
         for sequence in (from.max(first)..=last).take(max) {
             entries.push(self.get(sequence).await?);
@@ -251,13 +266,10 @@ impl SiteLog {
         Ok(entries)
     }
 
-    /// The last sequence in the stream, as the server says now.
-    pub async fn stream_last_sequence(&self) -> Result<u64, LogError> {
-        Ok(self.stream_bounds().await?.1)
-    }
-
-    /// The stream's first and last sequence, as the server says now.
-    async fn stream_bounds(&self) -> Result<(u64, u64), LogError> {
+    /// The stream's first and last sequence, as the server says now. An empty log's last
+    /// is one before its first. A first sequence past the record after the last one a
+    /// reader holds is a gap: the log was rebuilt ([`SiteLog::create_rebuilt`]).
+    pub async fn bounds(&self) -> Result<(u64, u64), LogError> {
         let info = self
             .read_retrying(|| async { self.stream.get_info().await.map_err(|e| e.to_string()) })
             .await?;
@@ -315,9 +327,78 @@ fn read_may_pass(detail: &str) -> bool {
         .any(|words| detail.contains(words))
 }
 
+/// A site name the stream's name can hold: letters, digits, `-` and `_`.
+fn check_site(site: &str) -> Result<(), LogError> {
+    let ok = !site.is_empty()
+        && site
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    if !ok {
+        return Err(LogError::BadSite(site.to_owned()));
+    }
+    Ok(())
+}
+
 /// The stream of site `site`'s log.
 fn stream_name(site: &str) -> String {
     format!("LEVELMAP_SITE_{site}")
+}
+
+/// The subject site `site`'s records are appended on.
+fn log_subject(site: &str) -> String {
+    format!("levelmap.site.{site}.log")
+}
+
+/// Site `site`'s stream: `replicas` copies, file storage, starting at `first_sequence`
+/// (1 when `None`).
+fn log_config(site: &str, replicas: usize, first_sequence: Option<u64>) -> Config {
+    Config {
+        name: stream_name(site),
+        subjects: vec![log_subject(site)],
+        storage: StorageType::File,
+        num_replicas: replicas,
+        // Ids are remembered this long: a retry after a lost ack comes within seconds.
+        duplicate_window: Duration::from_secs(120),
+        first_sequence,
+        ..Default::default()
+    }
+}
+
+/// Deletes site `site`'s log, every record of it; whether there was one. Only a rebuild
+/// does this (`levelmap site-log rebuild --replace`).
+pub async fn delete_log(js: &Context, site: &str) -> Result<bool, LogError> {
+    check_site(site)?;
+    if !log_exists(js, site).await? {
+        return Ok(false);
+    }
+    js.delete_stream(stream_name(site))
+        .await
+        .map_err(LogError::jetstream)?;
+    Ok(true)
+}
+
+/// Site `site`'s log's first and last sequence and its record count, if it has a log.
+/// Reads, creates nothing.
+pub async fn log_state(js: &Context, site: &str) -> Result<Option<(u64, u64, u64)>, LogError> {
+    check_site(site)?;
+    if !log_exists(js, site).await? {
+        return Ok(None);
+    }
+    let mut stream = js
+        .get_stream(stream_name(site))
+        .await
+        .map_err(LogError::jetstream)?;
+    let state = stream
+        .info()
+        .await
+        .map_err(LogError::jetstream)?
+        .state
+        .clone();
+    Ok(Some((
+        state.first_sequence,
+        state.last_sequence,
+        state.messages,
+    )))
 }
 
 /// Whether site `site` has a log (a site some host ever took); reads, creates nothing.

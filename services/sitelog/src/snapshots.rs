@@ -7,7 +7,7 @@
 use crate::LogError;
 use async_nats::jetstream::context::Context;
 use async_nats::jetstream::object_store::{
-    Config, GetErrorKind, InfoErrorKind, ObjectMetadata, ObjectStore,
+    Config, DeleteErrorKind, GetErrorKind, InfoErrorKind, ObjectMetadata, ObjectStore,
 };
 use std::collections::HashMap;
 use tokio::io::AsyncReadExt;
@@ -80,6 +80,16 @@ impl Snapshots {
         match read_whole(&self.store, site).await? {
             Some((info, bytes)) => Ok(Some((tag_of(&info.metadata)?, bytes))),
             None => Ok(None),
+        }
+    }
+
+    /// Deletes `site`'s snapshot; deleting what is gone is no error. A rebuilt log numbers
+    /// its records anew, and a snapshot tagged with the old numbers is no use to it.
+    pub async fn delete(&self, site: &str) -> Result<(), LogError> {
+        match self.store.delete(site).await {
+            Ok(()) => Ok(()),
+            Err(e) if e.kind() == DeleteErrorKind::NotFound => Ok(()),
+            Err(e) => Err(LogError::JetStream(e.to_string())),
         }
     }
 }
