@@ -111,6 +111,13 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
             running.http_addr,
             config.store_path.display()
         );
+        let foxglove = match config.foxglove.enabled {
+            true => {
+                let shared = running.shared.clone();
+                Some(foxglove_feed::start(&config.foxglove, &config.read_token, shared).await?)
+            }
+            false => None,
+        };
         if let Some(path) = &args.from_recording {
             let fed = running.feed_recording(path).await;
             match &fed {
@@ -132,12 +139,18 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
                 Err(e) => tracing::error!("{e:#}"),
             }
             if fed.is_err() || args.exit_when_done {
+                if let Some(feed) = foxglove {
+                    feed.stop().await;
+                }
                 running.stop().await?;
                 return fed.map(|_| ());
             }
         }
         stop.await;
         tracing::info!("stopping");
+        if let Some(feed) = foxglove {
+            feed.stop().await;
+        }
         running.stop().await
     })
 }

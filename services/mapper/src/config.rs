@@ -2,9 +2,11 @@
 //! shows them all.
 
 mod cluster;
+mod foxglove;
 mod localization;
 
 pub use cluster::ClusterConfig;
+pub use foxglove::FoxgloveConfig;
 pub use localization::LocalizationConfig;
 use runtime::session::SessionConfig;
 use serde::{Deserialize, Serialize};
@@ -59,6 +61,8 @@ pub struct MapperConfig {
     /// mapper hosts, each site's record in NATS JetStream. Unset: this one process holds
     /// every fleet (single-machine mode, the default).
     pub cluster: Option<ClusterConfig>,
+    /// The fleets live in Foxglove (`[foxglove]`, docs/foxglove.md); off by default.
+    pub foxglove: FoxgloveConfig,
 }
 
 impl Default for MapperConfig {
@@ -81,6 +85,7 @@ impl Default for MapperConfig {
             clouds: CloudsConfig::default(),
             store: StoreConfig::default(),
             cluster: None,
+            foxglove: FoxgloveConfig::default(),
         }
     }
 }

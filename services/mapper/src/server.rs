@@ -249,13 +249,7 @@ fn prune_clouds(config: crate::config::CloudsConfig, store: Arc<Store>, shared: 
             }
             let (store, shared, config) = (store.clone(), shared.clone(), config.clone());
             let pruned = tokio::task::spawn_blocking(move || {
-                let views: Vec<_> = shared
-                    .fleets
-                    .read()
-                    .expect("views lock")
-                    .values()
-                    .cloned()
-                    .collect();
+                let views = shared.views();
                 let oldest_ns =
                     now_ns().saturating_sub(config.max_age_s.saturating_mul(1_000_000_000));
                 for view in views {

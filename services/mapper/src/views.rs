@@ -133,6 +133,28 @@ impl Shared {
         }
     }
 
+    /// A robot's pose on the map now: its live odometry since its last node, composed onto
+    /// the node's map pose, or that node's pose alone; with the odometry's stamp and arrival
+    /// (ns, 0 without live odometry).
+    pub fn robot_pose(&self, view: &FleetView, robot: &fleetmap::RobotView) -> (Pose2, u64, u64) {
+        let live = self
+            .live
+            .lock()
+            .expect("live lock")
+            .get(&(view.id.clone(), robot.id.clone()))
+            .copied();
+        match live {
+            Some(l) => (robot.live_pose(&l.odometry), l.stamp_ns, l.received_ns),
+            None => (robot.map_pose_at_last_node, 0, 0),
+        }
+    }
+
+    /// Every fleet's latest view.
+    pub fn views(&self) -> Vec<Arc<FleetView>> {
+        let fleets = self.fleets.read().expect("views lock");
+        fleets.values().cloned().collect()
+    }
+
     /// A fleet's latest view.
     pub fn fleet(&self, id: &str) -> Option<Arc<FleetView>> {
         self.fleets.read().expect("views lock").get(id).cloned()

@@ -36,8 +36,9 @@ pub fn shared_data(relative: &str) -> PathBuf {
 /// What the cross-implementation tests check levelmap against, from PyPI: rosbags (CDR, MCAP,
 /// rosbag2) and the Python Zenoh (live rmw_zenoh keys) for ROS 2; the MCAP reference reader
 /// with its protobuf decoder for `levelmap record`'s files; rasterio (GDAL and PROJ in its
-/// wheel) for the GeoTIFF and the web tiles.
-pub const REFERENCE_PYTHON: [&str; 7] = [
+/// wheel) for the GeoTIFF and the web tiles; websockets and Foxglove's schemas for a Foxglove
+/// client.
+pub const REFERENCE_PYTHON: [&str; 9] = [
     "rosbags==0.11.9",
     "eclipse-zenoh==1.10.2",
     "numpy",
@@ -45,14 +46,17 @@ pub const REFERENCE_PYTHON: [&str; 7] = [
     "mcap-protobuf-support==0.6.0",
     "protobuf==7.36.2",
     "rasterio==1.4.4",
+    // A Foxglove client from the published protocol (tests/foxglove_check.py).
+    "websockets==17.4",
+    "foxglove-schemas-protobuf==0.4.0",
 ];
 
 /// A python with [`REFERENCE_PYTHON`]: a venv made on first use beside the build
-/// (`target/reference-python-venv-3`; the number changes with the list). Panics, naming the
+/// (`target/reference-python-venv-4`; the number changes with the list). Panics, naming the
 /// step, when python3 or PyPI is missing: the tests that need it must fail, not skip.
 pub fn reference_python() -> PathBuf {
     venv::program(
-        &venv::venv("reference-python-venv-3", &REFERENCE_PYTHON),
+        &venv::venv("reference-python-venv-4", &REFERENCE_PYTHON),
         "python",
     )
 }

@@ -129,17 +129,7 @@ pub(super) struct RobotState {
 
 /// The robot's pose on the map now: live odometry since its last node, or the node itself.
 pub(super) fn robot_state(api: &Api, v: &FleetView, robot: &RobotView) -> RobotState {
-    let live = api
-        .shared
-        .live
-        .lock()
-        .expect("live lock")
-        .get(&(v.id.clone(), robot.id.clone()))
-        .copied();
-    let (pose, stamp_ns, last_seen_ns) = match live {
-        Some(l) => (robot.live_pose(&l.odometry), l.stamp_ns, l.received_ns),
-        None => (robot.map_pose_at_last_node, 0, 0),
-    };
+    let (pose, stamp_ns, last_seen_ns) = api.shared.robot_pose(v, robot);
     RobotState {
         id: robot.id.clone(),
         pose,
