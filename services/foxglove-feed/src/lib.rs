@@ -97,32 +97,32 @@ impl Channels {
     }
 
     fn pose(&mut self, fleet: &str, robot: &str) -> &Channel<PoseInFrame> {
-        let context = &self.context;
-        self.poses
-            .entry((fleet.to_owned(), robot.to_owned()))
-            .or_insert_with(|| {
-                let topic = format!("/{fleet}/robots/{robot}/pose");
-                ChannelBuilder::new(topic).context(context).build()
-            })
+        let topic = || format!("/{fleet}/robots/{robot}/pose");
+        let key = (fleet.to_owned(), robot.to_owned());
+        channel(&self.context, &mut self.poses, key, topic)
     }
 
     fn grid(&mut self, fleet: &str) -> &Channel<Grid> {
-        let context = &self.context;
-        self.grids.entry(fleet.to_owned()).or_insert_with(|| {
-            ChannelBuilder::new(format!("/{fleet}/grid"))
-                .context(context)
-                .build()
-        })
+        let topic = || format!("/{fleet}/grid");
+        channel(&self.context, &mut self.grids, fleet.to_owned(), topic)
     }
 
     fn graph(&mut self, fleet: &str) -> &Channel<SceneUpdate> {
-        let context = &self.context;
-        self.graphs.entry(fleet.to_owned()).or_insert_with(|| {
-            ChannelBuilder::new(format!("/{fleet}/graph"))
-                .context(context)
-                .build()
-        })
+        let topic = || format!("/{fleet}/graph");
+        channel(&self.context, &mut self.graphs, fleet.to_owned(), topic)
     }
+}
+
+/// The channel of `key`, made on `topic` the first time.
+fn channel<'a, K: Eq + std::hash::Hash, T: foxglove::Encode>(
+    context: &Arc<Context>,
+    channels: &'a mut HashMap<K, Channel<T>>,
+    key: K,
+    topic: impl FnOnce() -> String,
+) -> &'a Channel<T> {
+    channels
+        .entry(key)
+        .or_insert_with(|| ChannelBuilder::new(topic()).context(context).build())
 }
 
 /// What was last sent of a fleet's map: its view's time, and when.
@@ -141,9 +141,7 @@ async fn publish(config: FoxgloveConfig, shared: Arc<Shared>, mut channels: Chan
     loop {
         tick.tick().await;
         let views = shared.views();
-        let now_ns = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as u64);
+        let now_ns = runtime::session::now_ns();
         let mut transforms = Vec::new();
         for view in &views {
             for robot in &view.robots {

@@ -62,8 +62,8 @@ pub struct EdgeArgs {
     pub json: bool,
 }
 
-/// Zenoh needs Tokio's multi-thread runtime.
-fn runtime() -> Result<tokio::runtime::Runtime> {
+/// Zenoh needs Tokio's multi-thread runtime (and so does the NATS client of `site-log`).
+pub(crate) fn runtime() -> Result<tokio::runtime::Runtime> {
     Ok(tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?)

@@ -67,9 +67,7 @@ fn rebuild(args: &RebuildArgs) -> Result<()> {
             path.display()
         )
     })?;
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()?;
+    let runtime = crate::services::runtime()?;
     let progress = |line: &str| eprintln!("site-log rebuild: {line}");
     let report = runtime.block_on(cluster::rebuild::rebuild(
         cluster,

@@ -365,7 +365,8 @@ fn log_config(site: &str, replicas: usize, first_sequence: Option<u64>) -> Confi
 }
 
 /// Deletes site `site`'s log, every record of it; whether there was one. Only a rebuild
-/// does this (`levelmap site-log rebuild --replace`).
+/// does this (`levelmap site-log rebuild`: an empty log made again by a host, or with
+/// `--replace` one that holds records).
 pub async fn delete_log(js: &Context, site: &str) -> Result<bool, LogError> {
     check_site(site)?;
     if !log_exists(js, site).await? {
