@@ -1,7 +1,8 @@
 //! `levelmap record` during a real run: a mapper and two simulated robots (processes, Zenoh
 //! TCP on loopback), the recorder beside them. The file is read back by the reference MCAP
 //! reader in Python, every node decoded with the schema embedded in the file; its counts must
-//! match the recorder's report and the mapper's map. A fresh mapper fed the file then holds
+//! match the recorder's report and the mapper's map. Recorded with `--foxglove`, the file holds
+//! each node's scan, cloud and fixes in Foxglove's schemas too, and the frames on `/tf`. A fresh mapper fed the file then holds
 //! the same network (every edge and its measurement) and the same poses: the feed solves
 //! where the live mapper solved (its recorded `map/poses` puts), so the replay is exact. A copy cut in the middle fails `levelmap mapper
 //! --from-recording`, naming the file.
@@ -70,6 +71,7 @@ fn start_recorder(connect: &str, out: &std::path::Path) -> Child {
             "--fleet",
             "park",
             "--json",
+            "--foxglove",
             "--connect",
             connect,
             "--out",
@@ -154,15 +156,41 @@ fn a_recorded_run_reads_back_in_python_and_replays_to_the_same_map() {
         serde_json::from_str(&testdata::run_reference_python(&script, &[&out])).expect("JSON");
     eprintln!("python mcap: {read:#}");
     assert_eq!(read["topics"], report["topics"], "per-topic counts");
-    assert_eq!(read["messages"], report["messages"]);
-    assert_eq!(read["summary_messages"], report["messages"]);
+    let (levelmap_messages, foxglove_messages) = (
+        report["messages"].as_u64().unwrap(),
+        report["foxglove_messages"].as_u64().unwrap(),
+    );
+    let messages = levelmap_messages + foxglove_messages;
+    assert_eq!(read["messages"], messages);
+    assert_eq!(read["summary_messages"], messages);
+    assert_eq!(report["foxglove_unreadable"], 0);
     for robot in ["robot0", "robot1"] {
         let key = |t: &str| format!("levelmap/park/robots/{robot}/{t}");
         assert_eq!(read["schemas"][key("node")], "levelmap.v1.Node");
         assert_eq!(read["schemas"][key("odom")], "levelmap.v1.Odometry");
         assert_eq!(read["schemas"][key("ack")], "levelmap.v1.Ack");
         assert_eq!(read["schemas"][key("scan")], "levelmap.v1.LiveScan");
+        // Every node sent (re-sends too) in Foxglove's schemas, placed by its odometry.
+        let topic = |t: &str| format!("/park/robots/{robot}/{t}");
+        assert_eq!(read["schemas"][topic("scan")], "foxglove.LaserScan");
+        assert_eq!(read["schemas"][topic("cloud")], "foxglove.PointCloud");
+        assert_eq!(read["schemas"][topic("gps")], "foxglove.LocationFix");
+        assert_eq!(read["topics"][topic("scan")], read["topics"][key("node")]);
+        assert_eq!(read["topics"][topic("cloud")], read["topics"][key("node")]);
+        assert!(read["topics"][topic("gps")].as_u64() > Some(0), "{read}");
+        let frames = read["foxglove"]["frames"].as_array().unwrap();
+        for link in [
+            format!("park/map>park/{robot}/odom"),
+            format!("park/{robot}/odom>park/{robot}"),
+        ] {
+            assert!(
+                frames.contains(&Value::from(link.clone())),
+                "{link}: {read}"
+            );
+        }
     }
+    assert_eq!(read["schemas"]["/tf"], "foxglove.FrameTransforms");
+    assert!(read["foxglove"]["returns"].as_u64() > Some(0), "{read}");
     assert_eq!(
         read["schemas"]["levelmap/park/map/poses"],
         "levelmap.v1.MapPoses"
@@ -183,7 +211,10 @@ fn a_recorded_run_reads_back_in_python_and_replays_to_the_same_map() {
             in_process_mapper_with(&replay_dir, mapper::MapperConfig::default()).await;
         let fed = mapper.feed_recording(&out).await.expect("fed");
         eprintln!("fed: {fed:?}");
-        assert_eq!(fed.messages, report["messages"].as_u64().unwrap());
+        assert_eq!(
+            fed.messages, messages,
+            "the feed reads the Foxglove topics past"
+        );
         let read = tokio::task::spawn_blocking(move || (graph_poses(&http), graph_edges(&http)));
         let read = read.await.unwrap();
         mapper.stop().await.unwrap();

@@ -2,6 +2,7 @@
 //! on loopback, measured from outside through HTTP: how long a published node takes to become
 //! visible on the API's event stream, and how fast robot pose queries are answered meanwhile.
 
+mod foxglove;
 mod live;
 
 use crate::FLEET;
@@ -68,6 +69,13 @@ pub struct BenchFleetArgs {
     /// the map windows around the robots after the run.
     #[arg(long, default_value_t = 0)]
     pub live_clients: usize,
+    /// Serve the mapper's Foxglove feed (`[foxglove]`, on a free loopback port) during the run.
+    #[arg(long)]
+    pub foxglove: bool,
+    /// Foxglove clients subscribing to every channel of the feed during the whole run (with
+    /// any, `--foxglove` is implied); the report has what they received.
+    #[arg(long, default_value_t = 0)]
+    pub foxglove_clients: usize,
 }
 
 /// Percentiles of a sample (named in ms, the unit of most uses).
@@ -121,6 +129,8 @@ struct BenchReport {
     live: Option<live::LiveReport>,
     /// 40 m windows around the robots, after the run (`--live-clients`).
     windows: Option<live::WindowReport>,
+    /// The Foxglove feed's clients (`--foxglove-clients`), each what it received.
+    foxglove_clients: Option<Vec<foxglove::FoxgloveClient>>,
 }
 
 /// The nodes of the park's three loops, each a node per scan, to be replayed.
@@ -212,6 +222,29 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     )?)
     .await?;
     let http = mapper.http_addr.to_string();
+    let feed = match args.foxglove || args.foxglove_clients > 0 {
+        true => {
+            let config = mapper::config::FoxgloveConfig {
+                enabled: true,
+                listen: "127.0.0.1:0".into(),
+                ..Default::default()
+            };
+            let tokens = mapper::tokens::Tokens::new("", "");
+            let (shared, clouds) = (mapper.shared.clone(), mapper.clouds.clone());
+            Some(foxglove_feed::start(&config, tokens, shared, clouds).await?)
+        }
+        false => None,
+    };
+    let foxglove_stop = Arc::new(AtomicBool::new(false));
+    let foxglove_clients: Vec<_> = match &feed {
+        Some(feed) => (0..args.foxglove_clients)
+            .map(|_| {
+                let url = format!("ws://{}", feed.addr);
+                tokio::spawn(foxglove::follow(url, foxglove_stop.clone()))
+            })
+            .collect(),
+        None => Vec::new(),
+    };
 
     // The event stream, timestamped on receipt.
     let seen: Arc<Mutex<HashMap<(String, u64), Instant>>> = Arc::default();
@@ -340,6 +373,11 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
         );
     }
     let live = (args.live_clients > 0).then(|| live::LiveReport::of(clients, stopped));
+    foxglove_stop.store(true, Ordering::SeqCst);
+    let mut foxglove_got = Vec::new();
+    for c in foxglove_clients {
+        foxglove_got.push(c.await??);
+    }
     let windows = (args.live_clients > 0).then(|| live::query_windows(&http, args.robots));
     let mut query_ms = Vec::new();
     let mut query_errors = 0;
@@ -383,6 +421,7 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
         optimizations: mapper.shared.metrics.optimizations.load(Ordering::Relaxed),
         live,
         windows,
+        foxglove_clients: (args.foxglove_clients > 0).then_some(foxglove_got),
     };
     for s in sessions {
         s.close().await.map_err(anyhow::Error::from_boxed)?;
@@ -413,6 +452,9 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
             report.map_nodes
         );
         tokio::signal::ctrl_c().await?;
+    }
+    if let Some(feed) = feed {
+        feed.stop().await;
     }
     mapper.stop().await
 }

@@ -5,7 +5,7 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use runtime::recording::RecordingWriter;
+use runtime::recording::{RecordingWriter, SchemaOf};
 use runtime::session::{DEFAULT_CLIENT_CONNECT, Role, SessionConfig, now_ns};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -43,6 +43,11 @@ pub struct RecordArgs {
     /// Stop after this many seconds (else on Ctrl-C or SIGTERM).
     #[arg(long, value_name = "S")]
     pub duration: Option<f64>,
+    /// Also write the traffic in Foxglove's well-known schemas, on topics of their own:
+    /// each node's scan (LaserScan), cloud (PointCloud) and fixes (LocationFix), the live
+    /// scans, and the robots' frames on /tf (odometry, and each solve's map → odometry).
+    #[arg(long)]
+    pub foxglove: bool,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -61,6 +66,11 @@ pub struct RecordReport {
     pub dropped: u64,
     /// Samples on keys that carry no levelmap message: not written.
     pub skipped: u64,
+    /// Messages written in Foxglove's schemas (`--foxglove`).
+    pub foxglove_messages: u64,
+    /// Messages recorded that made no Foxglove message as they did not decode or check
+    /// (`--foxglove`; the message itself is recorded as it came).
+    pub foxglove_unreadable: u64,
     /// Payload bytes written.
     pub payload_bytes: u64,
     /// The file's size (bytes).
@@ -110,25 +120,48 @@ pub fn recorder_session(service: SessionConfig, connect: Option<String>) -> Sess
 pub struct Recorder<W: Write + Seek> {
     writer: RecordingWriter<W>,
     report: RecordReport,
+    /// The traffic in Foxglove's schemas too (`--foxglove`).
+    foxglove: Option<foxglove_schemas::traffic::Traffic>,
 }
 
 impl<W: Write + Seek> Recorder<W> {
-    /// An empty recording over `out`.
-    pub fn new(out: W) -> Result<Self> {
+    /// An empty recording over `out`; with `foxglove`, the traffic in Foxglove's schemas too.
+    pub fn new(out: W, foxglove: bool) -> Result<Self> {
         Ok(Recorder {
             writer: RecordingWriter::new(out)?,
             report: RecordReport::default(),
+            foxglove: foxglove.then(Default::default),
         })
     }
 
     /// Writes one sample received at `log_time_ns`, or counts it skipped.
     pub fn record(&mut self, key: &str, payload: &[u8], log_time_ns: u64) -> Result<()> {
-        if self.writer.write(key, payload, log_time_ns)? {
-            self.report.messages += 1;
-            *self.report.topics.entry(key.to_owned()).or_default() += 1;
-            self.report.payload_bytes += payload.len() as u64;
-        } else {
+        if !self.writer.write(key, payload, log_time_ns)? {
             self.report.skipped += 1;
+            return Ok(());
+        }
+        self.report.messages += 1;
+        *self.report.topics.entry(key.to_owned()).or_default() += 1;
+        self.report.payload_bytes += payload.len() as u64;
+        let Some(traffic) = &mut self.foxglove else {
+            return Ok(());
+        };
+        let Ok(made) = traffic.translate(key, payload, log_time_ns) else {
+            self.report.foxglove_unreadable += 1;
+            return Ok(());
+        };
+        for m in made {
+            let schema = SchemaOf {
+                name: &m.schema_name,
+                encoding: &m.schema_encoding,
+                data: &m.schema_data,
+            };
+            let at = m.stamp_ns;
+            self.writer
+                .write_other(&m.topic, &schema, &m.data, log_time_ns, at)?;
+            self.report.foxglove_messages += 1;
+            *self.report.topics.entry(m.topic).or_default() += 1;
+            self.report.payload_bytes += m.data.len() as u64;
         }
         Ok(())
     }
@@ -167,7 +200,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     session.to_zenoh(Role::Client)?;
     let file = std::fs::File::create(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
-    let recorder = Recorder::new(BufWriter::new(file))?;
+    let recorder = Recorder::new(BufWriter::new(file), args.foxglove)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
@@ -177,8 +210,15 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
+        let foxglove = match args.foxglove {
+            true => format!(
+                " (and {} in Foxglove's schemas, {} unreadable)",
+                report.foxglove_messages, report.foxglove_unreadable
+            ),
+            false => String::new(),
+        };
         println!(
-            "{}: {} messages on {} keys, {} dropped, {} skipped, {} bytes in {:.1} s",
+            "{}: {} messages{foxglove} on {} topics, {} dropped, {} skipped, {} bytes in {:.1} s",
             report.out.display(),
             report.messages,
             report.topics.len(),
@@ -292,7 +332,7 @@ mod tests {
 
     #[test]
     fn the_tally_counts_per_key_and_skips_foreign_keys() {
-        let mut recorder = Recorder::new(std::io::Cursor::new(Vec::new())).unwrap();
+        let mut recorder = Recorder::new(std::io::Cursor::new(Vec::new()), false).unwrap();
         recorder
             .record("levelmap/park/robots/r1/odom", b"", 1)
             .unwrap();

@@ -113,8 +113,9 @@ pub fn run_mapper(args: &MapperArgs) -> Result<()> {
         );
         let foxglove = match config.foxglove.enabled {
             true => {
-                let shared = running.shared.clone();
-                Some(foxglove_feed::start(&config.foxglove, &config.read_token, shared).await?)
+                let tokens = mapper::tokens::Tokens::new(&config.token, &config.read_token);
+                let (shared, clouds) = (running.shared.clone(), running.clouds.clone());
+                Some(foxglove_feed::start(&config.foxglove, tokens, shared, clouds).await?)
             }
             false => None,
         };

@@ -18,7 +18,7 @@
 //! - [`deployment`]: how the mapper is deployed: alone ([`deployment::Alone`]), or as one
 //!   host of a cluster by the `cluster` crate (which this crate does not depend on), its
 //!   stateless HTTP front the `gateway` crate;
-//! - [`server`] wires them; [`config`] is the configuration.
+//! - [`server`] wires them; [`config`] is the configuration; [`tokens`] the bearer tokens.
 
 pub mod api;
 pub mod blobs;
@@ -31,6 +31,7 @@ pub mod localization;
 pub mod mapping;
 pub mod restore;
 pub mod server;
+pub mod tokens;
 pub use mapstore as store;
 pub mod versions;
 pub mod views;

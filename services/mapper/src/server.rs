@@ -30,6 +30,8 @@ pub struct Running {
     pub http_addr: std::net::SocketAddr,
     /// What the HTTP side reads: views, live odometry, counters.
     pub shared: Arc<Shared>,
+    /// The nodes' clouds, which no view holds (read from the store).
+    pub clouds: crate::views::clouds::Clouds,
     session: zenoh::Session,
     http: tokio::task::JoinHandle<()>,
     worker: Option<std::thread::JoinHandle<()>>,
@@ -175,11 +177,13 @@ pub async fn start_deployed(
         .await
         .with_context(|| format!("HTTP: cannot listen on {}", config.http_listen))?;
     let http_addr = listener.local_addr()?;
+    let clouds = crate::views::clouds::Clouds::new(store.clone());
     let app = crate::api::router(shared.clone(), work_tx.clone(), store, maps, blobs, &config);
     let http = serve_until_stopped(listener, app, shared.stopping.subscribe());
     Ok(Running {
         http_addr,
         shared,
+        clouds,
         session,
         http,
         worker: Some(worker),

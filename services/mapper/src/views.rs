@@ -200,5 +200,6 @@ impl Shared {
     }
 }
 
+pub mod clouds;
 pub mod instruments;
 pub mod live;

@@ -16,7 +16,7 @@ use wire::{DESCRIPTOR_SET, message_name_of_key, v1};
 /// Writes levelmap messages into an MCAP, its summary and chunk indexes on [`Self::finish`].
 pub struct RecordingWriter<W: Write + Seek> {
     writer: mcap::Writer<W>,
-    schemas: HashMap<&'static str, u16>,
+    schemas: HashMap<String, u16>,
     channels: HashMap<String, u16>,
     sequence: u32,
 }
@@ -57,20 +57,63 @@ impl<W: Write + Seek> RecordingWriter<W> {
         Ok(true)
     }
 
-    fn add_channel(&mut self, key: &str, name: &'static str) -> anyhow::Result<u16> {
-        let schema_id = match self.schemas.get(name) {
+    fn add_channel(&mut self, key: &str, name: &str) -> anyhow::Result<u16> {
+        self.channel(
+            key,
+            &SchemaOf {
+                name,
+                encoding: "protobuf",
+                data: DESCRIPTOR_SET,
+            },
+        )
+    }
+
+    /// The channel of `topic`, added with `schema` the first time.
+    fn channel(&mut self, topic: &str, schema: &SchemaOf<'_>) -> anyhow::Result<u16> {
+        if let Some(&id) = self.channels.get(topic) {
+            return Ok(id);
+        }
+        let schema_id = match self.schemas.get(schema.name) {
             Some(&id) => id,
             None => {
-                let id = self.writer.add_schema(name, "protobuf", DESCRIPTOR_SET)?;
-                self.schemas.insert(name, id);
+                let id = self
+                    .writer
+                    .add_schema(schema.name, schema.encoding, schema.data)?;
+                self.schemas.insert(schema.name.to_owned(), id);
                 id
             }
         };
         let id = self
             .writer
-            .add_channel(schema_id, key, "protobuf", &BTreeMap::new())?;
-        self.channels.insert(key.to_owned(), id);
+            .add_channel(schema_id, topic, "protobuf", &BTreeMap::new())?;
+        self.channels.insert(topic.to_owned(), id);
         Ok(id)
+    }
+
+    /// Writes one protobuf message of another schema (Foxglove's, `levelmap record
+    /// --foxglove`) on `topic`, measured at `publish_time_ns` (0: `log_time_ns`).
+    pub fn write_other(
+        &mut self,
+        topic: &str,
+        schema: &SchemaOf<'_>,
+        payload: &[u8],
+        log_time_ns: u64,
+        publish_time_ns: u64,
+    ) -> anyhow::Result<()> {
+        let channel_id = self.channel(topic, schema)?;
+        self.sequence = self.sequence.wrapping_add(1);
+        let header = MessageHeader {
+            channel_id,
+            sequence: self.sequence,
+            log_time: log_time_ns,
+            publish_time: if publish_time_ns == 0 {
+                log_time_ns
+            } else {
+                publish_time_ns
+            },
+        };
+        self.writer.write_to_known_channel(&header, payload)?;
+        Ok(())
     }
 
     /// Ends the recording: the last chunk, the summary (schemas, channels, statistics, chunk
@@ -79,6 +122,16 @@ impl<W: Write + Seek> RecordingWriter<W> {
         self.writer.finish()?;
         Ok(self.writer.into_inner())
     }
+}
+
+/// A channel's schema: its name, encoding and data.
+pub struct SchemaOf<'a> {
+    /// Its name (`foxglove.LaserScan`).
+    pub name: &'a str,
+    /// Its encoding (`protobuf`: the data is a `FileDescriptorSet`).
+    pub encoding: &'a str,
+    /// The schema itself.
+    pub data: &'a [u8],
 }
 
 /// The leading `Header` (field 1) of the messages that have one.

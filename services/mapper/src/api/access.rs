@@ -3,86 +3,17 @@
 
 use super::{Api, ApiError, Reply};
 use crate::config::CorsOrigin;
+pub(super) use crate::tokens::{Grant, Tokens};
 use axum::Json;
 use axum::extract::{Request, State};
 use axum::http::{HeaderMap, HeaderName, HeaderValue, Method, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
-use sha3::{Digest, Sha3_256};
 use std::time::Duration;
-use subtle::ConstantTimeEq;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use utoipa::ToSchema;
 use utoipa::openapi::security::SecurityRequirement;
-
-/// A token's SHA3-256 digest. Tokens are compared as digests: two 32-byte values whatever
-/// their lengths, every byte looked at, so neither the time taken nor an early exit tells
-/// how long the token is or how much of a guess was right.
-type Digest32 = [u8; 32];
-
-fn digest(token: &[u8]) -> Digest32 {
-    Sha3_256::digest(token).into()
-}
-
-/// What a request's bearer token is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Grant {
-    /// No token, or one the mapper does not know.
-    None,
-    /// The read token.
-    Read,
-    /// The write token (which reads too).
-    Write,
-}
-
-/// The configured tokens, as digests (none: not configured).
-pub(super) struct Tokens {
-    write: Option<Digest32>,
-    read: Option<Digest32>,
-}
-
-impl Tokens {
-    pub(super) fn new(write: &str, read: &str) -> Tokens {
-        let secret = |t: &str| (!t.is_empty()).then(|| digest(t.as_bytes()));
-        Tokens {
-            write: secret(write),
-            read: secret(read),
-        }
-    }
-
-    /// A write token is configured: the write routes are on.
-    pub(super) fn write_routes(&self) -> bool {
-        self.write.is_some()
-    }
-
-    /// A read token is configured: every guarded route needs a token.
-    pub(super) fn read_required(&self) -> bool {
-        self.read.is_some()
-    }
-
-    /// What the request's `Authorization: Bearer …` token is.
-    pub(super) fn grant(&self, headers: &HeaderMap) -> Grant {
-        let Some(given) = bearer(headers).map(digest) else {
-            return Grant::None;
-        };
-        let is = |secret: &Option<Digest32>| secret.is_some_and(|s| bool::from(s.ct_eq(&given)));
-        // Both compared, so the time does not tell which one matched first.
-        let (write, read) = (is(&self.write), is(&self.read));
-        if write {
-            Grant::Write
-        } else if read {
-            Grant::Read
-        } else {
-            Grant::None
-        }
-    }
-
-    /// Whether the request may read: no read token configured, or a known token.
-    pub(super) fn may_read(&self, headers: &HeaderMap) -> bool {
-        !self.read_required() || self.grant(headers) != Grant::None
-    }
-}
 
 /// The token of an `Authorization: Bearer …` header (the scheme in any case).
 fn bearer(headers: &HeaderMap) -> Option<&[u8]> {
@@ -98,7 +29,7 @@ fn bearer(headers: &HeaderMap) -> Option<&[u8]> {
 /// Middleware of the guarded routes: 401 without a known token when the mapper has a read
 /// token.
 pub(super) async fn require_read(State(api): State<Api>, request: Request, next: Next) -> Response {
-    if !api.tokens.may_read(request.headers()) {
+    if !api.tokens.may_read(bearer(request.headers())) {
         return ApiError::Unauthorized(
             "this mapper needs a bearer token to read (its read_token or token)".into(),
         )
@@ -114,7 +45,7 @@ pub(super) fn authorized(api: &Api, headers: &HeaderMap) -> Result<(), ApiError>
             "write routes are off: no token in the mapper's config".into(),
         ));
     }
-    match api.tokens.grant(headers) {
+    match api.tokens.grant(bearer(headers)) {
         Grant::Write => Ok(()),
         Grant::Read => Err(ApiError::Forbidden(
             "this token only reads: the write token is needed".into(),
@@ -153,7 +84,7 @@ pub(super) async fn auth(State(api): State<Api>, headers: HeaderMap) -> Reply<Js
         authorized: verdict.is_ok(),
         reason: verdict.err().map(|e| e.reason().to_owned()),
         read_required: api.tokens.read_required(),
-        read: api.tokens.may_read(&headers),
+        read: api.tokens.may_read(bearer(&headers)),
     }))
 }
 
@@ -232,8 +163,8 @@ mod tests {
     #[test]
     fn tokens_grant_what_they_are() {
         let t = Tokens::new("w-secret", "r-secret");
-        assert_eq!(t.grant(&with("Bearer w-secret")), Grant::Write);
-        assert_eq!(t.grant(&with("bearer r-secret")), Grant::Read);
+        assert_eq!(t.grant(bearer(&with("Bearer w-secret"))), Grant::Write);
+        assert_eq!(t.grant(bearer(&with("bearer r-secret"))), Grant::Read);
         // A prefix, an extension, another scheme, no token: nothing.
         for v in [
             "Bearer w-secre",
@@ -242,18 +173,18 @@ mod tests {
             "Bearer ",
             "w-secret",
         ] {
-            assert_eq!(t.grant(&with(v)), Grant::None, "{v}");
+            assert_eq!(t.grant(bearer(&with(v))), Grant::None, "{v}");
         }
-        assert_eq!(t.grant(&HeaderMap::new()), Grant::None);
-        assert!(!t.may_read(&HeaderMap::new()));
-        assert!(t.may_read(&with("Bearer r-secret")));
+        assert_eq!(t.grant(bearer(&HeaderMap::new())), Grant::None);
+        assert!(!t.may_read(bearer(&HeaderMap::new())));
+        assert!(t.may_read(bearer(&with("Bearer r-secret"))));
     }
 
     #[test]
     fn without_a_read_token_anyone_reads_and_nothing_is_a_token() {
         let t = Tokens::new("", "");
-        assert!(t.may_read(&HeaderMap::new()) && !t.read_required() && !t.write_routes());
+        assert!(t.may_read(bearer(&HeaderMap::new())) && !t.read_required() && !t.write_routes());
         // An empty configured token is never matched, even by an empty bearer.
-        assert_eq!(t.grant(&with("Bearer  ")), Grant::None);
+        assert_eq!(t.grant(bearer(&with("Bearer  "))), Grant::None);
     }
 }

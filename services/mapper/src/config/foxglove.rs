@@ -3,15 +3,16 @@
 
 use serde::{Deserialize, Serialize};
 
-/// A Foxglove WebSocket server beside the mapper (docs/foxglove.md): each fleet's grid, its
-/// robots' poses and frames and its pose graph, in the fleet's map frame.
+/// A Foxglove WebSocket server beside the mapper (docs/foxglove.md): each fleet's grid, pose
+/// graph, robots' poses and frames, and new nodes' scans, clouds and GPS fixes, in the
+/// fleet's map frame.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct FoxgloveConfig {
     /// Serve it; off by default.
     pub enabled: bool,
-    /// Its address. Loopback by default: the Foxglove protocol has no access control, so a
-    /// mapper with a read token refuses any other address.
+    /// Its address; loopback by default. With a read token, a connection there needs the
+    /// read or write token (`?token=` or a bearer header: the feed's token front).
     pub listen: String,
     /// The robots' poses and frames go out this often (ms).
     pub poses_every_ms: u64,

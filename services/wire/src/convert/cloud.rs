@@ -155,6 +155,12 @@ pub fn validate_cloud(cloud: &v1::SegmentedCloud) -> Result<ClassCounts, WireErr
     Ok(counts)
 }
 
+/// A cloud as its bytes are stored apart from its node ([`crate::split_node_cloud`]),
+/// decoded and checked ([`cloud_from_wire`]).
+pub fn decode_cloud(bytes: &[u8]) -> Result<ClassifiedCloud, WireError> {
+    cloud_from_wire(&super::decode("SegmentedCloud", bytes)?)
+}
+
 /// A cloud from the wire, checked ([`validate_cloud`]), in metres.
 pub fn cloud_from_wire(cloud: &v1::SegmentedCloud) -> Result<ClassifiedCloud, WireError> {
     validate_cloud(cloud)?;

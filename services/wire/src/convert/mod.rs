@@ -16,7 +16,7 @@ mod version;
 
 pub use cloud::{
     CLOUD_MAX_COORD_CM, CLOUD_MAX_POINTS, ClassifiedCloud, cloud_from_wire, cloud_to_wire,
-    point_class_from_wire, validate_cloud,
+    decode_cloud, point_class_from_wire, validate_cloud,
 };
 pub use gps::{fix_status_to_wire, gps_fix_from_wire, gps_fix_to_wire, validate_gps_fix};
 pub use input::{

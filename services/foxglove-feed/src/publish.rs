@@ -1,0 +1,251 @@
+//! What the feed publishes, from the mapper's views, in each fleet's map frame:
+//!
+//! | topic | schema | when |
+//! |---|---|---|
+//! | `/{fleet}/robots/{robot}/pose` | `foxglove.PoseInFrame` | every `poses_every_ms` |
+//! | `/tf` | `foxglove.FrameTransforms` (map → `{fleet}/{robot}`) | every `poses_every_ms` |
+//! | `/{fleet}/robots/{robot}/scan` | `foxglove.LaserScan` (the node's leveled scan at its pose) | each new node |
+//! | `/{fleet}/robots/{robot}/cloud` | `foxglove.PointCloud` (the node's 3D cloud, from the store) | each new node that has one |
+//! | `/{fleet}/robots/{robot}/gps` | `foxglove.LocationFix` (the node's fixes) | each new node's fixes |
+//! | `/{fleet}/grid` | `foxglove.Grid` (occupancy per cent, INT8) | the map changed, at most every `map_every_ms` |
+//! | `/{fleet}/graph` | `foxglove.SceneUpdate` (the pose graph's edges) | as the grid |
+//!
+//! Nothing is made for a channel no client subscribes to: a grid is made from every node's
+//! scan (off the async threads) and a cloud is a store read (likewise).
+
+use crate::convert;
+use fleetmap::FleetView;
+use foxglove::messages::{FrameTransforms, Grid, LaserScan, LocationFix, PointCloud};
+use foxglove::messages::{PoseInFrame, SceneUpdate};
+use foxglove::{Channel, ChannelBuilder, Context};
+use foxglove_schemas as schemas;
+use mapper::config::FoxgloveConfig;
+use mapper::views::Shared;
+use mapper::views::clouds::Clouds;
+use slam::Pose2;
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// New nodes a fleet's tick publishes at most (the newest): a mapper that restored a large
+/// map, or a burst, is not replayed whole to the clients.
+const NODES_PER_TICK: usize = 512;
+
+/// A robot's channels.
+struct RobotChannels {
+    pose: Channel<PoseInFrame>,
+    scan: Channel<LaserScan>,
+    cloud: Channel<PointCloud>,
+    gps: Channel<LocationFix>,
+}
+
+/// A fleet's channels.
+struct FleetChannels {
+    grid: Channel<Grid>,
+    graph: Channel<SceneUpdate>,
+}
+
+/// The channels, made as fleets and robots appear.
+pub(crate) struct Channels {
+    context: Arc<Context>,
+    tf: Channel<FrameTransforms>,
+    robots: HashMap<(String, String), RobotChannels>,
+    fleets: HashMap<String, FleetChannels>,
+}
+
+impl Channels {
+    pub(crate) fn new(context: Arc<Context>) -> Channels {
+        let tf = ChannelBuilder::new("/tf").context(&context).build();
+        Channels {
+            context,
+            tf,
+            robots: HashMap::new(),
+            fleets: HashMap::new(),
+        }
+    }
+
+    fn robot(&mut self, fleet: &str, robot: &str) -> &RobotChannels {
+        let context = &self.context;
+        self.robots
+            .entry((fleet.to_owned(), robot.to_owned()))
+            .or_insert_with(|| {
+                let topic = |what: &str| format!("/{fleet}/robots/{robot}/{what}");
+                RobotChannels {
+                    pose: ChannelBuilder::new(topic("pose")).context(context).build(),
+                    scan: ChannelBuilder::new(topic("scan")).context(context).build(),
+                    cloud: ChannelBuilder::new(topic("cloud")).context(context).build(),
+                    gps: ChannelBuilder::new(topic("gps")).context(context).build(),
+                }
+            })
+    }
+
+    fn fleet(&mut self, fleet: &str) -> &FleetChannels {
+        let context = &self.context;
+        self.fleets.entry(fleet.to_owned()).or_insert_with(|| {
+            let topic = |what: &str| format!("/{fleet}/{what}");
+            FleetChannels {
+                grid: ChannelBuilder::new(topic("grid")).context(context).build(),
+                graph: ChannelBuilder::new(topic("graph")).context(context).build(),
+            }
+        })
+    }
+}
+
+/// What was last sent of a fleet: its view's time and when (its map), and how many of its
+/// nodes.
+struct Sent {
+    map: Option<(u64, Instant)>,
+    nodes: usize,
+}
+
+/// A new node's cloud to read: fleet, robot, node, its pose, its time.
+type CloudWanted = (String, String, usize, Pose2, u64);
+
+/// Publishes every fleet's robots each `poses_every_ms`, their new nodes, and its map when
+/// it changed (at most each `map_every_ms`, and only while a client subscribes).
+pub(crate) async fn publish(
+    config: FoxgloveConfig,
+    shared: Arc<Shared>,
+    clouds: Clouds,
+    mut channels: Channels,
+) {
+    let mut tick = tokio::time::interval(Duration::from_millis(config.poses_every_ms.max(10)));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let map_every = Duration::from_millis(config.map_every_ms);
+    let mut sent: HashMap<String, Sent> = HashMap::new();
+    loop {
+        tick.tick().await;
+        let views = shared.views();
+        let now_ns = runtime::session::now_ns();
+        let mut transforms = Vec::new();
+        let mut wanted = Vec::new();
+        for view in &views {
+            for robot in &view.robots {
+                let (pose, stamp_ns, _) = shared.robot_pose(view, robot);
+                let stamp_ns = if stamp_ns == 0 { now_ns } else { stamp_ns };
+                let frame = schemas::map_frame(&view.id);
+                let channel = &channels.robot(&view.id, &robot.id).pose;
+                if channel.has_sinks() {
+                    channel.log(&schemas::pose_in_frame(frame, &pose, stamp_ns));
+                }
+                let child = schemas::robot_frame(&view.id, &robot.id);
+                let frame = schemas::map_frame(&view.id);
+                transforms.push(schemas::transform(frame, child, &pose, stamp_ns));
+            }
+            // A fleet first seen (the mapper just started) is published from its next node.
+            let len = view.nodes.len();
+            let fleet_sent = sent.entry(view.id.clone()).or_insert(Sent {
+                map: None,
+                nodes: len,
+            });
+            let from = fleet_sent.nodes.max(len.saturating_sub(NODES_PER_TICK));
+            fleet_sent.nodes = len;
+            wanted.extend(publish_nodes(view, from..len, &mut channels));
+            let watched = {
+                let fleet = channels.fleet(&view.id);
+                fleet.grid.has_sinks() || fleet.graph.has_sinks()
+            };
+            if !watched {
+                // A client that subscribes later gets the map at once.
+                fleet_sent.map = None;
+                continue;
+            }
+            let due = fleet_sent.map.is_none_or(|(updated, at)| {
+                updated != view.updated_ns && at.elapsed() >= map_every
+            });
+            if due {
+                publish_map(view, now_ns, channels.fleet(&view.id)).await;
+                fleet_sent.map = Some((view.updated_ns, Instant::now()));
+            }
+        }
+        if !transforms.is_empty() {
+            channels.tf.log(&FrameTransforms { transforms });
+        }
+        if !wanted.is_empty() {
+            publish_clouds(&clouds, wanted, &mut channels).await;
+        }
+    }
+}
+
+/// Publishes the scans and fixes of `view`'s nodes `nodes`; the clouds to read, of those
+/// whose cloud channel a client subscribes to.
+fn publish_nodes(
+    view: &FleetView,
+    nodes: std::ops::Range<usize>,
+    channels: &mut Channels,
+) -> Vec<CloudWanted> {
+    let mut wanted = Vec::new();
+    for i in nodes {
+        let (Some(node), Some(pose)) = (view.nodes.get(i), view.poses.get(i)) else {
+            continue;
+        };
+        let Some(robot) = view.robots.get(node.robot) else {
+            continue;
+        };
+        let robot_channels = channels.robot(&view.id, &robot.id);
+        let frame = || schemas::map_frame(&view.id);
+        if robot_channels.scan.has_sinks() {
+            robot_channels
+                .scan
+                .log(&schemas::laser_scan(frame(), pose, &node.scan));
+        }
+        if let (true, Some(datum)) = (robot_channels.gps.has_sinks(), &view.datum) {
+            for observation in &node.gps {
+                let fix = schemas::observed_fix(frame(), datum, observation, node.stamp_ns);
+                robot_channels.gps.log(&fix);
+            }
+        }
+        if robot_channels.cloud.has_sinks() {
+            wanted.push((view.id.clone(), robot.id.clone(), i, *pose, node.stamp_ns));
+        }
+    }
+    wanted
+}
+
+/// Reads the wanted clouds from the store (off the async threads) and publishes them.
+async fn publish_clouds(clouds: &Clouds, wanted: Vec<CloudWanted>, channels: &mut Channels) {
+    let clouds = clouds.clone();
+    let read = tokio::task::spawn_blocking(move || {
+        let mut made = Vec::new();
+        for (fleet, robot, node, pose, stamp_ns) in wanted {
+            match clouds.get(&fleet, node as u64) {
+                Ok(Some(cloud)) => {
+                    let frame = schemas::map_frame(&fleet);
+                    let msg = schemas::point_cloud(frame, &pose, &cloud, stamp_ns);
+                    made.push((fleet, robot, msg));
+                }
+                Ok(None) => {}
+                Err(e) => tracing::debug!(fleet, node, "foxglove: no cloud: {e:#}"),
+            }
+        }
+        made
+    })
+    .await;
+    match read {
+        Ok(made) => {
+            for (fleet, robot, msg) in made {
+                channels.robot(&fleet, &robot).cloud.log(&msg);
+            }
+        }
+        Err(e) => tracing::warn!("foxglove: reading clouds failed: {e}"),
+    }
+}
+
+/// Publishes a fleet's graph and grid to whichever a client subscribes to.
+async fn publish_map(view: &Arc<FleetView>, now_ns: u64, fleet: &FleetChannels) {
+    if fleet.graph.has_sinks() {
+        fleet.graph.log(&convert::graph(view, now_ns));
+    }
+    if !fleet.grid.has_sinks() {
+        return;
+    }
+    let v = view.clone();
+    let made = tokio::task::spawn_blocking(move || v.grid(&slam::GridParams::default())).await;
+    match made {
+        Ok(Ok(g)) => fleet
+            .grid
+            .log(&schemas::grid(schemas::map_frame(&view.id), &g, now_ns)),
+        Ok(Err(e)) => tracing::debug!(fleet = view.id, "foxglove: no grid: {e}"),
+        Err(e) => tracing::warn!(fleet = view.id, "foxglove: the grid failed: {e}"),
+    }
+}
