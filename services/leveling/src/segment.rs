@@ -108,6 +108,19 @@ impl SegmentParams {
     }
 }
 
+/// The smaller of two numbers that are not NaN (in-range points): one instruction, where
+/// `f32::min`'s NaN rule adds a blend to the running bounds' loop-carried chain.
+#[inline]
+fn min_of_numbers(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// The larger of two numbers that are not NaN; see [`min_of_numbers`].
+#[inline]
+fn max_of_numbers(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
 /// Eq. 3.2 for one pair: lower point `k` lies farther than `p_j` by more than R_t.
 #[inline]
 fn overhangs(r_k: f32, p_j: &CylPoint, r_t: f32) -> bool {
@@ -313,11 +326,11 @@ impl Segmenter {
                         first_landmark = Some(j);
                     }
                 }
-                max_r = max_r.max(r_j);
+                max_r = max_of_numbers(max_r, r_j);
                 running = PrefixBounds {
-                    min_z: running.min_z.min(z_j),
-                    min_u: running.min_u.min(u_j),
-                    max_v: running.max_v.max(v_j),
+                    min_z: min_of_numbers(running.min_z, z_j),
+                    min_u: min_of_numbers(running.min_u, u_j),
+                    max_v: max_of_numbers(running.max_v, v_j),
                 };
                 n_landmark += landmark as usize;
                 n_overhang += overhang as usize;
