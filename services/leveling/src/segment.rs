@@ -286,6 +286,7 @@ impl Segmenter {
         };
         for (j, p_j) in points.iter().enumerate() {
             let class = if !params.in_range(p_j) {
+                n_invalid += 1;
                 PointClass::Invalid
             } else {
                 let (r_j, z_j) = (p_j.r_m, p_j.z_m);
@@ -306,8 +307,11 @@ impl Segmenter {
                 {
                     // The point that made the last landmark usually lies below this one too
                     // (same surface, a little higher): try it before walking down.
-                    landmark = witness
-                        .is_some_and(|k: usize| is_below(&points[k], p_j, h_t, h_max, tan_a));
+                    landmark = witness.is_some_and(|k: usize| {
+                        points
+                            .get(k)
+                            .is_some_and(|p_k| is_below(p_k, p_j, h_t, h_max, tan_a))
+                    });
                     if !landmark {
                         for k in (0..j).rev() {
                             let b = &bounds[k];
@@ -336,7 +340,6 @@ impl Segmenter {
                 n_overhang += overhang as usize;
                 CLASS_OF[overhang as usize * 2 + landmark as usize]
             };
-            n_invalid += (class == PointClass::Invalid) as usize;
             out[j] = class;
             bounds[j] = running;
         }
