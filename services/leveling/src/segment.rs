@@ -269,8 +269,12 @@ impl Segmenter {
             self.max_height_m,
         );
         let out = &mut out[..points.len()];
-        self.bounds.resize(points.len(), PrefixBounds::default());
-        let bounds = &mut self.bounds[..];
+        // Grown only, never shrunk: a resize per column would refill slots every point
+        // overwrites before the walk reads them.
+        if self.bounds.len() < points.len() {
+            self.bounds.resize(points.len(), PrefixBounds::default());
+        }
+        let bounds = &mut self.bounds[..points.len()];
 
         // A valid lower point that was "below" an earlier landmark of this column.
         let mut witness: Option<usize> = None;
