@@ -31,6 +31,11 @@ use std::time::{Duration, Instant};
 /// map, or a burst, is not replayed whole to the clients.
 const NODES_PER_TICK: usize = 512;
 
+/// A grid's cells at most (2²², 8 MiB a message at two bytes a cell: 205 m square at 0.1 m);
+/// a larger map's cells are coarsened to fit. A client gets the grid every `map_every_ms`
+/// while the map changes: at the HTTP API's cap (2²⁴) that would be 32 MiB each time.
+const GRID_MAX_CELLS: usize = 1 << 22;
+
 /// A robot's channels.
 struct RobotChannels {
     pose: Channel<PoseInFrame>,
@@ -240,7 +245,14 @@ async fn publish_map(view: &Arc<FleetView>, now_ns: u64, fleet: &FleetChannels) 
         return;
     }
     let v = view.clone();
-    let made = tokio::task::spawn_blocking(move || v.grid(&slam::GridParams::default())).await;
+    // The HTTP grid's defaults, coarsened to fit GRID_MAX_CELLS: a larger site gets larger
+    // cells, not no grid.
+    let params = slam::GridParams {
+        coarsen_to_fit: true,
+        max_cells: GRID_MAX_CELLS,
+        ..slam::GridParams::default()
+    };
+    let made = tokio::task::spawn_blocking(move || v.grid(&params)).await;
     match made {
         Ok(Ok(g)) => fleet
             .grid

@@ -34,7 +34,11 @@ pub(super) async fn follow(url: String, stop: Arc<AtomicBool>) -> Result<Foxglov
         "Sec-WebSocket-Protocol",
         HeaderValue::from_static("foxglove.sdk.v1"),
     );
-    let (mut ws, _) = tokio_tungstenite::connect_async(request)
+    // A grid is one message of up to 8 MiB: no cap on a message's size (the library's is 16 MiB).
+    let config = tokio_tungstenite::tungstenite::protocol::WebSocketConfig::default()
+        .max_message_size(None)
+        .max_frame_size(None);
+    let (mut ws, _) = tokio_tungstenite::connect_async_with_config(request, Some(config), false)
         .await
         .with_context(|| format!("{url}: the Foxglove feed"))?;
     let mut got = FoxgloveClient::default();
