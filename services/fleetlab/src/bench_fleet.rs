@@ -76,6 +76,9 @@ pub struct BenchFleetArgs {
     /// any, `--foxglove` is implied); the report has what they received.
     #[arg(long, default_value_t = 0)]
     pub foxglove_clients: usize,
+    /// The Foxglove clients leave the grids out (every other channel still).
+    #[arg(long)]
+    pub foxglove_no_grid: bool,
 }
 
 /// Percentiles of a sample (named in ms, the unit of most uses).
@@ -240,7 +243,8 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
         Some(feed) => (0..args.foxglove_clients)
             .map(|_| {
                 let url = format!("ws://{}", feed.addr);
-                tokio::spawn(foxglove::follow(url, foxglove_stop.clone()))
+                let no_grid = args.foxglove_no_grid;
+                tokio::spawn(foxglove::follow(url, no_grid, foxglove_stop.clone()))
             })
             .collect(),
         None => Vec::new(),

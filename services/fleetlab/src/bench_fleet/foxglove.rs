@@ -27,8 +27,12 @@ pub(super) struct FoxgloveClient {
     by_schema: BTreeMap<String, u64>,
 }
 
-/// Follows the feed at `url` (ws://…) until `stop`.
-pub(super) async fn follow(url: String, stop: Arc<AtomicBool>) -> Result<FoxgloveClient> {
+/// Follows the feed at `url` (ws://…) until `stop`; without the grids when `no_grid`.
+pub(super) async fn follow(
+    url: String,
+    no_grid: bool,
+    stop: Arc<AtomicBool>,
+) -> Result<FoxgloveClient> {
     let mut request = url.as_str().into_client_request()?;
     request.headers_mut().insert(
         "Sec-WebSocket-Protocol",
@@ -58,6 +62,9 @@ pub(super) async fn follow(url: String, stop: Arc<AtomicBool>) -> Result<Foxglov
                 for channel in op["channels"].as_array().into_iter().flatten() {
                     let id = schemas.len() as u32 + 1;
                     let schema = channel["schemaName"].as_str().unwrap_or("").to_owned();
+                    if no_grid && schema == "foxglove.Grid" {
+                        continue;
+                    }
                     schemas.insert(id, schema);
                     let subscribe = serde_json::json!({
                         "op": "subscribe",
