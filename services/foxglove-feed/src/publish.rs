@@ -128,14 +128,13 @@ pub(crate) async fn publish(
             for robot in &view.robots {
                 let (pose, stamp_ns, _) = shared.robot_pose(view, robot);
                 let stamp_ns = if stamp_ns == 0 { now_ns } else { stamp_ns };
-                let frame = schemas::map_frame(&view.id);
+                let frame = || schemas::map_frame(&view.id);
                 let channel = &channels.robot(&view.id, &robot.id).pose;
                 if channel.has_sinks() {
-                    channel.log(&schemas::pose_in_frame(frame, &pose, stamp_ns));
+                    channel.log(&schemas::pose_in_frame(frame(), &pose, stamp_ns));
                 }
                 let child = schemas::robot_frame(&view.id, &robot.id);
-                let frame = schemas::map_frame(&view.id);
-                transforms.push(schemas::transform(frame, child, &pose, stamp_ns));
+                transforms.push(schemas::transform(frame(), child, &pose, stamp_ns));
             }
             // A fleet first seen (the mapper just started) is published from its next node.
             let len = view.nodes.len();

@@ -1,5 +1,6 @@
 //! What the HTTP side reads: per fleet, an immutable view replaced after every accepted node
-//! (readers never wait on the mapping), live odometry, counters and the event stream.
+//! (readers never wait on the mapping), live odometry, counters and the event stream; the
+//! nodes' clouds, which no view holds, through a read-only handle on the store ([`clouds`]).
 
 use fleetmap::{FleetMap, FleetView};
 use runtime::session::now_ns;
