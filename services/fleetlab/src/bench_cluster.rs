@@ -287,7 +287,7 @@ async fn drive(
             let stamp = epoch + started.elapsed().as_nanos() as u64;
             if node_turn == r as u64 % node_every && (k as usize) < nodes_per_robot {
                 let fleet = &sites[robot.site];
-                let node = robot_node(template, (fleet, &robot.name), k, east, stamp);
+                let node = robot_node(template, (fleet, &robot.name), (1, k), [east, 0.0], stamp);
                 sent.lock()
                     .expect("sent")
                     .insert((robot.name.clone(), k), Instant::now());

@@ -168,33 +168,35 @@ pub(crate) fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<Node>> {
         .collect()
 }
 
-/// Node `k` of a robot of `fleet` as sent: a pool node moved `east_m` east (odometry and
-/// GPS), renamed, restamped, encoded as an outbox keeps it with its send fields appended.
+/// Node `k` of chain `chain_id` of a robot of `fleet` as sent: a pool node moved by
+/// `offset_m` (east, north: odometry and GPS), renamed, restamped, encoded as an outbox keeps
+/// it with its send fields appended.
 pub(crate) fn robot_node(
     template: &Node,
     (fleet, robot): (&str, &str),
-    k: u64,
-    east_m: f64,
+    (chain_id, k): (u64, u64),
+    offset_m: [f64; 2],
     stamp_ns: u64,
 ) -> Vec<u8> {
     let mut node = template.clone().into_parts();
     node.fleet = fleet.to_owned();
     node.robot = robot.to_owned();
     node.node_seq = k;
-    // One chain per robot, from node 0: chain ids are per robot.
-    node.chain_id = 1;
+    node.chain_id = chain_id;
     // Every stamp moves by the same time: the fixes keep their own (earlier, increasing)
     // times relative to the scan's start.
     let shift = stamp_ns.saturating_sub(template.stamp_ns);
     node.stamp_ns += shift;
     node.scan.stamp_ns += shift;
     node.odometry.stamp_ns += shift;
-    node.odometry.pose.translation.x += east_m;
+    node.odometry.pose.translation.x += offset_m[0];
+    node.odometry.pose.translation.y += offset_m[1];
     let datum = sim::PARK_DATUM;
     for g in &mut node.gps {
         g.stamp_ns += shift;
         let mut enu = datum.geodetic_to_enu(&g.position);
-        enu.x += east_m;
+        enu.x += offset_m[0];
+        enu.y += offset_m[1];
         g.position = datum.enu_to_geodetic(&enu);
     }
     if k == 0 {
@@ -343,7 +345,8 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
             let stamp = epoch + started.elapsed().as_nanos() as u64;
             // Robots take turns within the node period, as real ones would not be in step.
             if node_turn == (r as u64 % node_every.max(1)) && (k as usize) < nodes_per_robot {
-                let node = robot_node(template, (FLEET, robot), k, east, stamp);
+                // One chain per robot, from node 0: chain ids are per robot.
+                let node = robot_node(template, (FLEET, robot), (1, k), [east, 0.0], stamp);
                 sent.lock()
                     .expect("sent")
                     .insert((robot.clone(), k), Instant::now());

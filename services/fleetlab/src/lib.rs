@@ -2,11 +2,13 @@
 //! loopback. [`demo`] runs edge services and scores the map against the simulator's ground
 //! truth, beside [`fixed2d`], the same run mapped from a fixed horizontal 2D scanner (the
 //! paper's baseline). [`bench_fleet`] loads one mapper with many robots and measures it from
-//! outside, through HTTP; [`bench_cluster`] does so for the cluster mode. The `levelmap` command line calls these (its `lab` feature); a
+//! outside, through HTTP; [`bench_cluster`] does so for the cluster mode; [`bench_growth`] grows
+//! one site to many nodes in compressed time and measures what grows with it. The `levelmap` command line calls these (its `lab` feature); a
 //! robot's build has none of it.
 
 pub mod bench_cluster;
 pub mod bench_fleet;
+pub mod bench_growth;
 pub mod bench_incremental;
 pub mod demo;
 pub mod fixed2d;
@@ -16,6 +18,7 @@ pub mod map_score;
 
 pub use bench_cluster::BenchClusterArgs;
 pub use bench_fleet::BenchFleetArgs;
+pub use bench_growth::BenchGrowthArgs;
 pub use bench_incremental::BenchIncrementalArgs;
 pub use demo::DemoArgs;
 pub use localize_demo::LocalizeDemoArgs;

@@ -7,6 +7,7 @@
 //! front ([`front`]) on the configured address, and the SDK's server on a loopback port
 //! behind it: a connection passes only with the read or write token.
 
+mod background;
 pub mod convert;
 pub mod front;
 mod publish;
@@ -81,7 +82,14 @@ pub async fn start(
         false => (sdk_addr, None),
     };
     let channels = publish::Channels::new(context);
-    let publisher = tokio::spawn(publish::publish(config.clone(), shared, clouds, channels));
+    let background = background::Background::start().context("the foxglove thread")?;
+    let publisher = tokio::spawn(publish::publish(
+        config.clone(),
+        shared,
+        clouds,
+        channels,
+        background,
+    ));
     let guard = if guarded {
         ", the read token needed"
     } else {

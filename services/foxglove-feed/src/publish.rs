@@ -11,8 +11,10 @@
 //! | `/{fleet}/graph` | `foxglove.SceneUpdate` (the pose graph's edges) | as the grid |
 //!
 //! Nothing is made for a channel no client subscribes to: a grid is made from every node's
-//! scan (off the async threads) and a cloud is a store read (likewise).
+//! scan and a cloud is a store read, both on the feed's background thread (the lowest CPU
+//! priority: [`crate::background`]).
 
+use crate::background::Background;
 use crate::convert;
 use fleetmap::FleetView;
 use foxglove::messages::{FrameTransforms, Grid, LaserScan, LocationFix, PointCloud};
@@ -113,6 +115,7 @@ pub(crate) async fn publish(
     shared: Arc<Shared>,
     clouds: Clouds,
     mut channels: Channels,
+    background: Background,
 ) {
     let mut tick = tokio::time::interval(Duration::from_millis(config.poses_every_ms.max(10)));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -158,7 +161,7 @@ pub(crate) async fn publish(
                 updated != view.updated_ns && at.elapsed() >= map_every
             });
             if due {
-                publish_map(view, now_ns, channels.fleet(&view.id)).await;
+                publish_map(view, now_ns, channels.fleet(&view.id), &background).await;
                 fleet_sent.map = Some((view.updated_ns, Instant::now()));
             }
         }
@@ -166,7 +169,7 @@ pub(crate) async fn publish(
             channels.tf.log(&FrameTransforms { transforms });
         }
         if !wanted.is_empty() {
-            publish_clouds(&clouds, wanted, &mut channels).await;
+            publish_clouds(&clouds, wanted, &mut channels, &background).await;
         }
     }
 }
@@ -206,37 +209,48 @@ fn publish_nodes(
     wanted
 }
 
-/// Reads the wanted clouds from the store (off the async threads) and publishes them.
-async fn publish_clouds(clouds: &Clouds, wanted: Vec<CloudWanted>, channels: &mut Channels) {
+/// Reads the wanted clouds from the store (on the background thread) and publishes them.
+async fn publish_clouds(
+    clouds: &Clouds,
+    wanted: Vec<CloudWanted>,
+    channels: &mut Channels,
+    background: &Background,
+) {
     let clouds = clouds.clone();
-    let read = tokio::task::spawn_blocking(move || {
-        let mut made = Vec::new();
-        for (fleet, robot, node, pose, stamp_ns) in wanted {
-            match clouds.get(&fleet, node as u64) {
-                Ok(Some(cloud)) => {
-                    let frame = schemas::map_frame(&fleet);
-                    let msg = schemas::point_cloud(frame, &pose, &cloud, stamp_ns);
-                    made.push((fleet, robot, msg));
+    let read = background
+        .run(move || {
+            let mut made = Vec::new();
+            for (fleet, robot, node, pose, stamp_ns) in wanted {
+                match clouds.get(&fleet, node as u64) {
+                    Ok(Some(cloud)) => {
+                        let frame = schemas::map_frame(&fleet);
+                        let msg = schemas::point_cloud(frame, &pose, &cloud, stamp_ns);
+                        made.push((fleet, robot, msg));
+                    }
+                    Ok(None) => {}
+                    Err(e) => tracing::debug!(fleet, node, "foxglove: no cloud: {e:#}"),
                 }
-                Ok(None) => {}
-                Err(e) => tracing::debug!(fleet, node, "foxglove: no cloud: {e:#}"),
             }
-        }
-        made
-    })
-    .await;
+            made
+        })
+        .await;
     match read {
-        Ok(made) => {
+        Some(made) => {
             for (fleet, robot, msg) in made {
                 channels.robot(&fleet, &robot).cloud.log(&msg);
             }
         }
-        Err(e) => tracing::warn!("foxglove: reading clouds failed: {e}"),
+        None => tracing::warn!("foxglove: the background thread read no clouds"),
     }
 }
 
 /// Publishes a fleet's graph and grid to whichever a client subscribes to.
-async fn publish_map(view: &Arc<FleetView>, now_ns: u64, fleet: &FleetChannels) {
+async fn publish_map(
+    view: &Arc<FleetView>,
+    now_ns: u64,
+    fleet: &FleetChannels,
+    background: &Background,
+) {
     if fleet.graph.has_sinks() {
         fleet.graph.log(&convert::graph(view, now_ns));
     }
@@ -251,12 +265,18 @@ async fn publish_map(view: &Arc<FleetView>, now_ns: u64, fleet: &FleetChannels) 
         max_cells: GRID_MAX_CELLS,
         ..slam::GridParams::default()
     };
-    let made = tokio::task::spawn_blocking(move || v.grid(&params)).await;
+    let made = background
+        .run(move || {
+            let g = v.grid(&params)?;
+            Ok::<_, slam::GridError>(schemas::grid(schemas::map_frame(&v.id), &g, now_ns))
+        })
+        .await;
     match made {
-        Ok(Ok(g)) => fleet
-            .grid
-            .log(&schemas::grid(schemas::map_frame(&view.id), &g, now_ns)),
-        Ok(Err(e)) => tracing::debug!(fleet = view.id, "foxglove: no grid: {e}"),
-        Err(e) => tracing::warn!(fleet = view.id, "foxglove: the grid failed: {e}"),
+        Some(Ok(grid)) => fleet.grid.log(&grid),
+        Some(Err(e)) => tracing::debug!(fleet = view.id, "foxglove: no grid: {e}"),
+        None => tracing::warn!(
+            fleet = view.id,
+            "foxglove: the background thread made no grid"
+        ),
     }
 }

@@ -49,6 +49,8 @@ enum Command {
     #[cfg(feature = "lab")]
     BenchFleet(fleetlab::BenchFleetArgs),
     #[cfg(feature = "lab")]
+    BenchGrowth(fleetlab::BenchGrowthArgs),
+    #[cfg(feature = "lab")]
     BenchIncremental(fleetlab::BenchIncrementalArgs),
     #[cfg(feature = "lab")]
     Demo(fleetlab::DemoArgs),
@@ -89,6 +91,8 @@ fn main() -> ExitCode {
         Command::BenchCluster(args) => fleetlab::bench_cluster::run(&args),
         #[cfg(feature = "lab")]
         Command::BenchFleet(args) => fleetlab::bench_fleet::run(&args),
+        #[cfg(feature = "lab")]
+        Command::BenchGrowth(args) => fleetlab::bench_growth::run(&args),
         #[cfg(feature = "lab")]
         Command::BenchIncremental(args) => fleetlab::bench_incremental::run(&args),
         #[cfg(feature = "lab")]

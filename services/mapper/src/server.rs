@@ -49,6 +49,15 @@ impl Running {
             .map_err(|e| anyhow::anyhow!("optimizing fleet {fleet}: {e}"))
     }
 
+    /// Hands a node to the worker as the bus would (`key` its Zenoh key, `payload` its bytes
+    /// as sent), waiting while the worker's queue is full: a bench driving the mapper in
+    /// compressed time waits, as a file's feed does. Errs once the worker has stopped.
+    pub fn feed_node(&self, key: &str, payload: Vec<u8>) -> Result<()> {
+        self.work
+            .send(Work::node(key, payload))
+            .map_err(|_| anyhow::anyhow!("the mapping worker has stopped"))
+    }
+
     /// Feeds the recording at `path` to the worker ([`crate::bus::recording`]) and waits until it
     /// has mapped it, solving where the recorded mapper solved and after the last node.
     pub async fn feed_recording(&self, path: &std::path::Path) -> Result<FeedReport> {

@@ -139,12 +139,8 @@ impl Solving {
 /// The solver thread yields to the mapping thread and the network when the cores are busy:
 /// nodes are shown and acked first, the whole network is solved with the time left.
 fn lower_priority() {
-    #[cfg(target_os = "linux")]
-    {
-        let thread = rustix::thread::gettid();
-        if let Err(e) = rustix::process::setpriority_process(Some(thread), SOLVER_NICE) {
-            tracing::warn!("the solver thread keeps its priority: {e}");
-        }
+    if let Err(e) = runtime::priority::lower_this_thread(SOLVER_NICE) {
+        tracing::warn!("the solver thread keeps its priority: {e}");
     }
 }
 

@@ -1,0 +1,348 @@
+//! `levelmap bench-growth`: one site grown to many nodes in compressed time, through the
+//! mapper's own write path (nodes handed to its worker as the bus hands them, as fast as it
+//! takes them; matching, the store's commits, the background solves as in service), and
+//! measured at each size: the store's size and its restore time, the process's resident
+//! memory per node, a whole-network solve, a node's time to be mapped, a map request.
+//!
+//! The robots drive laps of the park's three loops, each lap on new ground: a copy of the
+//! park on a lattice 500 m apart (east, then north), as a new chain of the robot (an outbox
+//! started again, placed by its GPS fixes). On the same paths again the mapper would pass
+//! over its nodes and not add any (docs/services.md, "Bounded growth"): the nodes of a site
+//! grow with the ground covered, and this bench covers new ground to grow them.
+
+use crate::FLEET;
+use crate::bench_fleet::{Percentiles, agent, node_pool, robot_node};
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use wire::Node;
+
+/// Grow one site to each of `--sizes` nodes and measure the mapper there.
+#[derive(Args, Debug)]
+pub struct BenchGrowthArgs {
+    /// Site sizes (nodes) at which it measures, ascending.
+    #[arg(long, value_delimiter = ',', default_value = "10000,100000,1000000")]
+    pub sizes: Vec<usize>,
+    /// Robots driving, their nodes dealt in turn.
+    #[arg(long, default_value_t = 20)]
+    pub robots: usize,
+    /// Nodes at each size handed over one at a time and waited for (the time to be mapped,
+    /// with no queue before it).
+    #[arg(long, default_value_t = 200)]
+    pub sample: usize,
+    /// Folder for the mapper's store (new, empty or an earlier run's, emptied at start; any
+    /// other is refused).
+    #[arg(long, default_value = "levelmap-bench-growth")]
+    pub dir: PathBuf,
+    /// The mapper's Zenoh endpoint.
+    #[arg(long, default_value = "tcp/127.0.0.1:7449")]
+    pub zenoh: String,
+    /// Print one JSON object of figures.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The figures at one size.
+#[derive(Serialize)]
+struct AtSize {
+    /// Nodes handed to the mapper so far.
+    fed: usize,
+    /// Of them, in the map (the rest passed over covered ground: not kept).
+    nodes: usize,
+    passed: u64,
+    /// Nodes handed over per second of the run up to here (compressed time).
+    fed_per_s: f64,
+    store_bytes: u64,
+    store_bytes_per_node: f64,
+    /// From a new mapper's start on the store to its serving the map.
+    restore_ms: f64,
+    /// The process's resident memory after the restore (Linux `VmRSS`).
+    resident_bytes: u64,
+    resident_bytes_per_node: f64,
+    /// A whole-network solve asked for now (`POST …/optimize`'s work).
+    solve_ms: f64,
+    /// Each sampled node, from its handing over to its being in the map's view.
+    node_to_view: Percentiles,
+    /// `GET …/map.png?max_cells=2^22`: the whole site, its cells coarsened to fit.
+    map_png_ms: f64,
+    map_png_status: u16,
+    map_png_bytes: usize,
+}
+
+#[derive(Serialize)]
+struct Report {
+    robots: usize,
+    pool_nodes_per_loop: Vec<usize>,
+    sizes: Vec<AtSize>,
+}
+
+/// Copies of the park along a lattice row before the next row starts.
+const LATTICE_COLUMNS: u64 = 32;
+/// The lattice's spacing (m): the park's loops fit in 500 m.
+const LATTICE_M: f64 = 500.0;
+
+/// A robot: its name, where along its loop's pool it starts, its lap and its node in it.
+struct Robot {
+    name: String,
+    offset: usize,
+    lap: u64,
+    k: u64,
+    sent: u64,
+}
+
+/// The robots, their nodes dealt in turn.
+struct Fleet {
+    pool: Vec<Vec<Node>>,
+    robots: Vec<Robot>,
+    next: usize,
+    started_ns: u64,
+}
+
+impl Fleet {
+    fn new(pool: Vec<Vec<Node>>, robots: usize) -> Fleet {
+        let robots = (0..robots)
+            .map(|r| Robot {
+                name: format!("r{r}"),
+                // Spread along the loop: robot r starts at the r-th share of its pool.
+                offset: r * pool[r % pool.len()].len() / robots,
+                lap: 0,
+                k: 0,
+                sent: 0,
+            })
+            .collect();
+        Fleet {
+            pool,
+            robots,
+            next: 0,
+            started_ns: runtime::session::now_ns(),
+        }
+    }
+
+    /// The next node of the next robot: its key and bytes as sent.
+    fn next_node(&mut self) -> Result<(String, Vec<u8>)> {
+        let r = self.next;
+        let count = self.robots.len();
+        self.next = (r + 1) % count;
+        let loop_nodes = &self.pool[r % self.pool.len()];
+        let robot = &mut self.robots[r];
+        if robot.k as usize == loop_nodes.len() {
+            (robot.lap, robot.k) = (robot.lap + 1, 0);
+        }
+        let template = &loop_nodes[(robot.offset + robot.k as usize) % loop_nodes.len()];
+        let copy = robot.lap * count as u64 + r as u64;
+        let offset_m = [
+            (copy % LATTICE_COLUMNS) as f64 * LATTICE_M,
+            (copy / LATTICE_COLUMNS) as f64 * LATTICE_M,
+        ];
+        // A node a second per robot, in compressed time.
+        let stamp_ns = self.started_ns + robot.sent * 1_000_000_000;
+        let chain = (robot.lap + 1, robot.k);
+        let payload = robot_node(template, (FLEET, &robot.name), chain, offset_m, stamp_ns);
+        robot.k += 1;
+        robot.sent += 1;
+        Ok((wire::node_key(FLEET, &robot.name)?, payload))
+    }
+}
+
+/// The nodes of each loop for one lap: from the start until the robot is back within 1 m of
+/// it, heading the same way within 30°, having driven 100 m (a loop may cross itself), so
+/// that a pool's end meets its start.
+fn lap_pool() -> Result<Vec<Vec<Node>>> {
+    node_pool(LAP_NODES_MAX, false)
+        .into_iter()
+        .enumerate()
+        .map(|(loop_index, nodes)| {
+            let start = nodes[0].odometry.pose;
+            let mut driven = 0.0;
+            for (i, pair) in nodes.windows(2).enumerate() {
+                let (a, b) = (pair[0].odometry.pose, pair[1].odometry.pose);
+                driven += (b.translation.vector - a.translation.vector).norm();
+                let back = (b.translation.vector - start.translation.vector).norm() < 1.0
+                    && b.rotation.angle_to(&start.rotation) < 30f64.to_radians();
+                if driven > 100.0 && back {
+                    return Ok(nodes[..=i].to_vec());
+                }
+            }
+            bail!("loop {loop_index}: no lap within {LAP_NODES_MAX} nodes")
+        })
+        .collect()
+}
+
+/// A lap's nodes at most (the park's longest loop has fewer).
+const LAP_NODES_MAX: usize = 1500;
+
+/// Runs the bench and prints its figures.
+pub fn run(args: &BenchGrowthArgs) -> Result<()> {
+    if args.sizes.is_empty() || args.sizes.windows(2).any(|w| w[0] >= w[1]) {
+        bail!("--sizes must be ascending");
+    }
+    if args.robots == 0 {
+        bail!("--robots must be at least 1");
+    }
+    crate::runtime()?.block_on(run_async(args))
+}
+
+async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
+    eprintln!("bench-growth: simulating a lap of each of the park's loops…");
+    let pool = tokio::task::spawn_blocking(lap_pool).await??;
+    let pool_nodes_per_loop: Vec<usize> = pool.iter().map(Vec::len).collect();
+    eprintln!("bench-growth: laps of {pool_nodes_per_loop:?} nodes");
+    let config = crate::park_mapper_config(&args.dir, "127.0.0.1:0", &args.zenoh)?;
+    let mut mapper = mapper::start(config.clone()).await?;
+    let mut fleet = Fleet::new(pool, args.robots);
+    let (mut fed, started) = (0usize, Instant::now());
+    let mut sizes = Vec::new();
+    for &size in &args.sizes {
+        let bulk = size.saturating_sub(args.sample);
+        while fed < bulk {
+            let (key, payload) = fleet.next_node()?;
+            tokio::task::block_in_place(|| mapper.feed_node(&key, payload))?;
+            fed += 1;
+            if fed % 10_000 == 0 {
+                eprintln!(
+                    "bench-growth: {fed} nodes fed, {:.0} s",
+                    started.elapsed().as_secs_f64()
+                );
+            }
+        }
+        let fed_per_s = fed as f64 / started.elapsed().as_secs_f64();
+        let node_to_view = sample_nodes(&mapper, &mut fleet, size - fed).await?;
+        fed = size;
+        let nodes = mapped_nodes(&mapper);
+        let passed = mapper
+            .shared
+            .metrics
+            .nodes_passed
+            .load(std::sync::atomic::Ordering::Relaxed);
+        let solve_started = Instant::now();
+        mapper.optimize(FLEET).await?;
+        let solve_ms = ms(solve_started);
+        let (map_png_ms, map_png_status, map_png_bytes) = map_png(&mapper.http_addr).await?;
+        let store_bytes = std::fs::metadata(&config.store_path)
+            .with_context(|| format!("{}", config.store_path.display()))?
+            .len();
+        mapper.stop().await?;
+        let restore_started = Instant::now();
+        mapper = mapper::start(config.clone()).await?;
+        let restore_ms = ms(restore_started);
+        let resident_bytes = resident_bytes()?;
+        let at = AtSize {
+            fed,
+            nodes,
+            passed,
+            fed_per_s,
+            store_bytes,
+            store_bytes_per_node: store_bytes as f64 / nodes.max(1) as f64,
+            restore_ms,
+            resident_bytes,
+            resident_bytes_per_node: resident_bytes as f64 / nodes.max(1) as f64,
+            solve_ms,
+            node_to_view,
+            map_png_ms,
+            map_png_status,
+            map_png_bytes,
+        };
+        eprintln!(
+            "bench-growth: {nodes} nodes: store {:.0} B/node, restore {restore_ms:.0} ms, \
+             {:.0} B resident/node, solve {solve_ms:.0} ms, node p99 {:.1} ms, map.png {map_png_ms:.0} ms",
+            at.store_bytes_per_node, at.resident_bytes_per_node, at.node_to_view.p99_ms
+        );
+        sizes.push(at);
+    }
+    mapper.stop().await?;
+    let report = Report {
+        robots: args.robots,
+        pool_nodes_per_loop,
+        sizes,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        for s in &report.sizes {
+            println!(
+                "{:>9} nodes  store {:>7.0} B/node  restore {:>8.0} ms  resident {:>6.0} B/node  \
+                 solve {:>8.0} ms  node p50/p99 {:.1}/{:.1} ms  map.png {:.0} ms ({})",
+                s.nodes,
+                s.store_bytes_per_node,
+                s.restore_ms,
+                s.resident_bytes_per_node,
+                s.solve_ms,
+                s.node_to_view.p50_ms,
+                s.node_to_view.p99_ms,
+                s.map_png_ms,
+                s.map_png_status
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The fleet's nodes in the mapper's view.
+fn mapped_nodes(mapper: &mapper::Running) -> usize {
+    mapper.shared.fleet(FLEET).map_or(0, |v| v.nodes.len())
+}
+
+/// Hands over `count` nodes one at a time, each waited for until the view holds it.
+async fn sample_nodes(
+    mapper: &mapper::Running,
+    fleet: &mut Fleet,
+    count: usize,
+) -> Result<Percentiles> {
+    let mut times = Vec::with_capacity(count);
+    for _ in 0..count {
+        let before = mapped_nodes(mapper);
+        let (key, payload) = fleet.next_node()?;
+        let t0 = Instant::now();
+        mapper.feed_node(&key, payload)?;
+        // A node the map does not take (a pass over covered ground) shows only as a count.
+        let passed = || {
+            mapper
+                .shared
+                .metrics
+                .nodes_passed
+                .load(std::sync::atomic::Ordering::Relaxed)
+        };
+        let passed_before = passed();
+        while mapped_nodes(mapper) == before && passed() == passed_before {
+            if t0.elapsed() > Duration::from_secs(60) {
+                bail!("a node was not mapped within 60 s");
+            }
+            tokio::time::sleep(Duration::from_micros(100)).await;
+        }
+        times.push(ms(t0));
+    }
+    Ok(Percentiles::of(times))
+}
+
+/// Cells of the map asked for: as the Foxglove feed's grid.
+const MAP_CELLS: usize = 1 << 22;
+
+/// `GET …/map.png` of the whole site in [`MAP_CELLS`] cells: time, status, bytes.
+async fn map_png(http: &std::net::SocketAddr) -> Result<(f64, u16, usize)> {
+    let url = format!("http://{http}/api/v1/fleets/{FLEET}/map.png?max_cells={MAP_CELLS}");
+    tokio::task::spawn_blocking(move || {
+        let t0 = Instant::now();
+        let response = agent().get(&url).call()?;
+        let status = response.status().as_u16();
+        let bytes = response.into_body().read_to_vec()?.len();
+        Ok((ms(t0), status, bytes))
+    })
+    .await?
+}
+
+/// The process's resident memory (Linux `/proc/self/status` `VmRSS`).
+fn resident_bytes() -> Result<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").context("/proc/self/status")?;
+    let kb = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        .context("no VmRSS in /proc/self/status")?;
+    Ok(kb * 1024)
+}
+
+fn ms(t0: Instant) -> f64 {
+    t0.elapsed().as_secs_f64() * 1e3
+}
