@@ -211,11 +211,7 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
         let node_to_view = sample_nodes(&mapper, &mut fleet, size - fed).await?;
         fed = size;
         let nodes = mapped_nodes(&mapper);
-        let passed = mapper
-            .shared
-            .metrics
-            .nodes_passed
-            .load(std::sync::atomic::Ordering::Relaxed);
+        let passed = passed_nodes(&mapper);
         let solve_started = Instant::now();
         mapper.optimize(FLEET).await?;
         let solve_ms = ms(solve_started);
@@ -284,6 +280,12 @@ fn mapped_nodes(mapper: &mapper::Running) -> usize {
     mapper.shared.fleet(FLEET).map_or(0, |v| v.nodes.len())
 }
 
+/// The nodes the mapper passed over covered ground (taken, not kept).
+fn passed_nodes(mapper: &mapper::Running) -> u64 {
+    let passed = &mapper.shared.metrics.nodes_passed;
+    passed.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// Hands over `count` nodes one at a time, each waited for until the view holds it.
 async fn sample_nodes(
     mapper: &mapper::Running,
@@ -292,20 +294,13 @@ async fn sample_nodes(
 ) -> Result<Percentiles> {
     let mut times = Vec::with_capacity(count);
     for _ in 0..count {
-        let before = mapped_nodes(mapper);
+        // A node the map does not take (a pass over covered ground) shows only as a count;
+        // both read before the node is handed over, which the worker may take at once.
+        let (before, passed_before) = (mapped_nodes(mapper), passed_nodes(mapper));
         let (key, payload) = fleet.next_node()?;
         let t0 = Instant::now();
         mapper.feed_node(&key, payload)?;
-        // A node the map does not take (a pass over covered ground) shows only as a count.
-        let passed = || {
-            mapper
-                .shared
-                .metrics
-                .nodes_passed
-                .load(std::sync::atomic::Ordering::Relaxed)
-        };
-        let passed_before = passed();
-        while mapped_nodes(mapper) == before && passed() == passed_before {
+        while mapped_nodes(mapper) == before && passed_nodes(mapper) == passed_before {
             if t0.elapsed() > Duration::from_secs(60) {
                 bail!("a node was not mapped within 60 s");
             }
