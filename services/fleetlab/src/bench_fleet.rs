@@ -248,7 +248,7 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
             .map(|_| {
                 let url = format!("ws://{}", feed.addr);
                 let no_grid = args.foxglove_no_grid;
-                tokio::spawn(foxglove::follow(url, no_grid, foxglove_stop.clone()))
+                foxglove::start(url, no_grid, foxglove_stop.clone())
             })
             .collect(),
         None => Vec::new(),
@@ -385,7 +385,10 @@ async fn run_async(args: &BenchFleetArgs) -> Result<()> {
     foxglove_stop.store(true, Ordering::SeqCst);
     let mut foxglove_got = Vec::new();
     for c in foxglove_clients {
-        foxglove_got.push(c.await??);
+        foxglove_got.push(
+            c.join()
+                .map_err(|_| anyhow::anyhow!("Foxglove client thread"))??,
+        );
     }
     let windows = (args.live_clients > 0).then(|| live::query_windows(&http, args.robots));
     let mut query_ms = Vec::new();

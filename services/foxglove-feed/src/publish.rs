@@ -7,11 +7,11 @@
 //! | `/{fleet}/robots/{robot}/scan` | `foxglove.LaserScan` (the node's leveled scan at its pose) | each new node |
 //! | `/{fleet}/robots/{robot}/cloud` | `foxglove.PointCloud` (the node's 3D cloud, from the store) | each new node that has one |
 //! | `/{fleet}/robots/{robot}/gps` | `foxglove.LocationFix` (the node's fixes) | each new node's fixes |
-//! | `/{fleet}/grid` | `foxglove.Grid` (occupancy per cent, INT8) | the map changed, at most every `map_every_ms` |
+//! | `/{fleet}/grid` | `foxglove.Grid` (occupancy per cent, INT8) | the map changed, at most every `map_every_ms` and ten times its making's time |
 //! | `/{fleet}/graph` | `foxglove.SceneUpdate` (the pose graph's edges) | as the grid |
 //!
 //! Nothing is made for a channel no client subscribes to: a grid is made from every node's
-//! scan and a cloud is a store read, both on the feed's background thread (the lowest CPU
+//! scan and a cloud is a store read, all on the feed's background thread (the lowest CPU
 //! priority: [`crate::background`]).
 
 use crate::background::Background;
@@ -38,6 +38,12 @@ const NODES_PER_TICK: usize = 512;
 /// while the map changes: at the HTTP API's cap (2²⁴) that would be 32 MiB each time.
 const GRID_MAX_CELLS: usize = 1 << 22;
 
+/// A fleet's next map waits at least this many times as long as its last one took to make
+/// (wall time on the background thread, its waits for a core included): the live map takes
+/// at most about a tenth of a core, and less the busier the cores are, whatever the site's
+/// size. A small site's map takes milliseconds and comes every `map_every_ms`.
+const MAP_WAIT_PER_MAKING: u32 = 10;
+
 /// A robot's channels.
 struct RobotChannels {
     pose: Channel<PoseInFrame>,
@@ -56,8 +62,8 @@ struct FleetChannels {
 pub(crate) struct Channels {
     context: Arc<Context>,
     tf: Channel<FrameTransforms>,
-    robots: HashMap<(String, String), RobotChannels>,
-    fleets: HashMap<String, FleetChannels>,
+    robots: HashMap<(String, String), Arc<RobotChannels>>,
+    fleets: HashMap<String, Arc<FleetChannels>>,
 }
 
 impl Channels {
@@ -71,42 +77,65 @@ impl Channels {
         }
     }
 
-    fn robot(&mut self, fleet: &str, robot: &str) -> &RobotChannels {
+    fn robot(&mut self, fleet: &str, robot: &str) -> &Arc<RobotChannels> {
         let context = &self.context;
         self.robots
             .entry((fleet.to_owned(), robot.to_owned()))
             .or_insert_with(|| {
                 let topic = |what: &str| format!("/{fleet}/robots/{robot}/{what}");
-                RobotChannels {
+                Arc::new(RobotChannels {
                     pose: ChannelBuilder::new(topic("pose")).context(context).build(),
                     scan: ChannelBuilder::new(topic("scan")).context(context).build(),
                     cloud: ChannelBuilder::new(topic("cloud")).context(context).build(),
                     gps: ChannelBuilder::new(topic("gps")).context(context).build(),
-                }
+                })
             })
     }
 
-    fn fleet(&mut self, fleet: &str) -> &FleetChannels {
+    fn fleet(&mut self, fleet: &str) -> &Arc<FleetChannels> {
         let context = &self.context;
         self.fleets.entry(fleet.to_owned()).or_insert_with(|| {
             let topic = |what: &str| format!("/{fleet}/{what}");
-            FleetChannels {
+            Arc::new(FleetChannels {
                 grid: ChannelBuilder::new(topic("grid")).context(context).build(),
                 graph: ChannelBuilder::new(topic("graph")).context(context).build(),
-            }
+            })
         })
     }
 }
 
-/// What was last sent of a fleet: its view's time and when (its map), and how many of its
-/// nodes.
+/// What was last sent of a fleet: its map (the view's time, and when the next may come),
+/// the map being made (when it started, and its end to come), and how many of its nodes.
 struct Sent {
     map: Option<(u64, Instant)>,
+    making: Option<(Instant, tokio::sync::oneshot::Receiver<Instant>)>,
     nodes: usize,
 }
 
-/// A new node's cloud to read: fleet, robot, node, its pose, its time.
-type CloudWanted = (String, String, usize, Pose2, u64);
+impl Sent {
+    /// Whether no map is being made: a map that was, and is done now, sets when the next may
+    /// come.
+    fn map_made(&mut self, map_every: Duration) -> bool {
+        let Some((started, making)) = &mut self.making else {
+            return true;
+        };
+        let finished = match making.try_recv() {
+            Ok(finished) => finished,
+            Err(tokio::sync::oneshot::error::TryRecvError::Empty) => return false,
+            // The job was dropped (the thread is gone): counted as taking until now.
+            Err(tokio::sync::oneshot::error::TryRecvError::Closed) => Instant::now(),
+        };
+        let wait = map_every.max((finished - *started) * MAP_WAIT_PER_MAKING);
+        if let Some((_, next)) = &mut self.map {
+            *next = *started + wait;
+        }
+        self.making = None;
+        true
+    }
+}
+
+/// A new node's cloud to read: its robot's channels, fleet, node, its pose, its time.
+type CloudWanted = (Arc<RobotChannels>, String, usize, Pose2, u64);
 
 /// Publishes every fleet's robots each `poses_every_ms`, their new nodes, and its map when
 /// it changed (at most each `map_every_ms`, and only while a client subscribes).
@@ -143,6 +172,7 @@ pub(crate) async fn publish(
             let len = view.nodes.len();
             let fleet_sent = sent.entry(view.id.clone()).or_insert(Sent {
                 map: None,
+                making: None,
                 nodes: len,
             });
             let from = fleet_sent.nodes.max(len.saturating_sub(NODES_PER_TICK));
@@ -157,19 +187,25 @@ pub(crate) async fn publish(
                 fleet_sent.map = None;
                 continue;
             }
-            let due = fleet_sent.map.is_none_or(|(updated, at)| {
-                updated != view.updated_ns && at.elapsed() >= map_every
-            });
+            let due = fleet_sent.map_made(map_every)
+                && fleet_sent.map.is_none_or(|(updated, next)| {
+                    updated != view.updated_ns && Instant::now() >= next
+                });
             if due {
-                publish_map(view, now_ns, channels.fleet(&view.id), &background).await;
-                fleet_sent.map = Some((view.updated_ns, Instant::now()));
+                let started = Instant::now();
+                let fleet = channels.fleet(&view.id).clone();
+                if let Some(making) = publish_map(view, now_ns, fleet, &background) {
+                    fleet_sent.making = Some((started, making));
+                }
+                // The next when this one is made (`map_made`).
+                fleet_sent.map = Some((view.updated_ns, started + map_every));
             }
         }
         if !transforms.is_empty() {
             channels.tf.log(&FrameTransforms { transforms });
         }
         if !wanted.is_empty() {
-            publish_clouds(&clouds, wanted, &mut channels, &background).await;
+            publish_clouds(&clouds, wanted, &background);
         }
     }
 }
@@ -203,60 +239,50 @@ fn publish_nodes(
             }
         }
         if robot_channels.cloud.has_sinks() {
-            wanted.push((view.id.clone(), robot.id.clone(), i, *pose, node.stamp_ns));
+            wanted.push((
+                robot_channels.clone(),
+                view.id.clone(),
+                i,
+                *pose,
+                node.stamp_ns,
+            ));
         }
     }
     wanted
 }
 
-/// Reads the wanted clouds from the store (on the background thread) and publishes them.
-async fn publish_clouds(
-    clouds: &Clouds,
-    wanted: Vec<CloudWanted>,
-    channels: &mut Channels,
-    background: &Background,
-) {
+/// Reads the wanted clouds from the store and publishes them, on the background thread.
+fn publish_clouds(clouds: &Clouds, wanted: Vec<CloudWanted>, background: &Background) {
     let clouds = clouds.clone();
-    let read = background
-        .run(move || {
-            let mut made = Vec::new();
-            for (fleet, robot, node, pose, stamp_ns) in wanted {
-                match clouds.get(&fleet, node as u64) {
-                    Ok(Some(cloud)) => {
-                        let frame = schemas::map_frame(&fleet);
-                        let msg = schemas::point_cloud(frame, &pose, &cloud, stamp_ns);
-                        made.push((fleet, robot, msg));
-                    }
-                    Ok(None) => {}
-                    Err(e) => tracing::debug!(fleet, node, "foxglove: no cloud: {e:#}"),
+    let count = wanted.len();
+    let handed = background.spawn(move || {
+        for (channels, fleet, node, pose, stamp_ns) in wanted {
+            match clouds.get(&fleet, node as u64) {
+                Ok(Some(cloud)) => {
+                    let frame = schemas::map_frame(&fleet);
+                    channels
+                        .cloud
+                        .log(&schemas::point_cloud(frame, &pose, &cloud, stamp_ns));
                 }
-            }
-            made
-        })
-        .await;
-    match read {
-        Some(made) => {
-            for (fleet, robot, msg) in made {
-                channels.robot(&fleet, &robot).cloud.log(&msg);
+                Ok(None) => {}
+                Err(e) => tracing::debug!(fleet, node, "foxglove: no cloud: {e:#}"),
             }
         }
-        None => tracing::warn!("foxglove: the background thread read no clouds"),
+    });
+    if handed.is_none() {
+        tracing::warn!("foxglove: the background thread is behind: {count} clouds not sent");
     }
 }
 
-/// Publishes a fleet's graph and grid to whichever a client subscribes to.
-async fn publish_map(
+/// Makes and publishes a fleet's graph and grid, to whichever a client subscribes to, on the
+/// background thread: when they are done comes on the receiver. None when the thread is
+/// behind (no map this time).
+fn publish_map(
     view: &Arc<FleetView>,
     now_ns: u64,
-    fleet: &FleetChannels,
+    fleet: Arc<FleetChannels>,
     background: &Background,
-) {
-    if fleet.graph.has_sinks() {
-        fleet.graph.log(&convert::graph(view, now_ns));
-    }
-    if !fleet.grid.has_sinks() {
-        return;
-    }
+) -> Option<tokio::sync::oneshot::Receiver<Instant>> {
     let v = view.clone();
     // The HTTP grid's defaults, coarsened to fit GRID_MAX_CELLS: a larger site gets larger
     // cells, not no grid.
@@ -265,18 +291,26 @@ async fn publish_map(
         max_cells: GRID_MAX_CELLS,
         ..slam::GridParams::default()
     };
-    let made = background
-        .run(move || {
-            let g = v.grid(&params)?;
-            Ok::<_, slam::GridError>(schemas::grid(schemas::map_frame(&v.id), &g, now_ns))
-        })
-        .await;
-    match made {
-        Some(Ok(grid)) => fleet.grid.log(&grid),
-        Some(Err(e)) => tracing::debug!(fleet = view.id, "foxglove: no grid: {e}"),
-        None => tracing::warn!(
+    let handed = background.spawn(move || {
+        if fleet.graph.has_sinks() {
+            fleet.graph.log(&convert::graph(&v, now_ns));
+        }
+        if fleet.grid.has_sinks() {
+            let grid = v
+                .grid(&params)
+                .map(|g| schemas::grid(schemas::map_frame(&v.id), &g, now_ns));
+            match grid {
+                Ok(grid) => fleet.grid.log(&grid),
+                Err(e) => tracing::debug!(fleet = v.id, "foxglove: no grid: {e}"),
+            }
+        }
+        Instant::now()
+    });
+    if handed.is_none() {
+        tracing::warn!(
             fleet = view.id,
-            "foxglove: the background thread made no grid"
-        ),
+            "foxglove: the background thread is behind: no map this time"
+        );
     }
+    handed
 }

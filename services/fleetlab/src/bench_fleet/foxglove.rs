@@ -1,7 +1,9 @@
 //! The bench's Foxglove clients (`--foxglove-clients`): each connects to the mapper's
 //! Foxglove feed with the protocol's subprotocol (`foxglove.sdk.v1`), subscribes to every
 //! channel as it is advertised (a client that watches everything: the most a client costs)
-//! and counts what it receives until the run ends.
+//! and counts what it receives until the run ends. Each runs on a thread of its own with
+//! a runtime of its own, as a viewer in a process of its own would: its reading does not
+//! queue on the mapper's async threads.
 
 use anyhow::{Context, Result};
 use futures_util::{SinkExt, StreamExt};
@@ -27,12 +29,22 @@ pub(super) struct FoxgloveClient {
     by_schema: BTreeMap<String, u64>,
 }
 
-/// Follows the feed at `url` (ws://…) until `stop`; without the grids when `no_grid`.
-pub(super) async fn follow(
+/// A client following the feed at `url` (ws://…) on a thread of its own, until `stop`.
+pub(super) fn start(
     url: String,
     no_grid: bool,
     stop: Arc<AtomicBool>,
-) -> Result<FoxgloveClient> {
+) -> std::thread::JoinHandle<Result<FoxgloveClient>> {
+    std::thread::spawn(move || {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()?
+            .block_on(follow(url, no_grid, stop))
+    })
+}
+
+/// Follows the feed at `url` (ws://…) until `stop`; without the grids when `no_grid`.
+async fn follow(url: String, no_grid: bool, stop: Arc<AtomicBool>) -> Result<FoxgloveClient> {
     let mut request = url.as_str().into_client_request()?;
     request.headers_mut().insert(
         "Sec-WebSocket-Protocol",
