@@ -6,7 +6,9 @@ use clap::Args;
 use graphio::{carmen, gridmap};
 use serde::Serialize;
 use slam::matching::metric::return_to_start;
-use slam::{GridParams, Mapper2d, Mapper2dParams, MapperStats, OccupancyGrid, WrongClosures};
+use slam::{
+    GridParams, Mapper2d, Mapper2dParams, MapperStats, OccupancyGrid, WrongClosures, WrongMatches,
+};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -16,7 +18,7 @@ pub struct Slam2dArgs {
     /// The CARMEN log.
     pub log: PathBuf,
     /// Kümmerle et al. relations file: adds relation_trans_error_mean/std and
-    /// relation_rot_error_mean (poses at every relation timestamp).
+    /// relation_rot_error_mean (rad) and _mean_deg/_max_deg (poses at every relation timestamp).
     #[arg(long, value_name = "FILE")]
     pub relations: Option<PathBuf>,
     /// Write the occupancy grid (node scans at optimized poses) as PNG: free white,
@@ -41,7 +43,12 @@ pub struct Slam2dArgs {
     /// earlier one, their estimated relative pose off by 0.5–2 m and 3–15°.
     #[arg(long, value_name = "FRACTION")]
     pub inject_false_closures: Option<f64>,
-    /// Seed of the injected wrong closures.
+    /// Inject wrong sequential matches to see the mapper find them: this many per node
+    /// (0.01: one in a hundred), each a node's match with its robot's last node moved off
+    /// by 0.3–1 m and 2–10° before the mapper's checks.
+    #[arg(long, value_name = "FRACTION")]
+    pub inject_wrong_matches: Option<f64>,
+    /// Seed of the injected wrong closures and matches.
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub seed: u64,
     /// Print one JSON object instead of text.
@@ -83,6 +90,11 @@ struct Report {
     /// Of the injected wrong closures, those that became edges.
     #[serde(skip_serializing_if = "Option::is_none")]
     false_closures_accepted: Option<usize>,
+    /// Wrong sequential matches injected, and of them those that became edges.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    wrong_matches_injected: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    wrong_matches_accepted: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     relations: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -91,8 +103,14 @@ struct Report {
     relation_trans_error_std: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     relation_trans_error_max: Option<f64>,
+    /// Mean absolute rotational relation error (rad), and in degrees as Kümmerle et al. and
+    /// Hess et al. (Table II) give it.
     #[serde(skip_serializing_if = "Option::is_none")]
     relation_rot_error_mean: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    relation_rot_error_mean_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    relation_rot_error_max_deg: Option<f64>,
     /// The last pose's distance from the first (m), and the last scan matched against the
     /// first from there: how far the match moves it (m, rad; null when they do not match).
     /// For a run that ends where it started, a closed loop needs a small correction.
@@ -116,10 +134,16 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
     let mut wrong = args
         .inject_false_closures
         .map(|fraction| WrongClosures::new(fraction, args.seed));
+    let mut wrong_matches = args
+        .inject_wrong_matches
+        .map(|fraction| WrongMatches::new(fraction, args.seed));
     for scan in &log.scans {
         placed.push(mapper.add_scan(scan.laser_pose, scan.to_scan2())?);
         if let Some(wrong) = &mut wrong {
             wrong.inject(&mut mapper)?;
+        }
+        if let Some(wrong) = &mut wrong_matches {
+            wrong.inject(&mut mapper);
         }
     }
     let report = mapper.finish()?;
@@ -180,11 +204,15 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         elapsed_ms,
         false_closures_injected: wrong.as_ref().map(WrongClosures::injected),
         false_closures_accepted: wrong.as_ref().map(|w| w.accepted(mapper.graph())),
+        wrong_matches_injected: wrong_matches.as_ref().map(|w| w.injected(&mapper)),
+        wrong_matches_accepted: wrong_matches.as_ref().map(|w| w.accepted(&mapper)),
         relations: metric.map(|m| m.0),
         relation_trans_error_mean: metric.map(|m| m.1.translation_mean_m),
         relation_trans_error_std: metric.map(|m| m.1.translation_std_m),
         relation_trans_error_max: metric.map(|m| m.1.translation_max_m),
         relation_rot_error_mean: metric.map(|m| m.1.rotation_mean_rad),
+        relation_rot_error_mean_deg: metric.map(|m| m.1.rotation_mean_rad.to_degrees()),
+        relation_rot_error_max_deg: metric.map(|m| m.1.rotation_max_rad.to_degrees()),
         return_to_start_m: back.distance_m,
         return_correction_m: back.correction_m,
         return_correction_rad: back.correction_rad,
@@ -201,8 +229,16 @@ pub fn run(args: &Slam2dArgs) -> Result<()> {
         {
             println!("  wrong closures: {injected} injected, {accepted} became edges");
         }
+        if let (Some(injected), Some(accepted)) =
+            (r.wrong_matches_injected, r.wrong_matches_accepted)
+        {
+            println!("  wrong matches: {injected} injected, {accepted} became edges");
+        }
         if let (Some(m), Some(s)) = (r.relation_trans_error_mean, r.relation_trans_error_std) {
             println!("  relations: translation error {m:.4} ± {s:.4} m");
+        }
+        if let Some(deg) = r.relation_rot_error_mean_deg {
+            println!("  relations: rotation error {deg:.3}°");
         }
         let correction = r
             .return_correction_m

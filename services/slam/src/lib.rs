@@ -45,7 +45,7 @@ pub use init::{Init, InitError, initialize};
 pub use mapping2d::{
     BackgroundSolve, ConsistencyParams, ContactCheckParams, CoverageParams, FirstContactParams,
     Mapper2d, Mapper2dParams, MapperStats, Passed, Placed, RestoreError, SavedMapper,
-    SolvedInBackground, SubmapSearchParams, WrongClosures,
+    SolvedInBackground, SubmapSearchParams, WrongClosures, WrongMatches,
 };
 #[cfg(feature = "solver")]
 pub use optimize::{Method, OptimizeParams, OptimizeReport, Optimizer, StopReason};

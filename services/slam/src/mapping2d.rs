@@ -36,6 +36,7 @@ mod submap_search;
 mod submaps;
 mod support;
 mod wrong_closures;
+mod wrong_matches;
 
 pub use contact_check::ContactCheckParams;
 pub use coverage::{CoverageParams, Passed};
@@ -46,6 +47,7 @@ pub use saved::{RestoreError, SavedMapper};
 pub use solve::{BackgroundSolve, SolvedInBackground};
 pub use submap_params::SubmapSearchParams;
 pub use wrong_closures::WrongClosures;
+pub use wrong_matches::WrongMatches;
 
 use crate::matching::Scan2;
 use crate::network::{EdgeKind, GraphError, PoseGraph, RelativeEdge};
@@ -176,6 +178,12 @@ pub struct Mapper2d {
     /// caller's store keeps them with that solve; [`coverage`]).
     #[serde(skip)]
     pass_fixes: Vec<crate::GpsEdge>,
+    /// Fault drills ([`WrongMatches`]): the error to put on the next node's sequential
+    /// match, and each match so made (its node, its measurement). Not saved.
+    #[serde(skip)]
+    next_match_error: Option<Pose2>,
+    #[serde(skip)]
+    wrong_matches_made: Vec<(usize, Pose2)>,
 }
 
 impl Mapper2d {
@@ -271,9 +279,11 @@ impl Mapper2d {
         let moved = step.x.hypot(step.y) >= self.params.node_distance_m
             || wrap_angle(step.theta).abs() >= self.params.node_rotation_rad;
         // Match against the last node from the odometry guess.
-        let matched = self
-            .match_to_node(last, &scan, step)
-            .filter(|m| self.agrees_with_odometry(m, &step));
+        let matched = self.match_to_node(last, &scan, step).map(|m| match moved {
+            true => self.made_wrong(m),
+            false => m,
+        });
+        let matched = matched.filter(|m| self.agrees_with_odometry(m, &step));
         if !moved {
             let offset = matched.map_or(step, |m| m.pose);
             return Ok(Placed::Attached { node: last, offset });
@@ -331,6 +341,16 @@ impl Mapper2d {
     pub fn finish(&mut self) -> Result<OptimizeReport, GraphError> {
         self.expire_closures(true);
         self.optimize()
+    }
+
+    /// `m` moved off by the error a fault drill asked for, if any ([`WrongMatches`]).
+    fn made_wrong(&mut self, mut m: crate::matching::Match) -> crate::matching::Match {
+        if let Some(error) = self.next_match_error.take() {
+            m.pose = m.pose.compose(&error);
+            self.wrong_matches_made
+                .push((self.graph.poses.len(), m.pose));
+        }
+        m
     }
 
     fn push_node(

@@ -11,7 +11,7 @@ use std::f64::consts::TAU;
 #[derive(Clone, Debug)]
 pub struct WrongClosures {
     fraction: f64,
-    state: u64,
+    draw: SplitMix,
     /// Wrong closures owed (a fraction of the matches seen).
     owed: f64,
     matches_seen: usize,
@@ -30,7 +30,7 @@ impl WrongClosures {
     pub fn new(fraction: f64, seed: u64) -> WrongClosures {
         WrongClosures {
             fraction,
-            state: seed,
+            draw: SplitMix(seed),
             owed: 0.0,
             matches_seen: 0,
             injected: Vec::new(),
@@ -77,15 +77,9 @@ impl WrongClosures {
         let mut added = 0;
         while self.owed >= 1.0 && !earlier.is_empty() {
             self.owed -= 1.0;
-            let from = earlier[(self.unit() * earlier.len() as f64) as usize];
+            let from = earlier[(self.draw.unit() * earlier.len() as f64) as usize];
             let truth = mapper.graph.poses[from].between(&mapper.graph.poses[newest]);
-            let (distance, direction) = (self.within(OFF_M), self.unit() * TAU);
-            let sign = if self.unit() < 0.5 { -1.0 } else { 1.0 };
-            let off = Pose2::new(
-                distance * direction.cos(),
-                distance * direction.sin(),
-                sign * self.within(OFF_RAD),
-            );
+            let off = self.draw.offset(OFF_M, OFF_RAD);
             let [sx, sy, st] = CLAIMED_SIGMA;
             let covariance = [
                 [sx * sx, 0.0, 0.0],
@@ -98,17 +92,35 @@ impl WrongClosures {
         }
         Ok(added)
     }
+}
 
-    /// Uniform in [0, 1) (SplitMix64).
-    fn unit(&mut self) -> f64 {
-        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.state;
+/// The injectors' seeded draws (SplitMix64).
+#[derive(Clone, Debug)]
+pub(super) struct SplitMix(pub u64);
+
+impl SplitMix {
+    /// Uniform in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
     }
 
-    fn within(&mut self, (lo, hi): (f64, f64)) -> f64 {
+    /// Uniform in [lo, hi).
+    pub fn within(&mut self, (lo, hi): (f64, f64)) -> f64 {
         lo + (hi - lo) * self.unit()
+    }
+
+    /// A pose off by `off_m` (m, random direction) and `off_rad` (rad, random sign).
+    pub fn offset(&mut self, off_m: (f64, f64), off_rad: (f64, f64)) -> Pose2 {
+        let (distance, direction) = (self.within(off_m), self.unit() * TAU);
+        let sign = if self.unit() < 0.5 { -1.0 } else { 1.0 };
+        Pose2::new(
+            distance * direction.cos(),
+            distance * direction.sin(),
+            sign * self.within(off_rad),
+        )
     }
 }
