@@ -52,7 +52,9 @@ struct AtSize {
     /// Of them, in the map (the rest passed over covered ground: not kept).
     nodes: usize,
     passed: u64,
-    /// Nodes handed over per second of the run up to here (compressed time).
+    /// Of them, refused (out of order, a quarantined fleet, …: none expected).
+    rejected: u64,
+    /// Nodes handed over and handled per second of the run up to here (compressed time).
     fed_per_s: f64,
     store_bytes: u64,
     store_bytes_per_node: f64,
@@ -63,7 +65,8 @@ struct AtSize {
     resident_bytes_per_node: f64,
     /// A whole-network solve asked for now (`POST …/optimize`'s work).
     solve_ms: f64,
-    /// Each sampled node, from its handing over to its being in the map's view.
+    /// Each sampled node, handed over with no queue before it, until the worker is done
+    /// with it (in the store and the view, and acked; or passed).
     node_to_view: Percentiles,
     /// `GET …/map.png?max_cells=2^22`: the whole site, its cells coarsened to fit.
     map_png_ms: f64,
@@ -193,6 +196,8 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
     let mut mapper = mapper::start(config.clone()).await?;
     let mut fleet = Fleet::new(pool, args.robots);
     let (mut fed, started) = (0usize, Instant::now());
+    // Nodes fed before this mapper started (its counters start at 0).
+    let mut fed_before_start = 0;
     let mut sizes = Vec::new();
     for &size in &args.sizes {
         let bulk = size.saturating_sub(args.sample);
@@ -207,11 +212,13 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
                 );
             }
         }
+        drain(&mapper, (fed - fed_before_start) as u64).await?;
         let fed_per_s = fed as f64 / started.elapsed().as_secs_f64();
         let node_to_view = sample_nodes(&mapper, &mut fleet, size - fed).await?;
         fed = size;
         let nodes = mapped_nodes(&mapper);
         let passed = passed_nodes(&mapper);
+        let rejected = rejected_nodes(&mapper);
         let solve_started = Instant::now();
         mapper.optimize(FLEET).await?;
         let solve_ms = ms(solve_started);
@@ -223,11 +230,13 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
         let restore_started = Instant::now();
         mapper = mapper::start(config.clone()).await?;
         let restore_ms = ms(restore_started);
+        fed_before_start = fed;
         let resident_bytes = resident_bytes()?;
         let at = AtSize {
             fed,
             nodes,
             passed,
+            rejected,
             fed_per_s,
             store_bytes,
             store_bytes_per_node: store_bytes as f64 / nodes.max(1) as f64,
@@ -286,7 +295,42 @@ fn passed_nodes(mapper: &mapper::Running) -> u64 {
     passed.load(std::sync::atomic::Ordering::Relaxed)
 }
 
-/// Hands over `count` nodes one at a time, each waited for until the view holds it.
+/// The nodes of mapping robots refused.
+fn rejected_nodes(mapper: &mapper::Running) -> u64 {
+    let rejected = mapper.shared.metrics.rejected.lock();
+    let rejected = rejected.unwrap_or_else(std::sync::PoisonError::into_inner);
+    (rejected.iter())
+        .filter(|((topic, _), _)| *topic == "node")
+        .map(|(_, count)| count)
+        .sum()
+}
+
+/// The nodes the worker is done with: mapped and acked, passed, or refused.
+fn handled_nodes(mapper: &mapper::Running) -> u64 {
+    let accepted = &mapper.shared.metrics.nodes_accepted;
+    accepted.load(std::sync::atomic::Ordering::Relaxed)
+        + passed_nodes(mapper)
+        + rejected_nodes(mapper)
+}
+
+/// Waits until the worker has handled `fed` nodes (those handed over wait in its queue):
+/// a sampled node then has none before it.
+async fn drain(mapper: &mapper::Running, fed: u64) -> Result<()> {
+    let (mut last, mut changed) = (handled_nodes(mapper), Instant::now());
+    while last < fed {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+        let handled = handled_nodes(mapper);
+        if handled != last {
+            (last, changed) = (handled, Instant::now());
+        } else if changed.elapsed() > Duration::from_secs(60) {
+            bail!("the mapper handled {last} of {fed} nodes and none in 60 s");
+        }
+    }
+    Ok(())
+}
+
+/// Hands over `count` nodes one at a time, each waited for until the worker is done with it
+/// (acked once in the store and the view, or passed over covered ground).
 async fn sample_nodes(
     mapper: &mapper::Running,
     fleet: &mut Fleet,
@@ -294,13 +338,12 @@ async fn sample_nodes(
 ) -> Result<Percentiles> {
     let mut times = Vec::with_capacity(count);
     for _ in 0..count {
-        // A node the map does not take (a pass over covered ground) shows only as a count;
-        // both read before the node is handed over, which the worker may take at once.
-        let (before, passed_before) = (mapped_nodes(mapper), passed_nodes(mapper));
+        // Read before the node is handed over: the worker may take it at once.
+        let before = handled_nodes(mapper);
         let (key, payload) = fleet.next_node()?;
         let t0 = Instant::now();
         mapper.feed_node(&key, payload)?;
-        while mapped_nodes(mapper) == before && passed_nodes(mapper) == passed_before {
+        while handled_nodes(mapper) == before {
             if t0.elapsed() > Duration::from_secs(60) {
                 bail!("a node was not mapped within 60 s");
             }
