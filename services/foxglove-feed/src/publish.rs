@@ -314,3 +314,32 @@ fn publish_map(
     }
     handed
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_next_map_waits_ten_times_its_making() {
+        let map_every = Duration::from_secs(2);
+        let started = Instant::now();
+        let (done, making) = tokio::sync::oneshot::channel();
+        let mut sent = Sent {
+            map: Some((1, started + map_every)),
+            making: Some((started, making)),
+            nodes: 0,
+        };
+        assert!(!sent.map_made(map_every), "still being made");
+        done.send(started + Duration::from_secs(1))
+            .expect("waited for");
+        assert!(sent.map_made(map_every));
+        assert_eq!(sent.map, Some((1, started + Duration::from_secs(10))));
+        // A quick one: map_every rules.
+        let (done, making) = tokio::sync::oneshot::channel();
+        sent.making = Some((started, making));
+        done.send(started + Duration::from_millis(5))
+            .expect("waited for");
+        assert!(sent.map_made(map_every));
+        assert_eq!(sent.map, Some((1, started + map_every)));
+    }
+}

@@ -18,6 +18,7 @@ pub mod network;
 pub mod parts;
 pub mod robust;
 pub mod se2;
+mod splitmix;
 
 pub use gnss::GpsObservation;
 pub use grid::{BeamFan, CellState, FanBeam, GridError, GridParams, OccupancyGrid};

@@ -279,11 +279,10 @@ impl Mapper2d {
         let moved = step.x.hypot(step.y) >= self.params.node_distance_m
             || wrap_angle(step.theta).abs() >= self.params.node_rotation_rad;
         // Match against the last node from the odometry guess.
-        let matched = self.match_to_node(last, &scan, step).map(|m| match moved {
-            true => self.made_wrong(m),
-            false => m,
-        });
-        let matched = matched.filter(|m| self.agrees_with_odometry(m, &step));
+        let matched = self
+            .match_to_node(last, &scan, step)
+            .map(|m| if moved { self.made_wrong(m) } else { m })
+            .filter(|m| self.agrees_with_odometry(m, &step));
         if !moved {
             let offset = matched.map_or(step, |m| m.pose);
             return Ok(Placed::Attached { node: last, offset });

@@ -5,6 +5,7 @@
 use super::Mapper2d;
 use crate::network::{GraphError, PoseGraph};
 use crate::se2::Pose2;
+use crate::splitmix::SplitMix;
 use std::f64::consts::TAU;
 
 /// Seeded generator of wrong closures, fed to a mapper as external candidates.
@@ -30,7 +31,7 @@ impl WrongClosures {
     pub fn new(fraction: f64, seed: u64) -> WrongClosures {
         WrongClosures {
             fraction,
-            draw: SplitMix(seed),
+            draw: SplitMix::new(seed),
             owed: 0.0,
             matches_seen: 0,
             injected: Vec::new(),
@@ -79,7 +80,7 @@ impl WrongClosures {
             self.owed -= 1.0;
             let from = earlier[(self.draw.unit() * earlier.len() as f64) as usize];
             let truth = mapper.graph.poses[from].between(&mapper.graph.poses[newest]);
-            let off = self.draw.offset(OFF_M, OFF_RAD);
+            let off = offset(&mut self.draw, OFF_M, OFF_RAD);
             let [sx, sy, st] = CLAIMED_SIGMA;
             let covariance = [
                 [sx * sx, 0.0, 0.0],
@@ -94,33 +95,14 @@ impl WrongClosures {
     }
 }
 
-/// The injectors' seeded draws (SplitMix64).
-#[derive(Clone, Debug)]
-pub(super) struct SplitMix(pub u64);
-
-impl SplitMix {
-    /// Uniform in [0, 1).
-    pub fn unit(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Uniform in [lo, hi).
-    pub fn within(&mut self, (lo, hi): (f64, f64)) -> f64 {
-        lo + (hi - lo) * self.unit()
-    }
-
-    /// A pose off by `off_m` (m, random direction) and `off_rad` (rad, random sign).
-    pub fn offset(&mut self, off_m: (f64, f64), off_rad: (f64, f64)) -> Pose2 {
-        let (distance, direction) = (self.within(off_m), self.unit() * TAU);
-        let sign = if self.unit() < 0.5 { -1.0 } else { 1.0 };
-        Pose2::new(
-            distance * direction.cos(),
-            distance * direction.sin(),
-            sign * self.within(off_rad),
-        )
-    }
+/// A pose off by `off_m` (m, random direction) and `off_rad` (rad, random sign), drawn
+/// from `draw`.
+pub(super) fn offset(draw: &mut SplitMix, off_m: (f64, f64), off_rad: (f64, f64)) -> Pose2 {
+    let (distance, direction) = (draw.uniform(off_m.0, off_m.1), draw.unit() * TAU);
+    let sign = if draw.unit() < 0.5 { -1.0 } else { 1.0 };
+    Pose2::new(
+        distance * direction.cos(),
+        distance * direction.sin(),
+        sign * draw.uniform(off_rad.0, off_rad.1),
+    )
 }

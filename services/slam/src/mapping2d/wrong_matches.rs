@@ -4,8 +4,9 @@
 //! both covariances) before it becomes an edge.
 
 use super::Mapper2d;
-use super::wrong_closures::SplitMix;
+use super::wrong_closures::offset;
 use crate::network::{EdgeKind, PoseGraph};
+use crate::splitmix::SplitMix;
 
 /// How far a wrong match is off (m, rad): uniform in these ranges, random direction and sign.
 const OFF_M: (f64, f64) = (0.3, 1.0);
@@ -26,7 +27,7 @@ impl WrongMatches {
     pub fn new(fraction: f64, seed: u64) -> WrongMatches {
         WrongMatches {
             fraction,
-            draw: SplitMix(seed),
+            draw: SplitMix::new(seed),
             owed: 0.0,
             nodes_seen: 0,
         }
@@ -59,7 +60,7 @@ impl WrongMatches {
         self.nodes_seen = nodes;
         if self.owed >= 1.0 && mapper.next_match_error.is_none() {
             self.owed -= 1.0;
-            mapper.next_match_error = Some(self.draw.offset(OFF_M, OFF_RAD));
+            mapper.next_match_error = Some(offset(&mut self.draw, OFF_M, OFF_RAD));
         }
     }
 }

@@ -3,6 +3,7 @@
 //! comes from a seeded generator.
 
 use crate::Pose2;
+use crate::splitmix::SplitMix;
 
 /// A plane scene in map coordinates (m).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -17,7 +18,7 @@ impl Scene {
     /// An outdoor-like scene around the origin, about 40 m × 30 m: an L-shaped building,
     /// a fence, a parked car (box) and twenty trees of 0.15–0.4 m radius.
     pub fn park() -> Scene {
-        let mut rng = Rng::new(7);
+        let mut rng = SplitMix::new(7);
         let mut walls = vec![
             [[-12.0, 8.0], [10.0, 8.0]],
             [[10.0, 8.0], [10.0, 15.0]],
@@ -86,7 +87,7 @@ impl Scene {
         noise_std_m: f64,
         seed: u64,
     ) -> Vec<f32> {
-        let mut rng = Rng::new(seed);
+        let mut rng = SplitMix::new(seed);
         bearings_rad
             .iter()
             .map(|&b| {
@@ -117,45 +118,12 @@ pub fn uneven_bearings(
     drop_every: usize,
     seed: u64,
 ) -> Vec<f32> {
-    let mut rng = Rng::new(seed);
+    let mut rng = SplitMix::new(seed);
     let step = fov_rad / count as f64;
     (0..count)
         .filter(|i| drop_every == 0 || i % drop_every != drop_every / 2)
         .map(|i| (-fov_rad / 2.0 + step * (i as f64 + 0.5 + rng.uniform(-jitter, jitter))) as f32)
         .collect()
-}
-
-/// SplitMix64: small, seeded, good enough for test noise.
-struct Rng(u64);
-
-impl Rng {
-    fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.unit()
-    }
-
-    /// Standard normal (Box–Muller).
-    fn gaussian(&mut self) -> f64 {
-        let u = 1.0 - self.unit();
-        let v = self.unit();
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-    }
 }
 
 #[cfg(test)]
