@@ -82,6 +82,10 @@ pub struct MapperStats {
     pub sequential_matches: usize,
     /// Scan matches between successive nodes rejected (odometry used instead).
     pub sequential_rejected: usize,
+    /// Of the sequential matches (and of the scans attached to a node), those IDC got
+    /// wrong or missed that the correlative search on the local map found.
+    #[serde(default)]
+    pub sequential_recovered: usize,
     /// Loop-closure candidates matched.
     pub loop_candidates: usize,
     /// Loop-closure matches the quality gate accepted (each then checked for consistency).
@@ -280,8 +284,7 @@ impl Mapper2d {
             || wrap_angle(step.theta).abs() >= self.params.node_rotation_rad;
         // Match against the last node from the odometry guess.
         let matched = self
-            .match_to_node(last, &scan, step)
-            .map(|m| if moved { self.made_wrong(m) } else { m })
+            .sequential_match(last, &scan, step, moved)
             .filter(|m| self.agrees_with_odometry(m, &step));
         if !moved {
             let offset = matched.map_or(step, |m| m.pose);

@@ -23,7 +23,7 @@ mod validate;
 pub use idc::{IdcParams, Match, idc};
 pub use refine::{Prior, Reference, RefineParams, refine, refine_against};
 pub use scan::Scan2;
-pub use validate::{QualityGate, accept};
+pub use validate::{QualityGate, accept, evaluate};
 
 use std::fmt;
 

@@ -133,12 +133,19 @@ impl Mapper2d {
         added
     }
 
-    /// Information of an odometry step: σ_xy and σ_θ grow with its length and turn.
-    pub(super) fn odometry_information(&self, step: &Pose2) -> Matrix3<f64> {
+    /// The odometry model's standard deviations of a step, (σ_xy m, σ_θ rad): they grow
+    /// with its length and turn.
+    pub(super) fn odometry_sigmas(&self, step: &Pose2) -> (f64, f64) {
         let p = &self.params;
         let sxy = p.odometry_sigma_xy_m + p.odometry_sigma_xy_per_m * step.x.hypot(step.y);
         let st = p.odometry_sigma_theta_rad
             + p.odometry_sigma_theta_per_rad * wrap_angle(step.theta).abs();
+        (sxy, st)
+    }
+
+    /// Information of an odometry step (see [`Self::odometry_sigmas`]).
+    pub(super) fn odometry_information(&self, step: &Pose2) -> Matrix3<f64> {
+        let (sxy, st) = self.odometry_sigmas(step);
         Matrix3::from_diagonal(&nalgebra::Vector3::new(
             1.0 / (sxy * sxy),
             1.0 / (sxy * sxy),

@@ -1,11 +1,74 @@
 //! Local matching: a new scan against its robot's last node, by IDC and then the
 //! point-to-line refinement (against that node's scan, or the last few nodes' scans).
+//!
+//! The match that becomes an edge is checked where it puts the scan: the quality gate at its
+//! final pose against the last node's scan (inlier share, free-space conflicts, residual).
+//! IDC is local: from a poor guess it can settle in a wrong minimum, and such a match does
+//! not fit the local map. Then (and when IDC finds nothing) the scan is searched again by
+//! the correlative matcher, which has no local minima, over the odometry's 99.9 % window on
+//! a grid of the local map's scans, refined by IDC from the pose it finds, and checked the
+//! same way; what still fails leaves the node on odometry.
 
 use super::Mapper2d;
-use crate::matching::{Match, Prior, Reference, Scan2, accept, idc, refine_against};
+use crate::matching::correlative::{SearchWindow, precompute, search};
+use crate::matching::{Match, Prior, Reference, Scan2, accept, evaluate, idc, refine_against};
 use crate::se2::Pose2;
 
+/// The odometry window of the correlative search, in standard deviations of the odometry
+/// model: √χ²₃(0.999) = 4.03, a 99.9 % bound on the step's error.
+const ODOMETRY_WINDOW_SIGMAS: f64 = 4.03;
+
 impl Mapper2d {
+    /// The sequential match of `scan` against node `last`, its robot's last node, from the
+    /// odometry `step`: IDC refined against the local map when it fits the last node's scan
+    /// at its pose, else the correlative search's, refined and checked the same way (see
+    /// the module's docs). `moved`: the scan makes a node (the match may then be made
+    /// wrong on purpose, see `WrongMatches`).
+    pub(super) fn sequential_match(
+        &mut self,
+        last: usize,
+        scan: &Scan2,
+        step: Pose2,
+        moved: bool,
+    ) -> Option<Match> {
+        let first = self
+            .match_to_node(last, scan, step)
+            .map(|m| if moved { self.made_wrong(m) } else { m });
+        if let Some(m) = first.and_then(|m| self.fits_last_scan(last, scan, &m)) {
+            return Some(m);
+        }
+        let found = self.search_local_map(last, scan, step)?;
+        let m = self.match_to_node(last, scan, found)?;
+        let m = self.fits_last_scan(last, scan, &m)?;
+        self.stats.sequential_recovered += 1;
+        Some(m)
+    }
+
+    /// `m` evaluated again at its pose against node `last`'s scan, if the gate accepts it
+    /// there.
+    fn fits_last_scan(&self, last: usize, scan: &Scan2, m: &Match) -> Option<Match> {
+        let checked = Match {
+            iterations: m.iterations,
+            converged: m.converged,
+            ..evaluate(&self.node_scans[last], scan, &m.pose, &self.params.idc)
+        };
+        accept(&checked, &self.params.gate).then_some(checked)
+    }
+
+    /// The best pose of `scan` (in node `last`'s frame) on a grid of the local map's scans,
+    /// within the odometry's window around `step`.
+    fn search_local_map(&self, last: usize, scan: &Scan2, step: Pose2) -> Option<Pose2> {
+        let p = &self.params.submaps;
+        let references = self.submap(last);
+        let grids = precompute(references.iter().map(|r| (r.pose, r.scan)), &p.grid)?;
+        let (sigma_xy_m, sigma_theta_rad) = self.odometry_sigmas(&step);
+        let window = SearchWindow {
+            linear_m: ODOMETRY_WINDOW_SIGMAS * sigma_xy_m,
+            angular_rad: ODOMETRY_WINDOW_SIGMAS * sigma_theta_rad,
+        };
+        search(&grids, scan, step, &window, p.min_score, &p.grid).map(|found| found.pose)
+    }
+
     /// The match of `scan` against node `last` from `guess` (the scan's frame in the node's
     /// frame) when the gate accepts it: IDC's, refined when refinement is on and the
     /// refined match passes the gate too.

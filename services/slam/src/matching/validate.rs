@@ -33,6 +33,18 @@ use crate::Pose2;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
 
+/// The match of `current` at `pose` (its frame in `reference`'s frame) against `reference`,
+/// evaluated as IDC evaluates its own result: covariance and quality at that pose, with no
+/// iteration (`iterations` 0, `converged` false). How a pose found some other way is checked.
+pub fn evaluate(reference: &Scan2, current: &Scan2, pose: &Pose2, params: &IdcParams) -> Match {
+    let contour = Contour::new(
+        reference,
+        params.join_distance_m,
+        params.join_distance_per_m,
+    );
+    validate(&contour, current, pose, params)
+}
+
 /// Evaluates the current scan at `pose` against the reference contour: the match at `pose`
 /// with its covariance and quality (the caller fills in how the iteration went).
 pub(super) fn validate(
