@@ -1,9 +1,9 @@
 //! Wrong sequential matches on real logs: each log is mapped clean, then again with 2 % of
-//! its nodes' matches with their robot's last node moved off by 0.3–1 m and 2–10° before the
-//! mapper's checks (`slam::WrongMatches`), and the relation error (Kümmerle et al. 2009) must
-//! stay within 10 % of the clean run's: the mapper must find them (each match is checked
-//! against the last node's scan where it puts the new one, and searched again on the local
-//! map when it does not fit; `mapping2d/local.rs`).
+//! its nodes' matches with their robot's last node moved off by 0.3–1 m and 2–10°
+//! (`slam::WrongMatches`), and the relation error (Kümmerle et al. 2009) must stay within 10 %
+//! of the clean run's: the mapper must find them (each match is gated where it puts the new
+//! scan, against the last node's scan, and searched again on the local map when it fails;
+//! `mapping2d/local.rs`).
 
 mod common;
 

@@ -1,13 +1,13 @@
 //! Local matching: a new scan against its robot's last node, by IDC and then the
 //! point-to-line refinement (against that node's scan, or the last few nodes' scans).
 //!
-//! The match that becomes an edge is checked where it puts the scan: the quality gate at its
-//! final pose against the last node's scan (inlier share, free-space conflicts, residual).
-//! IDC is local: from a poor guess it can settle in a wrong minimum, and such a match does
-//! not fit the local map. Then (and when IDC finds nothing) the scan is searched again by
+//! Every match is held to the quality gate where it puts the scan, against the last node's
+//! scan (inlier share, free-space conflicts, residual: `matching::validate`). IDC is local:
+//! from a poor guess it can settle in a wrong minimum, and such a match does not fit the
+//! last scan where it puts it. Then (and when IDC finds nothing) the scan is searched again by
 //! the correlative matcher, which has no local minima, over the odometry's 99.9 % window on
-//! a grid of the local map's scans, refined by IDC from the pose it finds, and checked the
-//! same way; what still fails leaves the node on odometry.
+//! a grid of the local map's scans, refined by IDC from the pose it finds, and held to the
+//! same gate (`sequential_search`); what still fails leaves the node on odometry.
 
 use super::Mapper2d;
 use crate::matching::correlative::{SearchWindow, precompute, search};
@@ -20,9 +20,9 @@ const ODOMETRY_WINDOW_SIGMAS: f64 = 4.03;
 
 impl Mapper2d {
     /// The sequential match of `scan` against node `last`, its robot's last node, from the
-    /// odometry `step`: IDC refined against the local map when it fits the last node's scan
-    /// at its pose, else the correlative search's, refined and checked the same way (see
-    /// the module's docs). `moved`: the scan makes a node (the match may then be made
+    /// odometry `step`: IDC's refined against the local map when it passes the gate, else
+    /// (with `sequential_search`) the correlative search's, refined and gated the same way
+    /// (see the module's docs). `moved`: the scan makes a node (its match may then be made
     /// wrong on purpose, see `WrongMatches`).
     pub(super) fn sequential_match(
         &mut self,
@@ -31,28 +31,35 @@ impl Mapper2d {
         step: Pose2,
         moved: bool,
     ) -> Option<Match> {
-        let first = self
-            .match_to_node(last, scan, step)
-            .map(|m| if moved { self.made_wrong(m) } else { m });
-        if let Some(m) = first.and_then(|m| self.fits_last_scan(last, scan, &m)) {
-            return Some(m);
+        let first = self.match_to_node(last, scan, step);
+        let first = match first {
+            Some(m) if moved => self.made_wrong(last, scan, m),
+            first => first,
+        };
+        if first.is_some() || !self.params.sequential_search {
+            return first;
         }
         let found = self.search_local_map(last, scan, step)?;
         let m = self.match_to_node(last, scan, found)?;
-        let m = self.fits_last_scan(last, scan, &m)?;
         self.stats.sequential_recovered += 1;
         Some(m)
     }
 
-    /// `m` evaluated again at its pose against node `last`'s scan, if the gate accepts it
-    /// there.
-    fn fits_last_scan(&self, last: usize, scan: &Scan2, m: &Match) -> Option<Match> {
-        let checked = Match {
+    /// `m` at `pose` instead: evaluated there against node `last`'s scan, as the matcher
+    /// evaluates its own result, if the gate accepts it.
+    pub(super) fn match_moved_to(
+        &self,
+        last: usize,
+        scan: &Scan2,
+        m: &Match,
+        pose: &Pose2,
+    ) -> Option<Match> {
+        let moved = Match {
             iterations: m.iterations,
             converged: m.converged,
-            ..evaluate(&self.node_scans[last], scan, &m.pose, &self.params.idc)
+            ..evaluate(&self.node_scans[last], scan, pose, &self.params.idc)
         };
-        accept(&checked, &self.params.gate).then_some(checked)
+        accept(&moved, &self.params.gate).then_some(moved)
     }
 
     /// The best pose of `scan` (in node `last`'s frame) on a grid of the local map's scans,

@@ -34,6 +34,13 @@ pub struct Mapper2dParams {
     /// Keep the odometry edge beside an accepted match between successive nodes (odometry
     /// and scan matching fused), rather than the match alone.
     pub fuse_odometry: bool,
+    /// When IDC's match with the last node fails the gate (a wrong minimum from a poor
+    /// guess, or none), search the scan again by the correlative matcher on the local map
+    /// over the odometry's 99.9 % window (docs/slam.md, "Point-to-line refinement"). Default
+    /// true; off where odometry is trusted to arbitrate matches
+    /// ([`Self::precise_dead_reckoning`]): it then errs less than a grid cell, and the node
+    /// is left on it.
+    pub sequential_search: bool,
     /// Do not optimize the whole network while adding scans: the caller runs
     /// [`Mapper2d::optimize_pending`](super::Mapper2d::optimize_pending) (a server batching
     /// the nodes that arrived together into one solve), or takes the solve to run in the
@@ -93,6 +100,7 @@ impl Default for Mapper2dParams {
             match_min_sigma_theta_rad: 0.2f64.to_radians(),
             match_odometry_max_chi2: f64::INFINITY,
             fuse_odometry: false,
+            sequential_search: true,
             defer_optimization: false,
             local_window_nodes: 30,
             loop_search_radius_m: 3.0,
@@ -131,6 +139,7 @@ impl Mapper2dParams {
             odometry_sigma_theta_per_rad: 0.01,
             match_odometry_max_chi2: 16.0,
             fuse_odometry: true,
+            sequential_search: false,
             // Off for now: on the simulated fleet it rejects the fixed 2D scanner's two wrong
             // closures, and the demo's comparison (leveled ≥ 3× better) no longer holds
             // (docs/measurements/slam.md, "Consistency of loop closures").

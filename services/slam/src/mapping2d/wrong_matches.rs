@@ -1,7 +1,7 @@
 //! Wrong sequential matches on purpose, to see the mapper find them: a node's match with its
 //! robot's last node moved off by a little, as a match that slid along a corridor or turned
-//! into a wrong minimum would be. The mapper checks it as any match (against odometry, with
-//! both covariances) before it becomes an edge.
+//! into a wrong minimum would be. It is evaluated and gated at that pose as the matcher's own
+//! result is, then checked as any match before it becomes an edge.
 
 use super::Mapper2d;
 use super::wrong_closures::offset;
