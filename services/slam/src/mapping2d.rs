@@ -345,23 +345,6 @@ impl Mapper2d {
         self.optimize()
     }
 
-    /// `m` moved off by the error a fault drill asked for, if any ([`WrongMatches`]).
-    /// `m` made wrong when a wrong match is pending ([`WrongMatches`]): its pose moved off,
-    /// then evaluated and gated there as the matcher's own result is.
-    fn made_wrong(
-        &mut self,
-        last: usize,
-        scan: &Scan2,
-        m: crate::matching::Match,
-    ) -> Option<crate::matching::Match> {
-        let Some(error) = self.next_match_error.take() else {
-            return Some(m);
-        };
-        let pose = m.pose.compose(&error);
-        self.wrong_matches_made.push((self.graph.poses.len(), pose));
-        self.match_moved_to(last, scan, &m, &pose)
-    }
-
     fn push_node(
         &mut self,
         robot: usize,

@@ -23,7 +23,8 @@ mod validate;
 pub use idc::{IdcParams, Match, idc};
 pub use refine::{Prior, Reference, RefineParams, refine, refine_against};
 pub use scan::Scan2;
-pub use validate::{QualityGate, accept, evaluate};
+pub(crate) use validate::evaluate;
+pub use validate::{QualityGate, accept};
 
 use std::fmt;
 

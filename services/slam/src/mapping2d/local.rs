@@ -11,7 +11,7 @@
 
 use super::Mapper2d;
 use crate::matching::correlative::{SearchWindow, precompute, search};
-use crate::matching::{Match, Prior, Reference, Scan2, accept, evaluate, idc, refine_against};
+use crate::matching::{Match, Prior, Reference, Scan2, accept, idc, refine_against};
 use crate::se2::Pose2;
 
 /// The odometry window of the correlative search, in standard deviations of the odometry
@@ -43,23 +43,6 @@ impl Mapper2d {
         let m = self.match_to_node(last, scan, found)?;
         self.stats.sequential_recovered += 1;
         Some(m)
-    }
-
-    /// `m` at `pose` instead: evaluated there against node `last`'s scan, as the matcher
-    /// evaluates its own result, if the gate accepts it.
-    pub(super) fn match_moved_to(
-        &self,
-        last: usize,
-        scan: &Scan2,
-        m: &Match,
-        pose: &Pose2,
-    ) -> Option<Match> {
-        let moved = Match {
-            iterations: m.iterations,
-            converged: m.converged,
-            ..evaluate(&self.node_scans[last], scan, pose, &self.params.idc)
-        };
-        accept(&moved, &self.params.gate).then_some(moved)
     }
 
     /// The best pose of `scan` (in node `last`'s frame) on a grid of the local map's scans,

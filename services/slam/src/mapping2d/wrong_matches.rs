@@ -5,6 +5,7 @@
 
 use super::Mapper2d;
 use super::wrong_closures::offset;
+use crate::matching::{Match, Scan2, accept, evaluate};
 use crate::network::{EdgeKind, PoseGraph};
 use crate::splitmix::SplitMix;
 
@@ -61,6 +62,72 @@ impl WrongMatches {
         if self.owed >= 1.0 && mapper.next_match_error.is_none() {
             self.owed -= 1.0;
             mapper.next_match_error = Some(offset(&mut self.draw, OFF_M, OFF_RAD));
+        }
+    }
+}
+
+impl Mapper2d {
+    /// `m`, the match of `scan` with node `last`, made wrong when a wrong match is pending:
+    /// its pose moved off, then evaluated and gated there against the last node's scan as
+    /// the matcher's own result is (`None` when the gate rejects it).
+    pub(super) fn made_wrong(&mut self, last: usize, scan: &Scan2, m: Match) -> Option<Match> {
+        let Some(error) = self.next_match_error.take() else {
+            return Some(m);
+        };
+        let pose = m.pose.compose(&error);
+        self.wrong_matches_made.push((self.graph.poses.len(), pose));
+        let moved = Match {
+            iterations: m.iterations,
+            converged: m.converged,
+            ..evaluate(&self.node_scans[last], scan, &pose, &self.params.idc)
+        };
+        accept(&moved, &self.params.gate).then_some(moved)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::scan_at;
+    use super::*;
+    use crate::Mapper2dParams;
+    use crate::Pose2;
+
+    /// A wrong match fails the gate where it puts the scan; with the sequential search the
+    /// scan is found again and the edge is the true motion, without it the node falls back
+    /// on odometry.
+    #[test]
+    fn a_wrong_match_is_gated_and_found_again_by_the_search() {
+        let truth = [Pose2::new(-2.0, 0.0, 0.0), Pose2::new(-1.4, 0.0, 0.0)];
+        for search in [true, false] {
+            let mut mapper = Mapper2d::new(Mapper2dParams {
+                sequential_search: search,
+                ..Mapper2dParams::default()
+            });
+            mapper
+                .add_scan(truth[0], scan_at(&truth[0], 0))
+                .expect("add");
+            mapper.next_match_error = Some(Pose2::new(0.5, 0.0, 5f64.to_radians()));
+            mapper
+                .add_scan(truth[1], scan_at(&truth[1], 1))
+                .expect("add");
+            let stats = mapper.stats();
+            assert_eq!(mapper.wrong_matches_made.len(), 1);
+            let edge = &mapper.graph.edges[0];
+            if search {
+                assert_eq!(
+                    (stats.sequential_matches, stats.sequential_recovered),
+                    (1, 1)
+                );
+                assert_eq!(edge.kind, EdgeKind::ScanMatch);
+                let off = truth[0].between(&truth[1]).between(&edge.measurement);
+                assert!(off.x.hypot(off.y) < 0.02, "{off:?}");
+            } else {
+                assert_eq!(
+                    (stats.sequential_matches, stats.sequential_rejected),
+                    (0, 1)
+                );
+                assert_eq!(edge.kind, EdgeKind::Odometry);
+            }
         }
     }
 }

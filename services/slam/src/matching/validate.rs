@@ -36,7 +36,12 @@ use serde::{Deserialize, Serialize};
 /// The match of `current` at `pose` (its frame in `reference`'s frame) against `reference`,
 /// evaluated as IDC evaluates its own result: covariance and quality at that pose, with no
 /// iteration (`iterations` 0, `converged` false). How a pose found some other way is checked.
-pub fn evaluate(reference: &Scan2, current: &Scan2, pose: &Pose2, params: &IdcParams) -> Match {
+pub(crate) fn evaluate(
+    reference: &Scan2,
+    current: &Scan2,
+    pose: &Pose2,
+    params: &IdcParams,
+) -> Match {
     let contour = Contour::new(
         reference,
         params.join_distance_m,
