@@ -1,6 +1,6 @@
 //! Speed of the pose-network optimizer on the public benchmarks, from the default chordal
 //! start: initialization and optimization separately (what `levelmap optimize` reports as
-//! `init_ms` and `solve_ms`).
+//! `init_ms` and `solve_ms`), and both with one optimizer (`total_ms`).
 //!
 //!     cargo bench -p slam --bench optimize
 //!
@@ -45,6 +45,23 @@ fn solve_from_chordal(bencher: divan::Bencher, file: &str) {
         .with_inputs(|| g.clone())
         .bench_local_values(|mut g| {
             Optimizer::new()
+                .optimize(&mut g, &OptimizeParams::default())
+                .expect("optimize")
+        });
+}
+
+/// From the file's edges to the optimum: the chordal initialization and the optimization with
+/// one optimizer, which orders the network once for both (what `levelmap optimize` reports
+/// as `total_ms`, and what is compared with g2o in scripts/compare-pose-graph.sh).
+#[divan::bench(args = GRAPHS, sample_count = 10)]
+fn to_the_optimum(bencher: divan::Bencher, file: &str) {
+    let g = graph(file);
+    bencher
+        .with_inputs(|| g.clone())
+        .bench_local_values(|mut g| {
+            let mut optimizer = Optimizer::new();
+            optimizer.initialize(&mut g, Init::Chordal).expect("init");
+            optimizer
                 .optimize(&mut g, &OptimizeParams::default())
                 .expect("optimize")
         });

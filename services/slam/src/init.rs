@@ -3,8 +3,9 @@
 //! over all edges, then linear translations; Carlone et al. 2015) starts close enough to the
 //! global optimum on the standard benchmarks that GTSAM and g2o miss from their defaults.
 
-use crate::linear::{NotPositiveDefinite, solve_once};
+use crate::linear::{NodeOrder, NotPositiveDefinite, SparsePattern, c64};
 use crate::network::{GraphError, PoseGraph};
+use crate::optimize::network_order;
 use crate::se2::Pose2;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -64,11 +65,32 @@ impl From<GraphError> for InitError {
 /// starts in the east-north frame of the datum.
 pub fn initialize(graph: &mut PoseGraph, init: Init) -> Result<(), InitError> {
     graph.validate()?;
+    initialize_validated(graph, init, None)
+}
+
+/// [`initialize`] of a validated network, the chordal systems ordered by `order` (the
+/// network's [`network_order`], which the optimizer keeps for its own system) or by their
+/// own.
+pub(crate) fn initialize_validated(
+    graph: &mut PoseGraph,
+    init: Init,
+    order: Option<&NodeOrder>,
+) -> Result<(), InitError> {
     match init {
         Init::Given => return Ok(()),
         Init::Odometry => odometry(graph)?,
         Init::Spanning => spanning(graph),
-        Init::Chordal => chordal(graph).map_err(|_| GraphError::Singular)?,
+        Init::Chordal => {
+            let own;
+            let order = match order {
+                Some(order) => order,
+                None => {
+                    own = network_order(graph);
+                    &own
+                }
+            };
+            chordal(graph, order).map_err(|_| GraphError::Singular)?
+        }
     }
     align_to_gps(graph);
     Ok(())
@@ -141,135 +163,100 @@ fn spanning(graph: &mut PoseGraph) {
     }
 }
 
-/// Chordal relaxation: rotations as free 2-vectors r_i = (cos θ_i, sin θ_i) with r_0 fixed,
-/// minimizing Σ κ |r_j − R(θ_z) r_i|², projected back to angles; then translations with the
-/// rotations fixed, minimizing Σ τ |t_j − t_i − R_i t_z|². κ and τ are the edge's rotational
-/// and (isotropic) translational information, as in SE-Sync.
-fn chordal(graph: &mut PoseGraph) -> Result<(), NotPositiveDefinite> {
+/// Chordal relaxation: rotations as free complex numbers r_i (cos θ_i + i sin θ_i) with
+/// r_0 = 1, minimizing Σ κ |r_j − e^{iθ_z} r_i|², projected back to angles; then translations
+/// with the rotations fixed, minimizing Σ τ |t_j − t_i − R_i t_z|². κ and τ are the edge's
+/// rotational and (isotropic) translational information, as in SE-Sync. Both systems have one
+/// unknown per node and one pattern (the weighted graph Laplacian's): a Hermitian one for the
+/// rotations, and a real one with two right-hand sides (x, y) for the translations.
+fn chordal(graph: &mut PoseGraph, order: &NodeOrder) -> Result<(), NotPositiveDefinite> {
     let n = graph.poses.len();
     if n < 2 {
         graph.poses.iter_mut().for_each(|p| *p = Pose2::IDENTITY);
         return Ok(());
     }
-    // Unknowns: 2 per node except node 0; index of node i's first unknown is 2(i − 1).
-    let var = |i: usize| if i == 0 { None } else { Some(2 * (i - 1)) };
-    let dim = 2 * (n - 1);
+    // Node 0 stays at the origin with heading 0; node i's unknown is i − 1.
+    let var = |i: usize| i.checked_sub(1);
+    let dim = n - 1;
+    let mut entries = Vec::with_capacity(3 * graph.edges.len());
+    for e in &graph.edges {
+        let (vi, vj) = (var(e.from), var(e.to));
+        entries.extend(vi.map(|i| (i, i)));
+        entries.extend(vj.map(|j| (j, j)));
+        if let (Some(i), Some(j)) = (vi, vj) {
+            entries.push((i.max(j), i.min(j)));
+        }
+    }
+    let kept: Vec<usize> = (1..n).collect();
+    let mut positions = SparsePattern::<f64>::ordered(1, &entries, &order.places_of(&kept));
+    let mut rotations: SparsePattern<c64> = positions.sharing();
 
-    // Rotations. Residual r_j − M r_i with M = R(θ_z); r_0 = (1, 0) moves to the right side.
-    let mut triplets = Vec::new();
-    let mut rhs = vec![0.0; dim];
+    // Rotations: the residual r_j − z r_i, z = e^{iθ_z}, is linear in the unknowns; its
+    // normal matrix is Hermitian, A_jj = A_ii = κ, A_ji = −κ z.
+    let mut values = Vec::with_capacity(entries.len());
+    let mut rhs = vec![c64::new(0.0, 0.0); dim];
     for e in &graph.edges {
         let kappa = e.information[(2, 2)];
         let (s, c) = e.measurement.theta.sin_cos();
-        let m = [[c, -s], [s, c]];
-        let (vi, vj) = (var(e.from), var(e.to));
-        add_pair_blocks(
-            &mut triplets,
-            &mut rhs,
-            vi,
-            vj,
-            kappa,
-            m,
-            [1.0, 0.0],
-            [0.0, 0.0],
-        );
+        let z = c64::new(c, s);
+        match (var(e.from), var(e.to)) {
+            (Some(i), Some(j)) => {
+                let k = c64::new(kappa, 0.0);
+                let below = if j > i { -z * kappa } else { -z.conj() * kappa };
+                values.extend([k, k, below]);
+            }
+            // r_0 = 1 fixed: r_j − z, or 1 − z r_i.
+            (None, Some(j)) => {
+                values.push(c64::new(kappa, 0.0));
+                rhs[j] += z * kappa;
+            }
+            (Some(i), None) => {
+                values.push(c64::new(kappa, 0.0));
+                rhs[i] += z.conj() * kappa;
+            }
+            (None, None) => {}
+        }
     }
-    let r = solve_once(dim, 2, &triplets, &rhs)?;
-    let theta = |i: usize| var(i).map_or(0.0, |v| r[v + 1].atan2(r[v]));
-    let angles: Vec<f64> = (0..n).map(theta).collect();
+    rotations.factorize(&values)?;
+    let r = rotations.solve(&rhs);
+    let angles: Vec<f64> = (0..n)
+        .map(|i| var(i).map_or(0.0, |v| r[v].im.atan2(r[v].re)))
+        .collect();
 
-    // Translations: residual t_j − t_i − R_i t_z, t_0 = 0.
-    triplets.clear();
-    rhs.iter_mut().for_each(|x| *x = 0.0);
+    // Translations: the residual t_j − t_i − d, d = R_i t_z, t_0 = 0; x and y apart.
+    let mut values = Vec::with_capacity(entries.len());
+    let mut rhs = vec![0.0; 2 * dim];
     for e in &graph.edges {
         let info = e.information.fixed_view::<2, 2>(0, 0).into_owned();
         let tau = info
             .try_inverse()
             .map_or(0.0, |cov| 2.0 / cov.trace().max(f64::MIN_POSITIVE));
         let (s, c) = angles[e.from].sin_cos();
-        let rotated = [
+        let d = [
             c * e.measurement.x - s * e.measurement.y,
             s * e.measurement.x + c * e.measurement.y,
         ];
         let (vi, vj) = (var(e.from), var(e.to));
-        add_pair_blocks(
-            &mut triplets,
-            &mut rhs,
-            vi,
-            vj,
-            tau,
-            [[1.0, 0.0], [0.0, 1.0]],
-            [0.0, 0.0],
-            rotated,
-        );
+        for (v, sign) in [(vi, -1.0), (vj, 1.0)] {
+            if let Some(v) = v {
+                values.push(tau);
+                rhs[v] += sign * tau * d[0];
+                rhs[dim + v] += sign * tau * d[1];
+            }
+        }
+        if vi.is_some() && vj.is_some() {
+            values.push(-tau);
+        }
     }
-    let t = solve_once(dim, 2, &triplets, &rhs)?;
+    positions.factorize(&values)?;
+    let t = positions.solve_columns(&rhs, 2);
     for (i, pose) in graph.poses.iter_mut().enumerate() {
         *pose = match var(i) {
             None => Pose2::IDENTITY,
-            Some(v) => Pose2::new(t[v], t[v + 1], angles[i]),
+            Some(v) => Pose2::new(t[v], t[dim + v], angles[i]),
         };
     }
     Ok(())
-}
-
-/// Normal-equation terms of w |x_j − M x_i − d|² over 2-vectors, with x_0 = `fixed` (node 0
-/// has no unknowns): blocks in lower-triangle triplets, right-hand side in `rhs`.
-#[allow(clippy::too_many_arguments)]
-fn add_pair_blocks(
-    triplets: &mut Vec<(usize, usize, f64)>,
-    rhs: &mut [f64],
-    vi: Option<usize>,
-    vj: Option<usize>,
-    w: f64,
-    m: [[f64; 2]; 2],
-    fixed: [f64; 2],
-    d: [f64; 2],
-) {
-    // Residual = x_j − M x_i − d; with x_i or x_j fixed, its part joins the constant.
-    let mx_fixed = [
-        m[0][0] * fixed[0] + m[0][1] * fixed[1],
-        m[1][0] * fixed[0] + m[1][1] * fixed[1],
-    ];
-    match (vi, vj) {
-        (Some(i), Some(j)) => {
-            // d/dx_j: I; d/dx_i: −M. H_jj = wI, H_ii = w MᵀM = wI, H_ji = −wM.
-            for k in 0..2 {
-                triplets.push((j + k, j + k, w));
-                triplets.push((i + k, i + k, w));
-            }
-            for (r, m_row) in m.iter().enumerate() {
-                for (c, m_rc) in m_row.iter().enumerate() {
-                    let (row, col, v) = if j > i {
-                        (j + r, i + c, -w * m_rc)
-                    } else {
-                        (i + c, j + r, -w * m_rc)
-                    };
-                    triplets.push((row, col, v));
-                }
-            }
-            for k in 0..2 {
-                rhs[j + k] += w * d[k];
-                rhs[i + k] -= w * (m[0][k] * d[0] + m[1][k] * d[1]);
-            }
-        }
-        (None, Some(j)) => {
-            // x_i fixed: residual x_j − (M x_fixed + d).
-            for k in 0..2 {
-                triplets.push((j + k, j + k, w));
-                rhs[j + k] += w * (mx_fixed[k] + d[k]);
-            }
-        }
-        (Some(i), None) => {
-            // x_j fixed: residual −M x_i + (x_fixed − d); Mᵀ M = I.
-            for k in 0..2 {
-                triplets.push((i + k, i + k, w));
-                let g = [fixed[0] - d[0], fixed[1] - d[1]];
-                rhs[i + k] += w * (m[0][k] * g[0] + m[1][k] * g[1]);
-            }
-        }
-        (None, None) => {}
-    }
 }
 
 #[cfg(test)]
@@ -319,6 +306,59 @@ mod tests {
                     "{init:?}"
                 );
             }
+        }
+    }
+
+    /// A noise-free network of many nodes, odometry and closures, where the order of the
+    /// unknowns is far from the nodes' own.
+    #[test]
+    fn chordal_recovers_a_noise_free_network() {
+        let mut rng = crate::splitmix::SplitMix::new(3);
+        let n = 60;
+        let truth: Vec<Pose2> = (0..n)
+            .map(|_| {
+                Pose2::new(
+                    rng.uniform(-20.0, 20.0),
+                    rng.uniform(-20.0, 20.0),
+                    rng.uniform(-3.0, 3.0),
+                )
+            })
+            .collect();
+        let mut g = PoseGraph {
+            poses: vec![Pose2::IDENTITY; n],
+            ..Default::default()
+        };
+        let link = |i: usize, j: usize, g: &mut PoseGraph| {
+            g.edges.push(RelativeEdge {
+                from: i,
+                to: j,
+                measurement: truth[i].between(&truth[j]),
+                information: Matrix3::from_diagonal(&nalgebra::Vector3::new(10.0, 20.0, 100.0)),
+                kind: EdgeKind::Odometry,
+                robust: Robust::None,
+            });
+        };
+        for i in 0..n - 1 {
+            link(i, i + 1, &mut g);
+        }
+        for _ in 0..40 {
+            let (i, j) = (
+                (rng.unit() * n as f64) as usize,
+                (rng.unit() * n as f64) as usize,
+            );
+            if i != j {
+                link(i, j, &mut g);
+            }
+        }
+        initialize(&mut g, Init::Chordal).unwrap();
+        let origin = truth[0];
+        for (p, t) in g.poses.iter().zip(&truth) {
+            let t = origin.between(t);
+            assert!(
+                (p.x - t.x).abs() < 1e-6 && (p.y - t.y).abs() < 1e-6,
+                "{p:?} vs {t:?}"
+            );
+            assert!(crate::wrap_angle(p.theta - t.theta).abs() < 1e-9);
         }
     }
 

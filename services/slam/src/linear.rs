@@ -1,8 +1,12 @@
-//! Sparse symmetric positive definite systems, solved with faer's supernodal sparse Cholesky.
-//! The fill-reducing ordering and the symbolic factorization (elimination tree, supernodes)
-//! are computed once per sparsity pattern. The pattern is stored already permuted, and every
-//! value's place in it is known, so a numeric factorization only scatters the values and
-//! factors: no sorting, no permuting and no allocation per factorization.
+//! Sparse symmetric (Hermitian) positive definite systems, solved with faer's supernodal
+//! sparse Cholesky.
+//!
+//! The work that depends only on which unknowns meet is done once: the fill-reducing order
+//! once per graph, on its nodes ([`NodeOrder`]), whatever the unknowns per node; the symbolic
+//! factorization (elimination tree, supernodes) once per pattern, shared by every system on it
+//! ([`SparsePattern::sharing`]). The pattern is stored already permuted, and every value's
+//! place in it is known, so a numeric factorization only scatters the values and factors: no
+//! sorting, no permuting and no allocation per factorization.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
@@ -12,32 +16,183 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::linalg::{SupernodalThreshold, amd};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+use faer::traits::ComplexField;
 use faer::{Conj, MatMut, Par, Side};
+use std::ops::AddAssign;
+use std::sync::Arc;
 
-/// A fixed sparsity pattern (lower triangle, duplicates summed) with its symbolic Cholesky,
-/// and the storage of the last numeric factor.
-pub struct SparsePattern {
+pub use faer::c64;
+
+/// A fill-reducing order of a graph's nodes: approximate minimum degree on the graph whose
+/// edges are the pairs of nodes that share a measurement. Every system on that graph (a
+/// pose's x, y, θ; a rotation's cosine and sine; a position) is ordered by it, its unknowns
+/// kept together; a system that holds some nodes fixed keeps the others in the same order,
+/// which fills in no more than the whole graph does.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NodeOrder {
+    /// `place[i]`: the place of node i in the order.
+    place: Vec<usize>,
+}
+
+impl NodeOrder {
+    /// The order of `nodes` nodes linked by `links` (either way round, repeats allowed).
+    pub fn new(nodes: usize, links: impl IntoIterator<Item = (usize, usize)>) -> NodeOrder {
+        let mut pairs: Vec<(usize, usize)> = links
+            .into_iter()
+            .filter(|&(a, b)| a != b)
+            .map(|(a, b)| (a.min(b), a.max(b)))
+            .collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        // The strict lower triangle: AMD orders A + Aᵀ and ignores the diagonal.
+        let columns = CompressedColumns::of_pairs(nodes, &pairs);
+        let graph =
+            SymbolicSparseColMat::new_checked(nodes, nodes, columns.start, None, columns.rows);
+        let (mut order, mut place) = (vec![0usize; nodes], vec![0usize; nodes]);
+        let mut buffer = MemBuffer::new(amd::order_maybe_unsorted_scratch::<usize>(
+            nodes,
+            graph.compute_nnz(),
+        ));
+        amd::order_maybe_unsorted(
+            &mut order,
+            &mut place,
+            graph.as_ref(),
+            amd::Control::default(),
+            MemStack::new(&mut buffer),
+        )
+        .expect("AMD ordering of a valid pattern");
+        NodeOrder { place }
+    }
+
+    /// Nodes ordered.
+    pub fn len(&self) -> usize {
+        self.place.len()
+    }
+
+    /// True for the order of no nodes.
+    pub fn is_empty(&self) -> bool {
+        self.place.is_empty()
+    }
+
+    /// The places, in this order, of the nodes `kept` (each once, all below [`Self::len`]) among
+    /// themselves: 0..kept.len().
+    pub fn places_of(&self, kept: &[usize]) -> Vec<usize> {
+        let mut at_place = vec![usize::MAX; self.place.len()];
+        for (k, &node) in kept.iter().enumerate() {
+            at_place[self.place[node]] = k;
+        }
+        let mut places = vec![0; kept.len()];
+        for (rank, &k) in at_place.iter().filter(|&&k| k != usize::MAX).enumerate() {
+            places[k] = rank;
+        }
+        places
+    }
+}
+
+/// A block pattern's off-diagonal half, compressed: block column `c` holds the block rows
+/// `rows[start[c]..start[c + 1]]`, increasing.
+struct CompressedColumns {
+    start: Vec<usize>,
+    rows: Vec<usize>,
+}
+
+impl CompressedColumns {
+    /// From sorted, distinct `(column, row)` pairs.
+    fn of_pairs(columns: usize, pairs: &[(usize, usize)]) -> CompressedColumns {
+        let mut start = vec![0; columns + 1];
+        for &(column, _) in pairs {
+            start[column + 1] += 1;
+        }
+        for c in 0..columns {
+            start[c + 1] += start[c];
+        }
+        CompressedColumns {
+            start,
+            rows: pairs.iter().map(|&(_, row)| row).collect(),
+        }
+    }
+
+    fn rows_of(&self, column: usize) -> &[usize] {
+        &self.rows[self.start[column]..self.start[column + 1]]
+    }
+
+    /// The transpose: column `c` holds the columns whose rows hold `c`, increasing (the
+    /// columns are walked in order, so no sort is needed).
+    fn transposed(&self) -> CompressedColumns {
+        let columns = self.start.len() - 1;
+        let mut start = vec![0; columns + 1];
+        for &row in &self.rows {
+            start[row + 1] += 1;
+        }
+        for c in 0..columns {
+            start[c + 1] += start[c];
+        }
+        let mut next = start.clone();
+        let mut rows = vec![0; self.rows.len()];
+        for column in 0..columns {
+            for &row in self.rows_of(column) {
+                rows[next[row]] = column;
+                next[row] += 1;
+            }
+        }
+        CompressedColumns { start, rows }
+    }
+}
+
+/// What a pattern's systems share: its order, its values' places and its symbolic
+/// factorization.
+struct Shape {
     n: usize,
-    entries: Vec<(usize, usize)>,
     /// `inverse[i]`: the place of unknown i in the fill-reducing order.
     inverse: Vec<usize>,
     /// The lower triangle of the permuted matrix.
     pattern: SymbolicSparseColMat<usize>,
-    /// `slot[k]`: where the value of entry k goes in `values`.
+    /// `slot[k]`: where the value of entry k goes in the values.
     slot: Vec<usize>,
-    values: Vec<f64>,
+    /// `transposed[k]`: entry k lies above the diagonal once permuted, so its value goes in
+    /// as the lower triangle's conjugate (a complex matrix is Hermitian).
+    transposed: Vec<bool>,
     symbolic: SymbolicCholesky<usize>,
-    factor: Vec<f64>,
+}
+
+impl Shape {
+    /// The permuted lower triangle's values from the values in the order given.
+    fn scatter<T: ComplexField + Copy + Default + AddAssign>(&self, values: &[T], out: &mut [T]) {
+        out.fill(T::default());
+        if T::IS_REAL {
+            for (&slot, &value) in self.slot.iter().zip(values) {
+                out[slot] += value;
+            }
+        } else {
+            for ((&slot, &value), &transposed) in self.slot.iter().zip(values).zip(&self.transposed)
+            {
+                out[slot] += if transposed {
+                    T::conj_impl(&value)
+                } else {
+                    value
+                };
+            }
+        }
+    }
+}
+
+/// A fixed sparsity pattern (lower triangle, duplicates summed) with its symbolic Cholesky,
+/// and the storage of the last numeric factor of a system on it, of real (`f64`) or complex
+/// Hermitian ([`c64`]) values.
+pub struct SparsePattern<T = f64> {
+    shape: Arc<Shape>,
+    values: Vec<T>,
+    factor: Vec<T>,
     factored: bool,
     /// Scratch of the numeric factorization and of a one-column solve.
     workspace: MemBuffer,
 }
 
-impl std::fmt::Debug for SparsePattern {
+impl<T> std::fmt::Debug for SparsePattern<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SparsePattern")
-            .field("n", &self.n)
-            .field("entries", &self.entries.len())
+            .field("n", &self.shape.n)
+            .field("values", &self.shape.slot.len())
             .field("factor_len", &self.factor.len())
             .finish()
     }
@@ -47,86 +202,104 @@ impl std::fmt::Debug for SparsePattern {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct NotPositiveDefinite;
 
-impl SparsePattern {
-    /// The pattern of an `n`×`n` matrix whose lower-triangle entries are `(row, col)` pairs,
-    /// in the order their values will be given; duplicates are summed.
-    pub fn new(n: usize, entries: &[(usize, usize)]) -> SparsePattern {
-        SparsePattern::new_blocked(n, entries, 1)
-    }
-
-    /// Like [`Self::new`] for unknowns in blocks of `block` (a pose's x, y, θ). The pattern
-    /// is built on the graph of blocks, `block²` times smaller: each block that holds an entry
-    /// is kept whole, and the fill-reducing ordering keeps each block's unknowns together.
-    pub fn new_blocked(n: usize, entries: &[(usize, usize)], block: usize) -> SparsePattern {
-        assert!(
-            block > 0 && n.is_multiple_of(block),
-            "unknowns come in whole blocks"
-        );
-        let blocks = n / block;
-        let original = block_columns(
-            blocks,
-            entries.iter().map(|&(row, col)| {
-                debug_assert!(row >= col && row < n, "lower triangle only");
-                (row / block, col / block)
-            }),
-        );
-        let place = block_amd(&original);
-        let permuted = block_columns(
-            blocks,
-            original.iter().enumerate().flat_map(|(col, rows)| {
-                let place = &place;
-                rows.iter().map(move |&row| {
-                    let (a, b) = (place[row], place[col]);
-                    (a.max(b), a.min(b))
-                })
-            }),
-        );
-        let inverse: Vec<usize> = (0..n)
-            .map(|i| place[i / block] * block + i % block)
+impl<T: ComplexField + Copy + Default + AddAssign> SparsePattern<T> {
+    /// The pattern of a matrix of `block_place.len()` blocks of `block` unknowns (a pose's
+    /// x, y, θ), block `b` at place `block_place[b]` of the elimination order
+    /// ([`NodeOrder::places_of`]). `nonzero` lists its nonzero blocks, `(row, col)` with
+    /// `row ≥ col` (duplicates summed), in the order their values will be given: a diagonal
+    /// block its lower triangle row by row (`block·(block + 1)/2` values), any other block all
+    /// its `block²` values row by row. The pattern is built on the graph of blocks, `block²`
+    /// times smaller than the scalar one, and each block that holds an entry is kept whole.
+    pub fn ordered(
+        block: usize,
+        nonzero: &[(usize, usize)],
+        block_place: &[usize],
+    ) -> SparsePattern<T> {
+        assert!(block > 0, "blocks of one unknown or more");
+        let blocks = block_place.len();
+        let n = blocks * block;
+        // The off-diagonal blocks, permuted, as (column, row) with column < row.
+        let mut pairs: Vec<(usize, usize)> = nonzero
+            .iter()
+            .filter(|&&(row, col)| row != col)
+            .map(|&(row, col)| {
+                debug_assert!(row > col && row < blocks, "lower triangle only");
+                let (a, b) = (block_place[row], block_place[col]);
+                (a.min(b), a.max(b))
+            })
             .collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        let lower = CompressedColumns::of_pairs(blocks, &pairs);
 
         // The lower triangle, column by column: the rest of the diagonal block, then each
         // block below it whole.
-        let (mut col_ptr, mut row_idx) = (vec![0], Vec::new());
-        for (col, rows) in permuted.iter().enumerate() {
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        col_ptr.push(0);
+        let mut row_idx = Vec::with_capacity(blocks * block * block + pairs.len() * block * block);
+        for col in 0..blocks {
             for d in 0..block {
                 row_idx.extend(col * block + d..(col + 1) * block);
-                for &row in &rows[1..] {
+                for &row in lower.rows_of(col) {
                     row_idx.extend(row * block..(row + 1) * block);
                 }
                 col_ptr.push(row_idx.len());
             }
         }
-        let slot = entries
+        let inverse: Vec<usize> = (0..n)
+            .map(|i| block_place[i / block] * block + i % block)
+            .collect();
+
+        // Each value's place in the permuted lower triangle, and whether the permutation put
+        // it above the diagonal (then it goes in transposed).
+        let values = nonzero
             .iter()
             .map(|&(row, col)| {
-                let (a, b) = (inverse[row], inverse[col]);
-                let (hi, lo) = (a.max(b), a.min(b));
-                let (hi_block, lo_block) = (hi / block, lo / block);
-                let start = col_ptr[lo];
-                if hi_block == lo_block {
-                    start + hi - lo
+                if row == col {
+                    block * (block + 1) / 2
                 } else {
-                    let k = permuted[lo_block][1..]
-                        .binary_search(&hi_block)
-                        .expect("every entry's block is in the pattern");
-                    start + block - lo % block + k * block + hi % block
+                    block * block
                 }
             })
-            .collect();
+            .sum();
+        let mut slot = Vec::with_capacity(values);
+        let mut transposed = Vec::with_capacity(values);
+        for &(row, col) in nonzero {
+            let (a, b) = (block_place[row], block_place[col]);
+            if row == col {
+                for r in 0..block {
+                    slot.extend((0..=r).map(|c| col_ptr[a * block + c] + r - c));
+                }
+                transposed.resize(slot.len(), false);
+                continue;
+            }
+            let (low, high) = (a.min(b), a.max(b));
+            let k = lower
+                .rows_of(low)
+                .binary_search(&high)
+                .expect("every nonzero block is in the pattern");
+            // Below the diagonal, the value of (high + i, low + j) sits in column low + j,
+            // after the rest of its diagonal block and k whole blocks.
+            let place = |i: usize, j: usize| col_ptr[low * block + j] + block - j + k * block + i;
+            for r in 0..block {
+                if a > b {
+                    slot.extend((0..block).map(|c| place(r, c)));
+                } else {
+                    slot.extend((0..block).map(|c| place(c, r)));
+                }
+            }
+            transposed.resize(slot.len(), a < b);
+        }
 
         // faer's symbolic analysis with the identity ordering reads the upper triangle
         // (whatever side it is told): the transpose, the blocks above the diagonal first.
-        let mut above: Vec<Vec<usize>> = vec![Vec::new(); blocks];
-        for (col, rows) in permuted.iter().enumerate() {
-            for &row in &rows[1..] {
-                above[row].push(col);
-            }
-        }
-        let (mut upper_ptr, mut upper_idx) = (vec![0], Vec::new());
-        for (col, rows) in above.iter().enumerate() {
+        let upper_blocks = lower.transposed();
+        let mut upper_ptr = Vec::with_capacity(n + 1);
+        upper_ptr.push(0);
+        let mut upper_idx = Vec::with_capacity(row_idx.len());
+        for col in 0..blocks {
             for d in 0..block {
-                for &row in rows {
+                for &row in upper_blocks.rows_of(col) {
                     upper_idx.extend(row * block..(row + 1) * block);
                 }
                 upper_idx.extend(col * block..=col * block + d);
@@ -134,10 +307,16 @@ impl SparsePattern {
             }
         }
         let upper = SymbolicSparseColMat::new_checked(n, n, upper_ptr, None, upper_idx);
-        // Pose graphs fill in: the supernodal (blocked, dense-kernel) factorization is several
-        // times faster than the simplicial one faer's heuristic picks for them.
+        // Blocks of poses fill in: there the supernodal (blocked, dense-kernel)
+        // factorization is several times faster than the simplicial one faer's heuristic
+        // picks. One unknown per node (the chordal initialization's systems) factors faster
+        // simplicial (manhattan 4.5 against 6.4 ms, city10000 22 against 24 ms).
         let params = CholeskySymbolicParams {
-            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            supernodal_flop_ratio_threshold: if block > 1 {
+                SupernodalThreshold::FORCE_SUPERNODAL
+            } else {
+                SupernodalThreshold::FORCE_SIMPLICIAL
+            },
             ..Default::default()
         };
         let symbolic = factorize_symbolic_cholesky(
@@ -147,46 +326,58 @@ impl SparsePattern {
             params,
         )
         .expect("symbolic Cholesky of a valid pattern");
-        let workspace = MemBuffer::new(StackReq::any_of(&[
-            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
-        ]));
-        SparsePattern {
+        SparsePattern::on(Arc::new(Shape {
             n,
-            entries: entries.to_vec(),
             inverse,
-            values: vec![0.0; row_idx.len()],
             pattern: SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx),
             slot,
-            factor: vec![0.0; symbolic.len_val()],
+            transposed,
             symbolic,
+        }))
+    }
+
+    fn on(shape: Arc<Shape>) -> SparsePattern<T> {
+        let workspace = MemBuffer::new(StackReq::any_of(&[
+            shape
+                .symbolic
+                .factorize_numeric_llt_scratch::<T>(Par::Seq, Default::default()),
+            shape.symbolic.solve_in_place_scratch::<T>(1, Par::Seq),
+        ]));
+        SparsePattern {
+            factor: vec![T::default(); shape.symbolic.len_val()],
+            values: vec![T::default(); shape.pattern.compute_nnz()],
+            shape,
             factored: false,
             workspace,
         }
     }
 
-    /// The matrix's dimension (rows = columns).
-    pub fn dim(&self) -> usize {
-        self.n
+    /// Another system on the same pattern, of values of type `U`: the order and the symbolic
+    /// factorization are shared, the values and the factor its own.
+    pub fn sharing<U: ComplexField + Copy + Default + AddAssign>(&self) -> SparsePattern<U> {
+        SparsePattern::on(Arc::clone(&self.shape))
     }
 
-    /// The `(row, col)` entries, in the order values are given.
-    pub fn entries(&self) -> &[(usize, usize)] {
-        &self.entries
+    /// The matrix's dimension (rows = columns).
+    pub fn dim(&self) -> usize {
+        self.shape.n
     }
 
     /// Factorizes the matrix with these `values` (one per entry given to [`Self::new`]),
-    /// keeping the factor for [`Self::solve`].
-    pub fn factorize(&mut self, values: &[f64]) -> Result<(), NotPositiveDefinite> {
-        assert_eq!(values.len(), self.slot.len(), "one value per pattern entry");
-        self.values.fill(0.0);
-        for (&slot, &value) in self.slot.iter().zip(values) {
-            self.values[slot] += value;
-        }
-        let matrix = SparseColMatRef::new(self.pattern.as_ref(), &self.values);
+    /// keeping the factor for [`Self::solve`]. A complex matrix is Hermitian: an entry
+    /// `(row, col)` below the diagonal holds `A[row][col]`, and `A[col][row]` is its conjugate.
+    pub fn factorize(&mut self, values: &[T]) -> Result<(), NotPositiveDefinite> {
+        assert_eq!(
+            values.len(),
+            self.shape.slot.len(),
+            "one value per pattern entry"
+        );
+        self.shape.scatter(values, &mut self.values);
+        let matrix = SparseColMatRef::new(self.shape.pattern.as_ref(), &self.values);
         self.factored = false;
-        self.symbolic
-            .factorize_numeric_llt::<f64>(
+        self.shape
+            .symbolic
+            .factorize_numeric_llt::<T>(
                 &mut self.factor,
                 matrix,
                 Side::Lower,
@@ -204,7 +395,7 @@ impl SparsePattern {
     ///
     /// # Panics
     /// If the last [`Self::factorize`] did not succeed.
-    pub fn solve(&mut self, b: &[f64]) -> Vec<f64> {
+    pub fn solve(&mut self, b: &[T]) -> Vec<T> {
         self.solve_columns(b, 1)
     }
 
@@ -213,31 +404,33 @@ impl SparsePattern {
     ///
     /// # Panics
     /// If the last [`Self::factorize`] did not succeed, or `b` is not `columns` columns.
-    pub fn solve_columns(&mut self, b: &[f64], columns: usize) -> Vec<f64> {
+    pub fn solve_columns(&mut self, b: &[T], columns: usize) -> Vec<T> {
         assert!(self.factored, "solve needs a successful factorize");
-        assert_eq!(b.len(), self.n * columns, "columns of dim() values");
-        let mut permuted = vec![0.0; b.len()];
-        for (out, col) in permuted.chunks_mut(self.n).zip(b.chunks(self.n)) {
-            for (&place, &value) in self.inverse.iter().zip(col) {
+        let n = self.shape.n;
+        assert_eq!(b.len(), n * columns, "columns of dim() values");
+        let mut permuted = vec![T::default(); b.len()];
+        for (out, col) in permuted.chunks_mut(n).zip(b.chunks(n)) {
+            for (&place, &value) in self.shape.inverse.iter().zip(col) {
                 out[place] = value;
             }
         }
         // One column fits the kept workspace; more need their own scratch.
         let mut wide = (columns > 1).then(|| {
             MemBuffer::new(
-                self.symbolic
-                    .solve_in_place_scratch::<f64>(columns, Par::Seq),
+                self.shape
+                    .symbolic
+                    .solve_in_place_scratch::<T>(columns, Par::Seq),
             )
         });
-        LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(
+        LltRef::new(&self.shape.symbolic, &self.factor).solve_in_place_with_conj(
             Conj::No,
-            MatMut::from_column_major_slice_mut(&mut permuted, self.n, columns),
+            MatMut::from_column_major_slice_mut(&mut permuted, n, columns),
             Par::Seq,
             MemStack::new(wide.as_mut().unwrap_or(&mut self.workspace)),
         );
-        let mut x = vec![0.0; b.len()];
-        for (out, col) in x.chunks_mut(self.n).zip(permuted.chunks(self.n)) {
-            for (o, &place) in out.iter_mut().zip(&self.inverse) {
+        let mut x = vec![T::default(); b.len()];
+        for (out, col) in x.chunks_mut(n).zip(permuted.chunks(n)) {
+            for (o, &place) in out.iter_mut().zip(&self.shape.inverse) {
                 *o = col[place];
             }
         }
@@ -245,85 +438,190 @@ impl SparsePattern {
     }
 }
 
-/// The lower triangle of a block pattern from its `(row, col)` block pairs (duplicates
-/// allowed): for each block column, the diagonal block first, then the block rows below it
-/// in increasing order.
-fn block_columns(blocks: usize, pairs: impl Iterator<Item = (usize, usize)>) -> Vec<Vec<usize>> {
-    let mut columns: Vec<Vec<usize>> = (0..blocks).map(|col| vec![col]).collect();
-    for (row, col) in pairs {
-        // The entries of one block come together: skip the repeats cheaply here.
-        if row != col && columns[col].last() != Some(&row) {
-            columns[col].push(row);
+impl SparsePattern<f64> {
+    /// A x for the symmetric matrix of these `values` (in the order given, as to
+    /// [`Self::factorize`]).
+    pub fn multiply(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
+        assert_eq!(
+            values.len(),
+            self.shape.slot.len(),
+            "one value per pattern entry"
+        );
+        let shape = &self.shape;
+        let mut lower = vec![0.0; shape.pattern.compute_nnz()];
+        shape.scatter(values, &mut lower);
+        let mut permuted = vec![0.0; shape.n];
+        for (&place, &value) in shape.inverse.iter().zip(x) {
+            permuted[place] = value;
         }
+        let x = permuted;
+        let mut y = vec![0.0; shape.n];
+        let rows = shape.pattern.row_idx();
+        for col in 0..shape.n {
+            for k in shape.pattern.col_range(col) {
+                let (row, value) = (rows[k], lower[k]);
+                y[row] += value * x[col];
+                if row != col {
+                    y[col] += value * x[row];
+                }
+            }
+        }
+        shape.inverse.iter().map(|&place| y[place]).collect()
     }
-    for rows in &mut columns {
-        rows[1..].sort_unstable();
-        rows.dedup();
-    }
-    columns
-}
-
-/// Approximate minimum degree ordering of a block pattern (as [`block_columns`] gives it):
-/// the place of each block in the order.
-fn block_amd(columns: &[Vec<usize>]) -> Vec<usize> {
-    let blocks = columns.len();
-    let mut col_ptr = Vec::with_capacity(blocks + 1);
-    col_ptr.push(0);
-    let mut row_idx = Vec::new();
-    for rows in columns {
-        row_idx.extend_from_slice(rows);
-        col_ptr.push(row_idx.len());
-    }
-    let graph = SymbolicSparseColMat::new_checked(blocks, blocks, col_ptr, None, row_idx);
-    let (mut order, mut place) = (vec![0usize; blocks], vec![0usize; blocks]);
-    let mut buffer = MemBuffer::new(amd::order_maybe_unsorted_scratch::<usize>(
-        blocks,
-        graph.compute_nnz(),
-    ));
-    amd::order_maybe_unsorted(
-        &mut order,
-        &mut place,
-        graph.as_ref(),
-        amd::Control::default(),
-        MemStack::new(&mut buffer),
-    )
-    .expect("AMD ordering of a valid pattern");
-    place
-}
-
-/// Solves A x = b once, for A given as lower-triangle triplets (duplicates summed), with
-/// unknowns in blocks of `block`.
-pub fn solve_once(
-    n: usize,
-    block: usize,
-    triplets: &[(usize, usize, f64)],
-    b: &[f64],
-) -> Result<Vec<f64>, NotPositiveDefinite> {
-    let entries: Vec<(usize, usize)> = triplets.iter().map(|&(r, c, _)| (r, c)).collect();
-    let values: Vec<f64> = triplets.iter().map(|t| t.2).collect();
-    let mut pattern = SparsePattern::new_blocked(n, &entries, block);
-    pattern.factorize(&values)?;
-    Ok(pattern.solve(b))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// Solves A x = b once, for A given as nonzero blocks with their values (as
+    /// [`SparsePattern::ordered`] takes them), ordered by AMD on its blocks; x and A x.
+    fn solve_blocks(
+        block: usize,
+        nonzero: &[((usize, usize), Vec<f64>)],
+        b: &[f64],
+    ) -> Result<(Vec<f64>, Vec<f64>), NotPositiveDefinite> {
+        let pairs: Vec<(usize, usize)> = nonzero.iter().map(|&(pair, _)| pair).collect();
+        let order = NodeOrder::new(b.len() / block, pairs.iter().copied());
+        let mut pattern: SparsePattern = SparsePattern::ordered(
+            block,
+            &pairs,
+            &order.places_of(&(0..order.len()).collect::<Vec<_>>()),
+        );
+        let values: Vec<f64> = nonzero
+            .iter()
+            .flat_map(|(_, v)| v.iter().copied())
+            .collect();
+        pattern.factorize(&values)?;
+        let x = pattern.solve(b);
+        let product = pattern.multiply(&values, &x);
+        Ok((x, product))
+    }
+
     #[test]
     fn solves_a_small_system_with_duplicates() {
         // [[4, 1], [1, 3]] given with the (0,0) entry split in two.
-        let x = solve_once(
-            2,
+        let x = solve_blocks(
             1,
-            &[(0, 0, 3.0), (0, 0, 1.0), (1, 0, 1.0), (1, 1, 3.0)],
+            &[
+                ((0, 0), vec![3.0]),
+                ((0, 0), vec![1.0]),
+                ((1, 0), vec![1.0]),
+                ((1, 1), vec![3.0]),
+            ],
             &[1.0, 2.0],
         )
-        .unwrap();
+        .unwrap()
+        .0;
         assert!((4.0 * x[0] + x[1] - 1.0).abs() < 1e-12 && (x[0] + 3.0 * x[1] - 2.0).abs() < 1e-12);
         assert_eq!(
-            solve_once(1, 1, &[(0, 0, -1.0)], &[1.0]).err(),
+            solve_blocks(1, &[((0, 0), vec![-1.0])], &[1.0]).err(),
             Some(NotPositiveDefinite)
         );
+    }
+
+    /// A Hermitian system on a real one's pattern, its unknowns in both orders (the entry
+    /// below the diagonal goes in conjugated when the order puts it above).
+    #[test]
+    fn a_hermitian_system_shares_the_real_ones_pattern() {
+        // [[2, 1 − i], [1 + i, 3]]: the entry below the diagonal is A[1][0] = 1 + i.
+        for places in [[0, 1], [1, 0]] {
+            let real: SparsePattern = SparsePattern::ordered(1, &[(0, 0), (1, 0), (1, 1)], &places);
+            let mut complex: SparsePattern<c64> = real.sharing();
+            let a10 = c64::new(1.0, 1.0);
+            complex
+                .factorize(&[c64::new(2.0, 0.0), a10, c64::new(3.0, 0.0)])
+                .unwrap();
+            let b = [c64::new(1.0, 2.0), c64::new(-1.0, 0.5)];
+            let x = complex.solve(&b);
+            let row0 = c64::new(2.0, 0.0) * x[0] + a10.conj() * x[1];
+            let row1 = a10 * x[0] + c64::new(3.0, 0.0) * x[1];
+            assert!(
+                (row0 - b[0]).norm() < 1e-12 && (row1 - b[1]).norm() < 1e-12,
+                "places {places:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_subset_of_nodes_keeps_their_order() {
+        // A path 0 – 1 – 2 – 3 – 4: whatever AMD picks, the kept nodes keep its order.
+        let order = NodeOrder::new(5, (0..4).map(|i| (i, i + 1)));
+        let kept = [4, 1, 3];
+        let places = order.places_of(&kept);
+        let mut sorted = places.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, vec![0, 1, 2]);
+        for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+            assert_eq!(
+                places[a] < places[b],
+                order.place[kept[a]] < order.place[kept[b]]
+            );
+        }
+    }
+
+    /// Random sparse block systems against the dense solve of the same matrix.
+    #[test]
+    fn block_systems_agree_with_dense_solves() {
+        let mut rng = crate::splitmix::SplitMix::new(7);
+        for block in [1usize, 2, 3] {
+            let blocks = 12;
+            let n = blocks * block;
+            let mut dense = nalgebra::DMatrix::<f64>::zeros(n, n);
+            let mut nonzero = Vec::new();
+            for _ in 0..20 {
+                let (a, b) = (
+                    (rng.unit() * blocks as f64) as usize,
+                    (rng.unit() * blocks as f64) as usize,
+                );
+                if a == b {
+                    continue;
+                }
+                let (hi, lo) = (a.max(b), a.min(b));
+                let mut values = Vec::new();
+                for r in 0..block {
+                    for c in 0..block {
+                        let v = rng.unit() - 0.5;
+                        dense[(hi * block + r, lo * block + c)] += v;
+                        dense[(lo * block + c, hi * block + r)] += v;
+                        values.push(v);
+                    }
+                }
+                nonzero.push(((hi, lo), values));
+            }
+            for d in 0..blocks {
+                let mut values = Vec::new();
+                for r in 0..block {
+                    for c in 0..=r {
+                        let v = if r == c {
+                            2.0 * n as f64
+                        } else {
+                            rng.unit() - 0.5
+                        };
+                        dense[(d * block + r, d * block + c)] += v;
+                        if r != c {
+                            dense[(d * block + c, d * block + r)] += v;
+                        }
+                        values.push(v);
+                    }
+                }
+                nonzero.push(((d, d), values));
+            }
+            let b: Vec<f64> = (0..n).map(|_| rng.unit()).collect();
+            let (x, product) = solve_blocks(block, &nonzero, &b).unwrap();
+            let ax = &dense * nalgebra::DVector::from_column_slice(&x);
+            for i in 0..n {
+                assert!(
+                    (ax[i] - b[i]).abs() < 1e-9,
+                    "block {block}: row {i}: {} vs {}",
+                    ax[i],
+                    b[i]
+                );
+                assert!(
+                    (product[i] - b[i]).abs() < 1e-9,
+                    "block {block}: A x, row {i}"
+                );
+            }
+        }
     }
 }

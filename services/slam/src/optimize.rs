@@ -5,7 +5,8 @@
 //! Beyond the paper, which solves a linear system: the full nonlinear problem on SE(2), with
 //! robust kernels by iteratively reweighted least squares.
 
-use crate::linear::SparsePattern;
+use crate::init::{Init, InitError, initialize_validated};
+use crate::linear::{NodeOrder, SparsePattern};
 use crate::network::{GraphError, PoseGraph};
 use crate::se2::wrap_angle;
 use nalgebra::{Matrix3, SMatrix, SVector};
@@ -93,11 +94,39 @@ pub struct OptimizeReport {
     pub reused_symbolic: bool,
 }
 
-/// The optimizer, with the symbolic factorization of the last network structure it saw.
+/// Near an optimum the normal matrix barely changes from step to step: after an undamped
+/// step that moved no variable by more than this (m or rad, about 3°), the Jacobians, and with
+/// them the matrix, are within a few percent of those the step was solved with, so the next
+/// step is first solved with the same factor (a chord step). Where that step only confirms
+/// convergence, as the last step from the chordal start does, it saves a factorization; a
+/// chord step that does not lower the cost is taken back and the step made with a new factor.
+/// At most one chord step follows a factorization.
+const CHORD_STEP_LIMIT: f64 = 0.05;
+
+/// The optimizer, with the fill-reducing order and the symbolic factorization of the last
+/// network structure it saw.
 #[derive(Debug, Default)]
 pub struct Optimizer {
     structure: Option<Structure>,
+    order: Option<KeyedOrder>,
     gauge: Gauge,
+}
+
+/// A network's node order with what it was computed from: the node count and the edges.
+#[derive(Debug)]
+struct KeyedOrder {
+    nodes: usize,
+    links: Vec<(usize, usize)>,
+    order: NodeOrder,
+}
+
+/// The fill-reducing order of a network's nodes, linked by its relative edges (GPS edges
+/// touch one node each and add no link).
+pub(crate) fn network_order(graph: &PoseGraph) -> NodeOrder {
+    NodeOrder::new(
+        graph.poses.len(),
+        graph.edges.iter().map(|e| (e.from, e.to)),
+    )
 }
 
 /// Which nodes stay where they are.
@@ -124,7 +153,7 @@ struct Structure {
 type Block = SMatrix<f64, 3, 3>;
 
 impl Structure {
-    fn build(graph: &PoseGraph, gauge: &Gauge) -> Structure {
+    fn build(graph: &PoseGraph, gauge: &Gauge, order: &NodeOrder) -> Structure {
         let n = graph.poses.len();
         let fixed = match gauge {
             Gauge::FloatingParts => graph.unanchored_part_roots(),
@@ -134,26 +163,28 @@ impl Structure {
             Gauge::FirstNode => Vec::new(),
         };
         let mut var_of = vec![None; n];
-        let mut next = 0;
+        let mut kept = Vec::with_capacity(n);
         for (i, v) in var_of.iter_mut().enumerate() {
             if fixed.binary_search(&i).is_err() {
-                *v = Some(next);
-                next += 3;
+                *v = Some(3 * kept.len());
+                kept.push(i);
             }
         }
-        let mut entries = Vec::new();
+        // The nonzero 3×3 blocks, in the order `linearize` gives their values.
+        let block = |v: Option<usize>| v.map(|v| v / 3);
+        let mut nonzero = Vec::with_capacity(3 * graph.edges.len() + graph.gps.len() + kept.len());
         for e in &graph.edges {
-            push_edge_entries(&mut entries, var_of[e.from], var_of[e.to]);
+            push_edge_blocks(&mut nonzero, block(var_of[e.from]), block(var_of[e.to]));
         }
         for g in &graph.gps {
-            push_edge_entries(&mut entries, var_of[g.node], None);
+            push_edge_blocks(&mut nonzero, block(var_of[g.node]), None);
         }
-        // The diagonal once more, for the damping.
-        entries.extend((0..next).map(|d| (d, d)));
+        // The diagonal blocks once more, for the damping.
+        nonzero.extend((0..kept.len()).map(|b| (b, b)));
         Structure {
             key: structure_key(graph),
             var_of,
-            pattern: SparsePattern::new_blocked(next, &entries, 3),
+            pattern: SparsePattern::ordered(3, &nonzero, &order.places_of(&kept)),
         }
     }
 }
@@ -166,27 +197,17 @@ fn structure_key(graph: &PoseGraph) -> (Vec<(usize, usize)>, Vec<usize>, usize) 
     )
 }
 
-/// Lower-triangle entries of the blocks an edge between variables `a` and `b` touches, in
-/// the order [`push_edge_values`] gives their values.
-fn push_edge_entries(entries: &mut Vec<(usize, usize)>, a: Option<usize>, b: Option<usize>) {
-    for v in [a, b].into_iter().flatten() {
-        for r in 0..3 {
-            for c in 0..=r {
-                entries.push((v + r, v + c));
-            }
-        }
-    }
+/// The blocks an edge between variable blocks `a` and `b` touches, in the order
+/// [`push_edge_values`] gives their values: the diagonal blocks, then the one below it.
+fn push_edge_blocks(nonzero: &mut Vec<(usize, usize)>, a: Option<usize>, b: Option<usize>) {
+    nonzero.extend(a.map(|a| (a, a)));
+    nonzero.extend(b.map(|b| (b, b)));
     if let (Some(a), Some(b)) = (a, b) {
-        let (hi, lo) = if a > b { (a, b) } else { (b, a) };
-        for r in 0..3 {
-            for c in 0..3 {
-                entries.push((hi + r, lo + c));
-            }
-        }
+        nonzero.push((a.max(b), a.min(b)));
     }
 }
 
-/// Values for [`push_edge_entries`]: diagonal blocks `haa`, `hbb`, and `hab` = Jaᵀ Ω Jb.
+/// Values for [`push_edge_blocks`]: diagonal blocks `haa`, `hbb`, and `hab` = Jaᵀ Ω Jb.
 fn push_edge_values(
     values: &mut Vec<f64>,
     a: Option<usize>,
@@ -253,6 +274,47 @@ impl Optimizer {
         }
     }
 
+    /// Sets `graph.poses` by `init` as [`crate::initialize`] does, keeping the network's
+    /// fill-reducing order for the solves that follow (the chordal initialization's systems
+    /// and the optimizer's are on the same graph).
+    pub fn initialize(&mut self, graph: &mut PoseGraph, init: Init) -> Result<(), InitError> {
+        graph.validate()?;
+        let order = (init == Init::Chordal).then(|| self.order_of(graph));
+        initialize_validated(graph, init, order)
+    }
+
+    /// The network's node order, computed again only when its edges changed.
+    fn order_of(&mut self, graph: &PoseGraph) -> &NodeOrder {
+        let same = self.order.as_ref().is_some_and(|o| {
+            o.nodes == graph.poses.len()
+                && o.links.len() == graph.edges.len()
+                && o.links
+                    .iter()
+                    .zip(&graph.edges)
+                    .all(|(&link, e)| link == (e.from, e.to))
+        });
+        if !same {
+            self.order = Some(KeyedOrder {
+                nodes: graph.poses.len(),
+                links: graph.edges.iter().map(|e| (e.from, e.to)).collect(),
+                order: network_order(graph),
+            });
+        }
+        &self.order.as_ref().expect("set above").order
+    }
+
+    /// The structure of `graph`, built again only when it changed; true if it was kept.
+    fn structure_of(&mut self, graph: &PoseGraph) -> bool {
+        let key = structure_key(graph);
+        if self.structure.as_ref().is_some_and(|s| s.key == key) {
+            return true;
+        }
+        let gauge = self.gauge.clone();
+        let structure = Structure::build(graph, &gauge, self.order_of(graph));
+        self.structure = Some(structure);
+        false
+    }
+
     fn validate(&self, graph: &PoseGraph) -> Result<(), GraphError> {
         match self.gauge {
             Gauge::FirstNode => graph.validate(),
@@ -269,11 +331,7 @@ impl Optimizer {
         params: &OptimizeParams,
     ) -> Result<OptimizeReport, GraphError> {
         self.validate(graph)?;
-        let key = structure_key(graph);
-        let reused_symbolic = self.structure.as_ref().is_some_and(|s| s.key == key);
-        if !reused_symbolic {
-            self.structure = Some(Structure::build(graph, &self.gauge));
-        }
+        let reused_symbolic = self.structure_of(graph);
         let structure = self.structure.as_mut().expect("built above");
         let (mut lin, mut candidate) = (Linearization::default(), Linearization::default());
         linearize(graph, structure, &mut lin);
@@ -294,17 +352,31 @@ impl Optimizer {
         let mut lambda = 0.0;
         let mut nu = 2.0;
         let mut previous_decrease = f64::INFINITY;
+        // The last factor is undamped and its step was small: the next step tries it first.
+        let mut chord_ready = false;
         while report.iterations < params.max_iterations {
             let damping = match params.method {
                 Method::GaussNewton => 0.0,
                 Method::LevenbergMarquardt => lambda,
             };
-            // The damping sits in the diagonal entries at the end of the values.
-            let start = lin.values.len() - lin.diagonal.len();
-            for (v, d) in lin.values[start..].iter_mut().zip(&lin.diagonal) {
-                *v = damping * d.max(1e-12);
+            let chord = chord_ready && damping == 0.0;
+            chord_ready = false;
+            // The damping sits in the diagonal blocks at the end of the values (lower
+            // triangles row by row: the diagonal is at 0, 2 and 5 of each).
+            let start = lin.values.len() - 2 * lin.diagonal.len();
+            for (block, d) in lin.values[start..]
+                .chunks_exact_mut(6)
+                .zip(lin.diagonal.chunks_exact(3))
+            {
+                for (k, d) in [0, 2, 5].into_iter().zip(d) {
+                    block[k] = damping * d.max(1e-12);
+                }
             }
-            let factorized = structure.pattern.factorize(&lin.values);
+            let factorized = if chord {
+                Ok(())
+            } else {
+                structure.pattern.factorize(&lin.values)
+            };
             lin.values[start..].iter_mut().for_each(|v| *v = 0.0);
             let step = match factorized {
                 Ok(()) => structure
@@ -331,17 +403,25 @@ impl Optimizer {
             linearize(graph, structure, &mut candidate);
             let cost = candidate.cost;
             let accepted = match params.method {
+                // A chord step must lower the cost; otherwise a fresh factor is made.
+                _ if chord => cost < lin.cost,
                 Method::GaussNewton => true,
                 Method::LevenbergMarquardt => {
-                    // Predicted decrease of the quadratic model with this damping.
-                    let h_dx = mat_vec(&structure.pattern, &lin.values, &step);
-                    let damp: f64 = step
-                        .iter()
-                        .zip(&lin.diagonal)
-                        .map(|(s, d)| damping * d.max(1e-12) * s * s)
-                        .sum();
-                    let predicted = dot(&step, &h_dx) + 2.0 * damp;
-                    let rho = (lin.cost - cost) / predicted.max(f64::MIN_POSITIVE);
+                    // The gain ratio ρ: the decrease over the quadratic model's prediction
+                    // with this damping. Undamped, only its sign matters (the damping stays
+                    // zero), and that is the decrease's: the product H·step is not needed.
+                    let rho = if damping == 0.0 {
+                        lin.cost - cost
+                    } else {
+                        let h_dx = structure.pattern.multiply(&lin.values, &step);
+                        let damp: f64 = step
+                            .iter()
+                            .zip(&lin.diagonal)
+                            .map(|(s, d)| damping * d.max(1e-12) * s * s)
+                            .sum();
+                        let predicted = dot(&step, &h_dx) + 2.0 * damp;
+                        (lin.cost - cost) / predicted.max(f64::MIN_POSITIVE)
+                    };
                     if rho > 0.0 && cost.is_finite() {
                         lambda *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
                         if lambda < 1e-3 * params.initial_damping {
@@ -369,6 +449,7 @@ impl Optimizer {
                 continue;
             }
             report.iterations += 1;
+            chord_ready = !chord && damping == 0.0 && max_step <= CHORD_STEP_LIMIT;
             let decrease = (lin.cost - cost) / lin.cost.max(f64::MIN_POSITIVE);
             std::mem::swap(&mut lin, &mut candidate);
             if max_step < params.min_step {
@@ -414,13 +495,7 @@ impl Optimizer {
         nodes: &[usize],
     ) -> Result<Vec<Option<Matrix3<f64>>>, GraphError> {
         self.validate(graph)?;
-        if self
-            .structure
-            .as_ref()
-            .is_none_or(|s| s.key != structure_key(graph))
-        {
-            self.structure = Some(Structure::build(graph, &self.gauge));
-        }
+        self.structure_of(graph);
         let structure = self.structure.as_mut().expect("built above");
         let vars: Vec<Option<usize>> = nodes.iter().map(|&n| structure.var_of[n]).collect();
         let solved: Vec<usize> = vars.iter().flatten().copied().collect();
@@ -491,7 +566,7 @@ fn linearize(graph: &PoseGraph, s: &Structure, lin: &mut Linearization) {
         push_edge_values(&mut lin.values, a, None, &h, &zero, &zero);
         accumulate(lin, a, &(o * err), &h);
     }
-    lin.values.extend(std::iter::repeat_n(0.0, dim));
+    lin.values.extend(std::iter::repeat_n(0.0, 2 * dim));
 }
 
 fn accumulate(lin: &mut Linearization, v: Option<usize>, g: &SVector<f64, 3>, h: &Block) {
@@ -511,18 +586,6 @@ fn apply_step(graph: &mut PoseGraph, s: &Structure, step: &[f64]) {
             pose.theta = wrap_angle(pose.theta + step[v + 2]);
         }
     }
-}
-
-/// H x for H given by its lower-triangle `values` in pattern order.
-fn mat_vec(pattern: &SparsePattern, values: &[f64], x: &[f64]) -> Vec<f64> {
-    let mut y = vec![0.0; x.len()];
-    for (&(r, c), v) in pattern.entries().iter().zip(values) {
-        y[r] += v * x[c];
-        if r != c {
-            y[c] += v * x[r];
-        }
-    }
-    y
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
