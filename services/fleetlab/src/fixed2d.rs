@@ -91,7 +91,7 @@ pub fn map_fixed2d(robots: usize, duration_s: f64, seed: u64) -> Result<Fixed2dR
     map.optimize_now()?;
     let ate = slam::position_rmse(map.poses().iter().copied().zip(truth));
     let grid = fleetmap::grid_of(
-        map.nodes().iter().map(|n| &**n),
+        || map.nodes().iter().map(|n| &**n),
         map.poses(),
         &slam::GridParams::default(),
     )?;

@@ -69,14 +69,19 @@ impl NodeRecord {
 }
 
 /// The probability grid of `nodes` at `poses` (the same order): the one way a fleet's map
-/// becomes a grid (the HTTP map, windows and tiles, versions, ROS 2, the lab's scores).
-pub fn grid_of<'a>(
-    nodes: impl IntoIterator<Item = &'a NodeRecord>,
+/// becomes a grid (the HTTP map, windows and tiles, versions, ROS 2, the lab's scores). Each
+/// node's beam fan is made when the grid's pass needs it and dropped after, so a whole site's
+/// grid takes the grid's memory and one node's, not every node's fan at once.
+/// `nodes()` walks the nodes, the same ones in the same order each time.
+pub fn grid_of<'a, I: Iterator<Item = &'a NodeRecord>>(
+    nodes: impl Fn() -> I,
     poses: &[Pose2],
     params: &slam::GridParams,
 ) -> Result<slam::OccupancyGrid, slam::GridError> {
-    let fans: Vec<slam::BeamFan> = nodes.into_iter().map(NodeRecord::fan).collect();
-    slam::OccupancyGrid::from_fans(poses.iter().copied().zip(&fans), params)
+    slam::OccupancyGrid::from_fans_made_again(
+        || poses.iter().copied().zip(nodes().map(NodeRecord::fan)),
+        params,
+    )
 }
 
 /// Most robots one fleet takes: per-robot state is bounded (a node of one more is rejected,

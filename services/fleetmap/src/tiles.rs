@@ -110,7 +110,6 @@ fn make_tile(view: &FleetView, key: &TileKey) -> Result<Tile, slam::GridError> {
             (p.x - cx).abs() <= reach && (p.y - cy).abs() <= reach
         })
         .collect();
-    let fans: Vec<slam::BeamFan> = near.iter().map(|&k| view.nodes[k].fan()).collect();
     let mut cells = vec![-1i8; TILE_CELLS * TILE_CELLS];
     let defaults = slam::GridParams::default();
     let (mut occupied_percent, mut free_percent) = (
@@ -118,8 +117,8 @@ fn make_tile(view: &FleetView, key: &TileKey) -> Result<Tile, slam::GridError> {
         (defaults.free_threshold * 100.0).round() as i8,
     );
     if !near.is_empty() {
-        let grid = slam::OccupancyGrid::from_fans(
-            near.iter().map(|&k| view.poses[k]).zip(&fans),
+        let grid = slam::OccupancyGrid::from_fans_made_again(
+            || near.iter().map(|&k| (view.poses[k], view.nodes[k].fan())),
             &params,
         )?;
         (occupied_percent, free_percent) = (grid.occupied_percent, grid.free_percent);

@@ -150,6 +150,6 @@ impl FleetView {
 
     /// The occupancy grid of the fleet's leveled scans at their optimized poses.
     pub fn grid(&self, params: &slam::GridParams) -> Result<slam::OccupancyGrid, slam::GridError> {
-        crate::fleet::grid_of(self.nodes.iter().map(|n| &**n), &self.poses, params)
+        crate::fleet::grid_of(|| self.nodes.iter().map(|n| &**n), &self.poses, params)
     }
 }

@@ -148,20 +148,32 @@ impl OccupancyGrid {
         scans: impl IntoIterator<Item = (Pose2, &'a BeamFan)>,
         params: &GridParams,
     ) -> Result<OccupancyGrid, GridError> {
-        check(params)?;
         let scans: Vec<(Pose2, &BeamFan)> = scans.into_iter().collect();
-        if scans.is_empty() {
-            return Err(GridError::NoScans);
-        }
-        if let Some(index) = scans.iter().position(|(p, _)| !p.is_finite()) {
-            return Err(GridError::NonFinitePose { index });
-        }
+        OccupancyGrid::from_fans_made_again(|| scans.iter().copied(), params)
+    }
+
+    /// [`Self::from_fans`] of scans made again on each of its three passes over them (the
+    /// grid's bounds, the cells beside a return, the casting): `scans()` gives them in the
+    /// same order every time. The memory it takes is the grid's and one scan's, not every
+    /// scan's beams at once: the way to a whole site's map.
+    pub fn from_fans_made_again<I, F>(
+        scans: impl Fn() -> I,
+        params: &GridParams,
+    ) -> Result<OccupancyGrid, GridError>
+    where
+        I: Iterator<Item = (Pose2, F)>,
+        F: std::borrow::Borrow<BeamFan>,
+    {
+        check(params)?;
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         let window = params.window_m;
         // With a window, only the scans whose beams reach into it.
-        let mut scans_used = Vec::with_capacity(scans.len());
-        for &(pose, fan) in &scans {
-            let (rays, wedges) = rays(fan, params);
+        let mut used = Vec::new();
+        for (index, (pose, fan)) in scans().enumerate() {
+            if !pose.is_finite() {
+                return Err(GridError::NonFinitePose { index });
+            }
+            let (rays, _) = rays(fan.borrow(), params);
             let (mut slo, mut shi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
             let ends = rays
                 .iter()
@@ -172,23 +184,35 @@ impl OccupancyGrid {
                     shi[d] = shi[d].max(q[d]);
                 }
             }
-            if window
-                .is_some_and(|w| shi[0] < w[0] || slo[0] > w[2] || shi[1] < w[1] || slo[1] > w[3])
-            {
+            let outside = window
+                .is_some_and(|w| shi[0] < w[0] || slo[0] > w[2] || shi[1] < w[1] || slo[1] > w[3]);
+            used.push(!outside);
+            if outside {
                 continue;
             }
             for d in 0..2 {
                 lo[d] = lo[d].min(slo[d]);
                 hi[d] = hi[d].max(shi[d]);
             }
-            scans_used.push((pose, rays, wedges));
         }
-        let scans = scans_used;
+        if used.is_empty() {
+            return Err(GridError::NoScans);
+        }
+        // The scans used, made again with their rays and wedges, in the same order.
+        let scans_used = || {
+            scans()
+                .zip(&used)
+                .filter(|(_, used)| **used)
+                .map(|((pose, fan), _)| {
+                    let (rays, wedges) = rays(fan.borrow(), params);
+                    (pose, rays, wedges)
+                })
+        };
         if let Some(w) = window {
             (lo[0], lo[1]) = (lo[0].max(w[0]), lo[1].max(w[1]));
             (hi[0], hi[1]) = (hi[0].min(w[2]), hi[1].min(w[3]));
             // No scan reaches it: the window, all unknown.
-            if scans.is_empty() || lo[0] >= hi[0] || lo[1] >= hi[1] {
+            if !used.contains(&true) || lo[0] >= hi[0] || lo[1] >= hi[1] {
                 (lo, hi) = ([w[0], w[1]], [w[2], w[3]]);
             }
         }
@@ -234,16 +258,15 @@ impl OccupancyGrid {
         let mut mark = vec![0u32; width * height];
         let clamp = |l: f32| l.clamp(params.log_odds_min, params.log_odds_max);
         let blind = params.blind_zone_m;
-        let returns = scans.iter().flat_map(|(pose, rays, _)| {
-            rays.iter()
+        let returns = scans_used().flat_map(|(pose, rays, _)| {
+            rays.into_iter()
                 .filter(|ray| ray.hit)
-                .map(|ray| ray.point(*pose, ray.clear_m))
+                .map(move |ray| ray.point(pose, ray.clear_m))
         });
         let beside_return = beside_a_return(returns, width, height, |q| index(cell(q)));
         let miss = params.log_odds_miss;
         let miss_beside = miss * params.miss_weight_beside_return;
-        for (k, (pose, rays, wedges)) in scans.iter().enumerate() {
-            let pose = *pose;
+        for (k, (pose, rays, wedges)) in scans_used().enumerate() {
             let (pass, ret) = (2 * k as u32 + 1, 2 * k as u32 + 2);
             for ray in rays.iter().filter(|ray| ray.hit) {
                 let Some(c) = index(cell(ray.point(pose, ray.clear_m))) else {
@@ -278,14 +301,14 @@ impl OccupancyGrid {
                     clear(x, y);
                 }
             };
-            for ray in rays {
+            for ray in &rays {
                 if ray.hit {
                     clear_line(ray.from, ray.direction, ray.clear_m - ray.short_m, true);
                 } else {
                     clear_line(ray.from, ray.direction, ray.clear_m, true);
                 }
             }
-            for &(i, j, gap) in wedges {
+            for &(i, j, gap) in &wedges {
                 let (a, b) = (rays[i], rays[j]);
                 // The chord between the two ends: a surface both beams saw lies along it.
                 let (ea, eb) = (a.end(), b.end());
