@@ -5,7 +5,6 @@
 
 use crate::linear::{NodeOrder, NotPositiveDefinite, SparsePattern, c64};
 use crate::network::{GraphError, PoseGraph};
-use crate::optimize::network_order;
 use crate::se2::Pose2;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -94,6 +93,15 @@ pub(crate) fn initialize_validated(
     }
     align_to_gps(graph);
     Ok(())
+}
+
+/// The fill-reducing order of a network's nodes, linked by its relative edges (GPS edges
+/// touch one node each and add no link): the chordal systems' and the optimizer's.
+pub(crate) fn network_order(graph: &PoseGraph) -> NodeOrder {
+    NodeOrder::new(
+        graph.poses.len(),
+        graph.edges.iter().map(|e| (e.from, e.to)),
+    )
 }
 
 /// Moves all poses by the rigid motion that best maps their antenna positions onto the GPS

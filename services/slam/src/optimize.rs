@@ -5,7 +5,7 @@
 //! Beyond the paper, which solves a linear system: the full nonlinear problem on SE(2), with
 //! robust kernels by iteratively reweighted least squares.
 
-use crate::init::{Init, InitError, initialize_validated};
+use crate::init::{Init, InitError, initialize_validated, network_order};
 use crate::linear::{NodeOrder, SparsePattern};
 use crate::network::{GraphError, PoseGraph};
 use crate::se2::wrap_angle;
@@ -118,15 +118,6 @@ struct KeyedOrder {
     nodes: usize,
     links: Vec<(usize, usize)>,
     order: NodeOrder,
-}
-
-/// The fill-reducing order of a network's nodes, linked by its relative edges (GPS edges
-/// touch one node each and add no link).
-pub(crate) fn network_order(graph: &PoseGraph) -> NodeOrder {
-    NodeOrder::new(
-        graph.poses.len(),
-        graph.edges.iter().map(|e| (e.from, e.to)),
-    )
 }
 
 /// Which nodes stay where they are.
