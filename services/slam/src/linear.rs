@@ -363,7 +363,7 @@ impl<T: ComplexField + Copy + Default + AddAssign> SparsePattern<T> {
         self.shape.n
     }
 
-    /// Factorizes the matrix with these `values` (one per entry given to [`Self::new`]),
+    /// Factorizes the matrix with these `values` (block by block, as [`Self::ordered`] lists them),
     /// keeping the factor for [`Self::solve`]. A complex matrix is Hermitian: an entry
     /// `(row, col)` below the diagonal holds `A[row][col]`, and `A[col][row]` is its conjugate.
     pub fn factorize(&mut self, values: &[T]) -> Result<(), NotPositiveDefinite> {
