@@ -287,16 +287,21 @@ mod tests {
             ..Default::default()
         };
         for (i, j) in [(0, 1), (1, 2), (2, 3), (3, 0), (0, 2)] {
-            g.edges.push(RelativeEdge {
-                from: i,
-                to: j,
-                measurement: truth[i].between(&truth[j]),
-                information: Matrix3::from_diagonal(&nalgebra::Vector3::new(10.0, 20.0, 100.0)),
-                kind: EdgeKind::Odometry,
-                robust: Robust::None,
-            });
+            g.edges.push(exact_edge(&truth, i, j));
         }
         (g, truth)
+    }
+
+    /// An edge from node `i` to `j` measuring their true relative pose exactly.
+    fn exact_edge(truth: &[Pose2], i: usize, j: usize) -> RelativeEdge {
+        RelativeEdge {
+            from: i,
+            to: j,
+            measurement: truth[i].between(&truth[j]),
+            information: Matrix3::from_diagonal(&nalgebra::Vector3::new(10.0, 20.0, 100.0)),
+            kind: EdgeKind::Odometry,
+            robust: Robust::None,
+        }
     }
 
     #[test]
@@ -336,18 +341,8 @@ mod tests {
             poses: vec![Pose2::IDENTITY; n],
             ..Default::default()
         };
-        let link = |i: usize, j: usize, g: &mut PoseGraph| {
-            g.edges.push(RelativeEdge {
-                from: i,
-                to: j,
-                measurement: truth[i].between(&truth[j]),
-                information: Matrix3::from_diagonal(&nalgebra::Vector3::new(10.0, 20.0, 100.0)),
-                kind: EdgeKind::Odometry,
-                robust: Robust::None,
-            });
-        };
         for i in 0..n - 1 {
-            link(i, i + 1, &mut g);
+            g.edges.push(exact_edge(&truth, i, i + 1));
         }
         for _ in 0..40 {
             let (i, j) = (
@@ -355,7 +350,7 @@ mod tests {
                 (rng.unit() * n as f64) as usize,
             );
             if i != j {
-                link(i, j, &mut g);
+                g.edges.push(exact_edge(&truth, i, j));
             }
         }
         initialize(&mut g, Init::Chordal).unwrap();
