@@ -142,30 +142,32 @@ fn robots_without_gps_or_a_known_start_meet_without_a_wrong_contact() {
         .filter_map(|i| Route::park_loop(i)?.lap_ns())
         .max()
         .expect("the park's loops");
-    // Two seeds at a time: the machine's two cores.
-    let results: Vec<SeedRun> = seeds
-        .chunks(2)
-        .flat_map(|pair| {
-            std::thread::scope(|scope| {
-                let runs: Vec<_> = pair
-                    .iter()
-                    .map(|&seed| {
-                        let world = &world;
-                        scope.spawn(move || {
-                            let start = FleetStart::Scattered;
-                            let (leveled, _) =
-                                fleet_inputs(world, start, false, seed, whole_loops_ns);
-                            let (stats, _, parts) = map_fleet(leveled, true);
-                            (seed, parts, stats)
-                        })
-                    })
-                    .collect();
-                runs.into_iter()
-                    .map(|run| run.join().expect("seed run"))
-                    .collect::<Vec<_>>()
+    // Two workers, the machine's two cores, each taking the next seed when it is done (the
+    // seeds' runs differ in length: pairs would wait for their slower half).
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut results: Vec<SeedRun> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..2)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut runs = Vec::new();
+                    while let Some(&seed) =
+                        seeds.get(next.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
+                    {
+                        let start = FleetStart::Scattered;
+                        let (leveled, _) = fleet_inputs(&world, start, false, seed, whole_loops_ns);
+                        let (stats, _, parts) = map_fleet(leveled, true);
+                        runs.push((seed, parts, stats));
+                    }
+                    runs
+                })
             })
-        })
-        .collect();
+            .collect();
+        workers
+            .into_iter()
+            .flat_map(|w| w.join().expect("seed runs"))
+            .collect()
+    });
+    results.sort_by_key(|run| run.0);
     let mut apart = Vec::new();
     for (seed, parts, stats) in &results {
         eprintln!(

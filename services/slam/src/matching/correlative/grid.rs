@@ -88,8 +88,8 @@ impl ProbabilityGrid {
     /// The cell holding point `p` (may lie outside the grid).
     pub(super) fn cell_of(&self, p: [f64; 2]) -> (i64, i64) {
         (
-            ((p[0] - self.origin[0]) / self.resolution_m).floor() as i64,
-            ((p[1] - self.origin[1]) / self.resolution_m).floor() as i64,
+            floor_to_i64((p[0] - self.origin[0]) / self.resolution_m),
+            floor_to_i64((p[1] - self.origin[1]) / self.resolution_m),
         )
     }
 
@@ -182,6 +182,9 @@ impl Level {
         }
     }
 
+    // Inlined: the slow path of `sum` calls it per cell, and the tests' profile (many codegen
+    // units) would not inline it across them.
+    #[inline]
     fn get(&self, i: i64, j: i64) -> u8 {
         let (i, j) = (i + self.pad, j + self.pad);
         if i < 0 || j < 0 || i >= self.width as i64 || j >= self.height as i64 {
@@ -252,6 +255,13 @@ impl Cells {
     pub(super) fn iter(&self) -> impl Iterator<Item = &(i64, i64)> {
         self.cells.iter()
     }
+}
+
+/// `x.floor() as i64` without the call to libm's `floor` that x86-64's baseline (no SSE4.1)
+/// makes of it: the search discretizes every return at every angle. Saturates as `as` does.
+fn floor_to_i64(x: f64) -> i64 {
+    let t = x as i64;
+    t.saturating_sub(i64::from((t as f64) > x))
 }
 
 /// `out[n] = max(line[n − half], line[n])`, a missing cell counting 0; `out` is `half` longer.
@@ -340,6 +350,16 @@ impl PrecomputedGrids {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floor_to_i64_is_floor() {
+        for x in [
+            -2.5, -2.0, -1e-12, -0.0, 0.0, 1e-12, 0.999, 1.0, 3.7, -3.7, 1e300, -1e300,
+        ] {
+            assert_eq!(floor_to_i64(x), x.floor() as i64, "{x}");
+        }
+        assert_eq!(floor_to_i64(f64::NAN), 0);
+    }
 
     #[test]
     fn each_level_is_the_max_over_its_window() {
