@@ -182,9 +182,6 @@ impl Level {
         }
     }
 
-    // Inlined: the slow path of `sum` calls it per cell, and the tests' profile (many codegen
-    // units) would not inline it across them.
-    #[inline]
     fn get(&self, i: i64, j: i64) -> u8 {
         let (i, j) = (i + self.pad, j + self.pad);
         if i < 0 || j < 0 || i >= self.width as i64 || j >= self.height as i64 {
