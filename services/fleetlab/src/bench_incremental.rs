@@ -1,7 +1,12 @@
 //! `levelmap bench-incremental`: a pose-graph file replayed node by node, as a robot would
-//! add it, through the mapper's way of solving (`slam::incremental`): each node is placed by
-//! its odometry edge, a node that brings a closure re-solves the window of the newest nodes
-//! at once, and the whole graph is solved on a second thread and applied as a correction.
+//! add it, through one of two ways of solving a growing network:
+//!
+//! - `window` (the mapper's, `slam::incremental`): each node is placed by its odometry edge,
+//!   a node that brings a closure re-solves the window of the newest nodes at once, and the
+//!   whole graph is solved on a second thread and applied as a correction;
+//! - `bayes-tree` (`slam::smoother`): iSAM2's incremental smoothing, every node an update of
+//!   the tree, nothing in the background.
+//!
 //! Measured: the foreground time per added node, by graph size; how far the newest node's
 //! estimate (what a robot gets back) lies from a batch solve of the graph so far; the final
 //! χ² against the batch optimum.
@@ -14,7 +19,10 @@ use serde::Serialize;
 use slam::incremental::{
     Adjacency, GlobalSolver, JobSource, SolveResult, apply_solve, solve_window,
 };
-use slam::{Init, OptimizeParams, Optimizer, Pose2, PoseGraph, initialize};
+use slam::{
+    IncrementalSmoother, Init, OptimizeParams, Optimizer, Pose2, PoseGraph, SmootherParams,
+    initialize,
+};
 use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -28,7 +36,17 @@ pub struct BenchIncrementalArgs {
     /// File format; guessed from the extension (.g2o, .graph) when omitted.
     #[arg(long, value_name = "g2o|toro")]
     pub format: Option<String>,
-    /// Nodes re-solved at a node that brings a closure.
+    /// How the growing network is solved.
+    #[arg(long, value_enum, default_value_t = Solver::Window)]
+    pub solver: Solver,
+    /// A pose whose step exceeds this (m or rad) is relinearized (`bayes-tree`).
+    #[arg(long, default_value_t = SmootherParams::default().relinearize_threshold)]
+    pub relinearize_threshold: f64,
+    /// A subtree's steps are recomputed when its separator moved by more than this
+    /// (`bayes-tree`).
+    #[arg(long, default_value_t = SmootherParams::default().wildfire)]
+    pub wildfire: f64,
+    /// Nodes re-solved at a node that brings a closure (`window`).
     #[arg(long, default_value_t = 30)]
     pub window: usize,
     /// Nodes added per second (0: as fast as the foreground goes, the hardest case for
@@ -47,6 +65,16 @@ pub struct BenchIncrementalArgs {
     pub json: bool,
 }
 
+/// How the replay solves the growing network.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Solver {
+    /// A window of the newest nodes now, the whole network in the background (the mapper's).
+    Window,
+    /// Incremental smoothing on a Bayes tree (iSAM2's method), in the foreground.
+    BayesTree,
+}
+
 /// Foreground time per added node over the 500 nodes up to a size.
 #[derive(Serialize)]
 struct AtSize {
@@ -59,14 +87,21 @@ struct Report {
     file: String,
     nodes: usize,
     edges: usize,
+    solver: Solver,
     window: usize,
     rate: f64,
     /// Every added node (ms): placing it, its edges, its window, and taking or applying a
     /// background solve when one was due.
     per_node: Percentiles,
+    per_node_mean_ms: f64,
     at_sizes: Vec<AtSize>,
-    /// Background solves applied.
+    /// Background solves applied (`window`).
     background_solves: usize,
+    /// Per update, the mean of poses eliminated again, and of rounds (`bayes-tree`).
+    eliminated_per_update: f64,
+    rounds_per_update: f64,
+    /// The tree at the end (`bayes-tree`).
+    tree: Option<slam::TreeShape>,
     /// The newest node's estimate when it was added against a batch solve of the graph up to
     /// it (m): over the checks, the median and the largest; and the largest difference of any
     /// node of the graph then.
@@ -95,6 +130,103 @@ pub fn run(args: &BenchIncrementalArgs) -> Result<()> {
     for (k, e) in full.edges.iter().enumerate() {
         brought[e.from.max(e.to)].push(k);
     }
+    let replay = match args.solver {
+        Solver::Window => replay_window(args, &full, &brought)?,
+        Solver::BayesTree => replay_bayes_tree(args, &full, &brought)?,
+    };
+    let report = report(args, &full, &replay)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_text(&report);
+    }
+    Ok(())
+}
+
+/// What a replay leaves: the final network, the time of each node, the checks.
+struct Replay {
+    graph: PoseGraph,
+    times_ms: Vec<f64>,
+    /// Graph size, every node's estimate then.
+    checks: Vec<(usize, Vec<Pose2>)>,
+    background_solves: usize,
+    /// Poses eliminated again and rounds, over all updates.
+    eliminated: usize,
+    rounds: usize,
+    tree: Option<slam::TreeShape>,
+}
+
+fn is_check(args: &BenchIncrementalArgs, size: usize, n: usize) -> bool {
+    size.is_multiple_of(args.check_every) || args.sizes.contains(&size) || size == n
+}
+
+fn wait_for_node(args: &BenchIncrementalArgs, started: Instant, i: usize) {
+    if args.rate > 0.0 {
+        let due = started + Duration::from_secs_f64(i as f64 / args.rate);
+        std::thread::sleep(due.saturating_duration_since(Instant::now()));
+    }
+}
+
+/// Every node an update of the smoother, placed from the estimate of its predecessor.
+fn replay_bayes_tree(
+    args: &BenchIncrementalArgs,
+    full: &PoseGraph,
+    brought: &[Vec<usize>],
+) -> Result<Replay> {
+    let n = full.poses.len();
+    let mut smoother = IncrementalSmoother::new(SmootherParams {
+        relinearize_threshold: args.relinearize_threshold,
+        wildfire: args.wildfire,
+        ..SmootherParams::default()
+    });
+    let (mut eliminated, mut rounds) = (0, 0);
+    smoother.update(&[full.poses[0]], &[]).context("node 0")?;
+    let (mut times_ms, mut checks) = (vec![0.0; n], Vec::new());
+    let mut edges = Vec::new();
+    let started = Instant::now();
+    for i in 1..n {
+        wait_for_node(args, started, i);
+        let t = Instant::now();
+        let guess = place(|k| smoother.estimate(k), full, &brought[i], i);
+        edges.clear();
+        edges.extend(brought[i].iter().map(|&k| full.edges[k].clone()));
+        let stats = smoother
+            .update(&[guess], &edges)
+            .with_context(|| format!("node {i}"))?;
+        (eliminated, rounds) = (
+            eliminated + stats.eliminated,
+            rounds + stats.rounds as usize,
+        );
+        times_ms[i] = t.elapsed().as_secs_f64() * 1e3;
+        if is_check(args, i + 1, n) {
+            checks.push((i + 1, smoother.estimates()));
+        }
+    }
+    // Every step exact (untimed): the wildfire leaves far steps slightly stale.
+    smoother.solve_all();
+    let graph = PoseGraph {
+        poses: smoother.estimates(),
+        edges: smoother.edges().to_vec(),
+        gps: Vec::new(),
+    };
+    Ok(Replay {
+        graph,
+        times_ms,
+        checks,
+        background_solves: 0,
+        eliminated,
+        rounds,
+        tree: Some(smoother.shape()),
+    })
+}
+
+/// Odometry placing, windows at closures, and the whole network on a second thread.
+fn replay_window(
+    args: &BenchIncrementalArgs,
+    full: &PoseGraph,
+    brought: &[Vec<usize>],
+) -> Result<Replay> {
+    let n = full.poses.len();
     let params = OptimizeParams::default();
     let (jobs, job_rx) = mpsc::channel();
     let (results, result_rx) = mpsc::channel::<SolveResult>();
@@ -113,19 +245,18 @@ pub fn run(args: &BenchIncrementalArgs) -> Result<()> {
     let (mut source, mut adjacency) = (JobSource::default(), Adjacency::default());
     let (mut out, mut pending, mut applied) = (false, false, 0usize);
     let mut times_ms = vec![0.0; n];
-    let mut checks: Vec<(usize, Pose2, Vec<Pose2>)> = Vec::new();
+    let mut checks = Vec::new();
     let started = Instant::now();
     for i in 1..n {
-        if args.rate > 0.0 {
-            let due = started + Duration::from_secs_f64(i as f64 / args.rate);
-            std::thread::sleep(due.saturating_duration_since(Instant::now()));
-        }
+        wait_for_node(args, started, i);
         let t = Instant::now();
         if let Ok(result) = result_rx.try_recv() {
             apply_solve(&mut graph, &result, |_| 0).context("background solve")?;
             (out, applied) = (false, applied + 1);
         }
-        graph.poses.push(place(&graph, &full, &brought[i], i));
+        graph
+            .poses
+            .push(place(|k| graph.poses[k], full, &brought[i], i));
         graph
             .edges
             .extend(brought[i].iter().map(|&k| full.edges[k].clone()));
@@ -143,9 +274,8 @@ pub fn run(args: &BenchIncrementalArgs) -> Result<()> {
             (out, pending) = (true, false);
         }
         times_ms[i] = t.elapsed().as_secs_f64() * 1e3;
-        let size = i + 1;
-        if size % args.check_every == 0 || args.sizes.contains(&size) || size == n {
-            checks.push((size, graph.poses[i], graph.poses.clone()));
+        if is_check(args, i + 1, n) {
+            checks.push((i + 1, graph.poses.clone()));
         }
     }
     // The background's last solve, of the whole graph from where the replay left it.
@@ -160,27 +290,27 @@ pub fn run(args: &BenchIncrementalArgs) -> Result<()> {
     applied += 1;
     drop(jobs);
     solver.join().expect("the solver thread");
-    let report = report(args, &full, &graph, &times_ms, &checks, applied)?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        print_text(&report);
-    }
-    Ok(())
+    Ok(Replay {
+        graph,
+        times_ms,
+        checks,
+        background_solves: applied,
+        eliminated: 0,
+        rounds: 0,
+        tree: None,
+    })
 }
 
-/// Where node `i` starts: its predecessor moved by the odometry edge it brings (else by the
-/// first edge it brings from an earlier node).
-fn place(graph: &PoseGraph, full: &PoseGraph, brought: &[usize], i: usize) -> Pose2 {
+/// Where node `i` starts: its predecessor (`pose_of` an earlier node) moved by the odometry
+/// edge it brings (else by the first edge it brings from an earlier node).
+fn place(pose_of: impl Fn(usize) -> Pose2, full: &PoseGraph, brought: &[usize], i: usize) -> Pose2 {
     let edges = || brought.iter().map(|&k| &full.edges[k]);
     let chain = edges().find(|e| e.from + 1 == i && e.to == i);
     match chain.or_else(|| edges().find(|e| e.to == i && e.from < i)) {
-        Some(e) => graph.poses[e.from].compose(&e.measurement),
-        None => edges()
-            .find(|e| e.from == i)
-            .map_or(graph.poses[i - 1], |e| {
-                graph.poses[e.to].compose(&e.measurement.inverse())
-            }),
+        Some(e) => pose_of(e.from).compose(&e.measurement),
+        None => edges().find(|e| e.from == i).map_or(pose_of(i - 1), |e| {
+            pose_of(e.to).compose(&e.measurement.inverse())
+        }),
     }
 }
 
@@ -210,15 +340,9 @@ fn distance(a: &Pose2, b: &Pose2) -> f64 {
     (a.x - b.x).hypot(a.y - b.y)
 }
 
-fn report(
-    args: &BenchIncrementalArgs,
-    full: &PoseGraph,
-    graph: &PoseGraph,
-    times_ms: &[f64],
-    checks: &[(usize, Pose2, Vec<Pose2>)],
-    background_solves: usize,
-) -> Result<Report> {
+fn report(args: &BenchIncrementalArgs, full: &PoseGraph, replay: &Replay) -> Result<Report> {
     let n = full.poses.len();
+    let times_ms = &replay.times_ms;
     let at_sizes = args
         .sizes
         .iter()
@@ -229,7 +353,7 @@ fn report(
         })
         .collect();
     let (mut newest, mut any_node) = (Vec::new(), 0.0f64);
-    for (size, _, poses) in checks {
+    for (size, poses) in &replay.checks {
         let reference = batch(full, *size)?;
         let ours = in_first_frame(poses);
         newest.push(distance(&ours[size - 1], &reference[size - 1]));
@@ -243,21 +367,26 @@ fn report(
     let batch_chi2 = Optimizer::new()
         .optimize(&mut optimum, &OptimizeParams::default())?
         .final_chi2;
-    let final_chi2 = graph.chi2();
+    let final_chi2 = replay.graph.chi2();
     Ok(Report {
         file: args.file.display().to_string(),
         nodes: n,
         edges: full.edges.len(),
+        solver: args.solver,
         window: args.window,
         rate: args.rate,
         per_node: Percentiles::of(times_ms[1..].to_vec()),
+        per_node_mean_ms: times_ms[1..].iter().sum::<f64>() / (n - 1) as f64,
         at_sizes,
-        background_solves,
+        background_solves: replay.background_solves,
+        eliminated_per_update: replay.eliminated as f64 / (n - 1) as f64,
+        rounds_per_update: replay.rounds as f64 / (n - 1) as f64,
+        tree: replay.tree,
         newest_vs_batch_p50_m: newest_p.p50_ms,
         newest_vs_batch_max_m: newest_p.max_ms,
         newest_within_1cm: within,
         any_node_vs_batch_max_m: any_node,
-        checks: checks.len(),
+        checks: replay.checks.len(),
         final_chi2,
         batch_chi2,
         relative_chi2: (final_chi2 - batch_chi2) / batch_chi2,
@@ -270,8 +399,8 @@ fn print_text(r: &Report) {
         r.file, r.nodes, r.edges, r.window
     );
     println!(
-        "  per node: p50 {:.3} ms, p99 {:.3} ms, max {:.1} ms",
-        r.per_node.p50_ms, r.per_node.p99_ms, r.per_node.max_ms
+        "  per node ({:?}): mean {:.3} ms, p50 {:.3} ms, p99 {:.3} ms, max {:.1} ms",
+        r.solver, r.per_node_mean_ms, r.per_node.p50_ms, r.per_node.p99_ms, r.per_node.max_ms
     );
     for s in &r.at_sizes {
         println!(
@@ -291,4 +420,16 @@ fn print_text(r: &Report) {
         "  chi2 {:.6} vs batch {:.6} ({:+.2e}), {} background solves",
         r.final_chi2, r.batch_chi2, r.relative_chi2, r.background_solves
     );
+    if r.solver == Solver::BayesTree {
+        println!(
+            "  per update: {:.1} poses eliminated again, {:.2} rounds",
+            r.eliminated_per_update, r.rounds_per_update
+        );
+    }
+    if let Some(t) = &r.tree {
+        println!(
+            "  tree: separators mean {:.1}, max {}; depth mean {:.0}, max {}",
+            t.separator_mean, t.separator_max, t.depth_mean, t.depth_max
+        );
+    }
 }

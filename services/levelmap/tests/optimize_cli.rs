@@ -175,3 +175,33 @@ fn an_incremental_replay_ends_at_the_batch_optimum() {
         "{r}"
     );
 }
+
+/// `levelmap bench-incremental --solver bayes-tree`: intel node by node through the Bayes
+/// tree; the newest node is the batch answer at every check (within 1 cm) and the end is the
+/// batch optimum.
+#[test]
+fn a_bayes_tree_replay_is_the_batch_answer_at_every_check() {
+    let path = testdata::shared_data("pose_graph_2d/se-sync/intel.g2o");
+    let result = levelmap(&[
+        "bench-incremental",
+        path.to_str().unwrap(),
+        "--solver",
+        "bayes-tree",
+        "--check-every",
+        "100",
+        "--json",
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let r: serde_json::Value = serde_json::from_slice(&result.stdout).expect("JSON");
+    assert_eq!(r["solver"], "bayes-tree", "{r}");
+    assert_eq!(r["per_node"]["count"], 1727, "{r}");
+    assert_eq!(r["checks"], 18, "{r}");
+    assert_eq!(r["newest_within_1cm"], 1.0, "{r}");
+    assert_eq!(r["background_solves"], 0, "{r}");
+    assert!(r["relative_chi2"].as_f64().unwrap().abs() <= 1e-4, "{r}");
+    assert!(r["tree"]["depth_max"].as_u64().unwrap() >= 1, "{r}");
+}

@@ -18,6 +18,7 @@ pub mod network;
 pub mod parts;
 pub mod robust;
 pub mod se2;
+pub mod smoother;
 mod splitmix;
 
 pub use gnss::GpsObservation;
@@ -27,6 +28,7 @@ pub use network::{EdgeKind, GpsEdge, GraphError, PoseGraph, RelativeEdge};
 pub use parts::PartTracker;
 pub use robust::Robust;
 pub use se2::{Pose2, aligned_position_rmse, position_rmse, rigid_fit, wrap_angle};
+pub use smoother::{IncrementalSmoother, SmootherError, SmootherParams, TreeShape, UpdateStats};
 
 // The solver: faer's sparse Cholesky and everything built on it.
 #[cfg(feature = "solver")]
