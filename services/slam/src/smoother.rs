@@ -193,14 +193,19 @@ impl IncrementalSmoother {
         (0..self.len()).map(|v| self.estimate(v)).collect()
     }
 
+    /// Every pose but node 0, each after its parent: a parent is eliminated after its
+    /// children, so by elimination position, last first.
+    fn roots_first(&self) -> Vec<usize> {
+        let mut poses: Vec<usize> = (1..self.len()).collect();
+        poses.sort_unstable_by_key(|&v| std::cmp::Reverse(self.position[v]));
+        poses
+    }
+
     /// The tree's separators and depths now.
     pub fn shape(&self) -> TreeShape {
         let n = self.len();
         let mut depth = vec![0usize; n];
-        // Parents are eliminated after their children: deepest first by position.
-        let mut by_position: Vec<usize> = (1..n).collect();
-        by_position.sort_unstable_by_key(|&v| std::cmp::Reverse(self.position[v]));
-        for &v in &by_position {
+        for v in self.roots_first() {
             let p = self.parent[v];
             depth[v] = if p == NONE { 1 } else { depth[p as usize] + 1 };
         }
@@ -217,9 +222,7 @@ impl IncrementalSmoother {
     /// Recomputes every step from the roots down, whatever the wildfire threshold (O(n)): the
     /// estimates are then the exact solution at the current linearization points.
     pub fn solve_all(&mut self) {
-        let mut by_position: Vec<usize> = (1..self.len()).collect();
-        by_position.sort_unstable_by_key(|&v| std::cmp::Reverse(self.position[v]));
-        for v in by_position {
+        for v in self.roots_first() {
             self.delta[v] = self.conditionals[v].solve(&self.delta);
         }
     }
