@@ -39,9 +39,15 @@ pub struct BenchIncrementalArgs {
     /// How the growing network is solved.
     #[arg(long, value_enum, default_value_t = Solver::Window)]
     pub solver: Solver,
-    /// A pose whose step exceeds this (m or rad) is relinearized (`bayes-tree`).
-    #[arg(long, default_value_t = SmootherParams::default().relinearize_threshold)]
-    pub relinearize_threshold: f64,
+    /// A pose whose step in x or y exceeds this (m) is relinearized (`bayes-tree`).
+    #[arg(long, default_value_t = SmootherParams::default().relinearize_translation)]
+    pub relinearize_translation: f64,
+    /// A pose whose step in θ exceeds this (rad) is relinearized (`bayes-tree`).
+    #[arg(long, default_value_t = SmootherParams::default().relinearize_rotation)]
+    pub relinearize_rotation: f64,
+    /// Rounds of relinearization within one update (`bayes-tree`).
+    #[arg(long, default_value_t = SmootherParams::default().max_relinearizations)]
+    pub max_relinearizations: u32,
     /// A subtree's steps are recomputed when its separator moved by more than this
     /// (`bayes-tree`).
     #[arg(long, default_value_t = SmootherParams::default().wildfire)]
@@ -175,9 +181,10 @@ fn replay_bayes_tree(
 ) -> Result<Replay> {
     let n = full.poses.len();
     let mut smoother = IncrementalSmoother::new(SmootherParams {
-        relinearize_threshold: args.relinearize_threshold,
+        relinearize_translation: args.relinearize_translation,
+        relinearize_rotation: args.relinearize_rotation,
+        max_relinearizations: args.max_relinearizations,
         wildfire: args.wildfire,
-        ..SmootherParams::default()
     });
     let (mut eliminated, mut rounds) = (0, 0);
     smoother.update(&[full.poses[0]], &[]).context("node 0")?;

@@ -12,7 +12,8 @@
 //!    by minimum degree with the update's poses last, and eliminates it again;
 //! 3. solves the top from the roots down, and goes into an orphan only where its separator's
 //!    step changed by more than `wildfire` (the rest of the tree keeps its steps);
-//! 4. relinearizes every pose whose step exceeds `relinearize_threshold` (its linearization
+//! 4. relinearizes every pose whose step exceeds `relinearize_translation` or
+//!    `relinearize_rotation` (its linearization
 //!    point moves to the estimate) and repeats 1–3 for them, up to `max_relinearizations`
 //!    times, so the estimate handed back is a converged Gauss-Newton answer, not one step.
 //!
@@ -27,7 +28,8 @@ mod tests;
 use crate::network::RelativeEdge;
 use crate::se2::{Pose2, wrap_angle};
 use eliminate::{
-    Conditional, Quadratic, add_into, adjacency, eliminate_first, linearize_edge, min_degree,
+    Conditional, EdgeFactor, Quadratic, add_into, adjacency, eliminate_first, linearize_edge,
+    min_degree,
 };
 use serde::{Deserialize, Serialize};
 
@@ -37,8 +39,10 @@ const NONE: u32 = u32::MAX;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SmootherParams {
-    /// A pose whose step exceeds this (m or rad, each component) is relinearized.
-    pub relinearize_threshold: f64,
+    /// A pose whose step in x or y exceeds this (m) is relinearized.
+    pub relinearize_translation: f64,
+    /// A pose whose step in θ exceeds this (rad) is relinearized.
+    pub relinearize_rotation: f64,
     /// Rounds of relinearization within one update; what is left waits for the next.
     pub max_relinearizations: u32,
     /// A subtree's steps are recomputed when its separator's moved by more than this.
@@ -48,7 +52,8 @@ pub struct SmootherParams {
 impl Default for SmootherParams {
     fn default() -> Self {
         SmootherParams {
-            relinearize_threshold: 1e-2,
+            relinearize_translation: 1e-2,
+            relinearize_rotation: 1e-2,
             max_relinearizations: 4,
             wildfire: 1e-4,
         }
@@ -150,10 +155,35 @@ struct Work {
     slot: Vec<u32>,
     edge_mark: Vec<u32>,
     changed: Vec<u32>,
+    elimination: Scratch,
+}
+
+/// The buffers of one re-elimination, kept so that an update allocates nothing once the
+/// smoother has seen an update as large.
+#[derive(Clone, Debug, Default)]
+struct Scratch {
+    fresh: Vec<EdgeFactor>,
+    sources: Vec<Source>,
+    /// Each source's poses as top slots, one after another; `clique_ends[i]` ends source i.
+    clique_slots: Vec<u32>,
+    clique_ends: Vec<usize>,
+    is_last: Vec<bool>,
+    /// `on[slot]`: the live sources on the top pose in `slot`.
+    on: Vec<Vec<usize>>,
+    alive: Vec<bool>,
+    /// The combined factor of the pose being eliminated.
+    h: Vec<f64>,
+    g: Vec<f64>,
+    vars: Vec<u32>,
+    slots: Vec<usize>,
+    /// `place[slot] = (k, i)`: the top pose in `slot` is the i-th of the combined factor of
+    /// the k-th elimination.
+    place: Vec<(u32, u32)>,
+    here: Vec<usize>,
 }
 
 /// A factor of one elimination: a fresh linearization of an edge, or what a pose left.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 enum Source {
     Edge(usize),
     Left(u32),
@@ -270,8 +300,8 @@ impl IncrementalSmoother {
                 .into_iter()
                 .filter(|&v| {
                     let d = &self.delta[v as usize];
-                    d.iter()
-                        .any(|x| x.abs() > self.params.relinearize_threshold)
+                    d[0].abs().max(d[1].abs()) > self.params.relinearize_translation
+                        || d[2].abs() > self.params.relinearize_rotation
                 })
                 .collect();
             if over.is_empty() {
@@ -354,33 +384,37 @@ impl IncrementalSmoother {
         for (i, &t) in top.iter().enumerate() {
             self.work.slot[t as usize] = i as u32;
         }
-        let fresh = self.linearize_top(&top, stamp);
-        let mut sources: Vec<Source> = (0..fresh.len()).map(Source::Edge).collect();
-        sources.extend(orphans.iter().map(|&w| Source::Left(w)));
-        let vars_of = |s: &Source, this: &Self| -> Vec<u32> {
-            match *s {
-                Source::Edge(i) => fresh[i].0.clone(),
-                Source::Left(w) => this.conditionals[w as usize].sep.clone(),
-            }
-        };
-        let cliques: Vec<Vec<u32>> = sources
-            .iter()
-            .map(|s| {
-                let vars = vars_of(s, self);
-                vars.iter().map(|&v| self.work.slot[v as usize]).collect()
-            })
-            .collect();
-        let mut is_last = vec![false; top.len()];
+        let mut x = std::mem::take(&mut self.work.elimination);
+        self.linearize_top(&top, stamp, &mut x.fresh);
+        x.sources.clear();
+        x.sources.extend((0..x.fresh.len()).map(Source::Edge));
+        x.sources.extend(orphans.iter().map(|&w| Source::Left(w)));
+        x.clique_slots.clear();
+        x.clique_ends.clear();
+        for source in &x.sources {
+            let vars = match *source {
+                Source::Edge(i) => x.fresh[i].vars(),
+                Source::Left(w) => &self.conditionals[w as usize].sep,
+            };
+            x.clique_slots
+                .extend(vars.iter().map(|&v| self.work.slot[v as usize]));
+            x.clique_ends.push(x.clique_slots.len());
+        }
+        x.is_last.clear();
+        x.is_last.resize(top.len(), false);
         for &v in last {
             if self.work.mark[v as usize] == stamp {
-                is_last[self.work.slot[v as usize] as usize] = true;
+                x.is_last[self.work.slot[v as usize] as usize] = true;
             }
         }
-        let order: Vec<u32> = min_degree(adjacency(top.len(), &cliques), &is_last)
+        let adjacent = adjacency(top.len(), &x.clique_slots, &x.clique_ends);
+        let order: Vec<u32> = min_degree(adjacent, &x.is_last)
             .into_iter()
             .map(|i| top[i as usize])
             .collect();
-        self.eliminate_in_order(&order, &fresh, sources, &cliques)?;
+        let eliminated = self.eliminate_in_order(&order, &mut x);
+        self.work.elimination = x;
+        eliminated?;
         stats.eliminated += order.len();
         for &v in order.iter().chain(&orphans) {
             let p = self.conditionals[v as usize]
@@ -415,9 +449,9 @@ impl IncrementalSmoother {
 
     /// The edges whose every pose is in the top, linearized at the current points: each as
     /// its poses (node 0 left out: it is held) and its quadratic.
-    fn linearize_top(&mut self, top: &[u32], stamp: u32) -> Vec<(Vec<u32>, Quadratic)> {
+    fn linearize_top(&mut self, top: &[u32], stamp: u32, fresh: &mut Vec<EdgeFactor>) {
         self.work.edge_mark.resize(self.edges.len(), 0);
-        let mut fresh = Vec::new();
+        fresh.clear();
         for &t in top {
             for &k in &self.edges_of[t as usize] {
                 let k = k as usize;
@@ -433,85 +467,91 @@ impl IncrementalSmoother {
                 fresh.push(linearize_edge(e, &self.theta));
             }
         }
-        fresh
     }
 
-    fn eliminate_in_order(
-        &mut self,
-        order: &[u32],
-        fresh: &[(Vec<u32>, Quadratic)],
-        mut sources: Vec<Source>,
-        cliques: &[Vec<u32>],
-    ) -> Result<(), SmootherError> {
+    fn eliminate_in_order(&mut self, order: &[u32], x: &mut Scratch) -> Result<(), SmootherError> {
         let top_len = order.len();
-        let mut on: Vec<Vec<usize>> = vec![Vec::new(); top_len];
-        for (i, clique) in cliques.iter().enumerate() {
-            for &local in clique {
-                on[local as usize].push(i);
-            }
+        if x.on.len() < top_len {
+            x.on.resize(top_len, Vec::new());
         }
-        let mut alive = vec![true; sources.len()];
-        let (mut h, mut g, mut vars, mut slots) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        // `place[local] = (k, i)`: the top pose `local` is the i-th of the combined factor of
-        // the k-th elimination.
-        let mut place = vec![(u32::MAX, 0u32); top_len];
-        let mut here = Vec::new();
+        x.on[..top_len].iter_mut().for_each(Vec::clear);
+        let mut start = 0;
+        for (i, &end) in x.clique_ends.iter().enumerate() {
+            for &local in &x.clique_slots[start..end] {
+                x.on[local as usize].push(i);
+            }
+            start = end;
+        }
+        x.alive.clear();
+        x.alive.resize(x.sources.len(), true);
+        x.place.clear();
+        x.place.resize(top_len, (u32::MAX, 0));
         for (k, &v) in order.iter().enumerate() {
             let k = k as u32;
             self.position[v as usize] = self.next_position;
             self.next_position += 1;
             let local = self.work.slot[v as usize] as usize;
-            here.clear();
-            here.extend(on[local].iter().copied().filter(|&i| alive[i]));
-            vars.clear();
-            vars.push(v);
-            place[local] = (k, 0);
-            for &i in &here {
-                alive[i] = false;
-                let factor_vars = match sources[i] {
-                    Source::Edge(f) => &fresh[f].0,
+            x.here.clear();
+            x.here
+                .extend(x.on[local].iter().copied().filter(|&i| x.alive[i]));
+            x.vars.clear();
+            x.vars.push(v);
+            x.place[local] = (k, 0);
+            for &i in &x.here {
+                x.alive[i] = false;
+                let factor_vars = match x.sources[i] {
+                    Source::Edge(f) => x.fresh[f].vars(),
                     Source::Left(w) => &self.conditionals[w as usize].sep,
                 };
                 for &u in factor_vars {
-                    let at = &mut place[self.work.slot[u as usize] as usize];
+                    let at = &mut x.place[self.work.slot[u as usize] as usize];
                     if at.0 != k {
-                        *at = (k, vars.len() as u32);
-                        vars.push(u);
+                        *at = (k, x.vars.len() as u32);
+                        x.vars.push(u);
                     }
                 }
             }
-            let m = 3 * vars.len();
-            h.clear();
-            h.resize(m * m, 0.0);
-            g.clear();
-            g.resize(m, 0.0);
-            for &i in &here {
-                let (factor_vars, q) = match sources[i] {
-                    Source::Edge(f) => (&fresh[f].0, &fresh[f].1),
-                    Source::Left(w) => (&self.conditionals[w as usize].sep, &self.left[w as usize]),
+            let m = 3 * x.vars.len();
+            x.h.clear();
+            x.h.resize(m * m, 0.0);
+            x.g.clear();
+            x.g.resize(m, 0.0);
+            for &i in &x.here {
+                let (factor_vars, factor) = match x.sources[i] {
+                    Source::Edge(f) => {
+                        let f = &x.fresh[f];
+                        (f.vars(), (f.h(), f.g()))
+                    }
+                    Source::Left(w) => {
+                        let left = &self.left[w as usize];
+                        (
+                            &self.conditionals[w as usize].sep[..],
+                            (&left.h[..], &left.g[..]),
+                        )
+                    }
                 };
-                slots.clear();
-                slots.extend(
+                x.slots.clear();
+                x.slots.extend(
                     factor_vars
                         .iter()
-                        .map(|&u| place[self.work.slot[u as usize] as usize].1 as usize),
+                        .map(|&u| x.place[self.work.slot[u as usize] as usize].1 as usize),
                 );
-                add_into(&mut h, &mut g, m, &slots, q);
+                add_into((&mut x.h, &mut x.g), m, &x.slots, factor);
             }
             eliminate_first(
-                &vars,
-                &h,
-                &g,
+                &x.vars,
+                &x.h,
+                &x.g,
                 &mut self.conditionals[v as usize],
                 &mut self.left[v as usize],
             )
             .map_err(|_| SmootherError::Unconstrained(v as usize))?;
-            if vars.len() > 1 {
-                let id = sources.len();
-                sources.push(Source::Left(v));
-                alive.push(true);
-                for &u in &vars[1..] {
-                    on[self.work.slot[u as usize] as usize].push(id);
+            if x.vars.len() > 1 {
+                let id = x.sources.len();
+                x.sources.push(Source::Left(v));
+                x.alive.push(true);
+                for &u in &x.vars[1..] {
+                    x.on[self.work.slot[u as usize] as usize].push(id);
                 }
             }
         }

@@ -10,7 +10,8 @@ use crate::se2::Pose2;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-/// A quadratic factor in information form on `vars`: ½ δᵀHδ − gᵀδ, H of (3k)², g of 3k.
+/// A quadratic factor in information form on `vars`: ½ δᵀHδ − gᵀδ, H of (3k)² (symmetric:
+/// only its upper triangle is read), g of 3k.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Quadratic {
     pub h: Vec<f64>,
@@ -51,8 +52,8 @@ impl Conditional {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct NotPositiveDefinite;
 
-/// Eliminates the first variable of a combined factor on `vars` (`h` of (3k)², `g` of 3k,
-/// the variable first) into `conditional`, its conditional on the rest, and `left`, the
+/// Eliminates the first variable of a combined factor on `vars` (`h` of (3k)², its upper
+/// triangle read, `g` of 3k, the variable first) into `conditional`, its conditional on the rest, and `left`, the
 /// factor left on the rest (both overwritten, their storage reused).
 pub(super) fn eliminate_first(
     vars: &[u32],
@@ -73,9 +74,9 @@ pub(super) fn eliminate_first(
         }
     };
     let l00 = pivot(at(0, 0))?;
-    let (l10, l20) = (at(1, 0) / l00, at(2, 0) / l00);
+    let (l10, l20) = (at(0, 1) / l00, at(0, 2) / l00);
     let l11 = pivot(at(1, 1) - l10 * l10)?;
-    let l21 = (at(2, 1) - l20 * l10) / l11;
+    let l21 = (at(1, 2) - l20 * l10) / l11;
     let l22 = pivot(at(2, 2) - l20 * l20 - l21 * l21)?;
     let rest = m - 3;
     let s = &mut conditional.s;
@@ -96,23 +97,25 @@ pub(super) fn eliminate_first(
     let d0 = g[0] / l00;
     let d1 = (g[1] - l10 * d0) / l11;
     let d = [d0, d1, (g[2] - l20 * d0 - l21 * d1) / l22];
-    // Filled row by row, not zeroed first: for a large separator the zeroing costs as much
-    // as the update.
+    // The upper triangle only (the factor is symmetric), each row from its diagonal on.
     left.h.clear();
-    left.h.reserve(rest * rest);
+    left.h.resize(rest * rest, 0.0);
     left.g.clear();
     let (s0, s1, s2) = (&s[..rest], &s[rest..2 * rest], &s[2 * rest..]);
     for a in 0..rest {
         let (a0, a1, a2) = (s0[a], s1[a], s2[a]);
         left.g.push(g[3 + a] - (a0 * d[0] + a1 * d[1] + a2 * d[2]));
-        let row = &h[(3 + a) * m + 3..(4 + a) * m];
-        left.h.extend(
-            row.iter()
-                .zip(s0)
-                .zip(s1)
-                .zip(s2)
-                .map(|(((&hv, &b0), &b1), &b2)| hv - (a0 * b0 + a1 * b1 + a2 * b2)),
-        );
+        let row = &h[(3 + a) * m + 3 + a..(4 + a) * m];
+        let out = &mut left.h[a * rest + a..(a + 1) * rest];
+        for ((((o, &hv), &b0), &b1), &b2) in out
+            .iter_mut()
+            .zip(row)
+            .zip(&s0[a..])
+            .zip(&s1[a..])
+            .zip(&s2[a..])
+        {
+            *o = hv - (a0 * b0 + a1 * b1 + a2 * b2);
+        }
     }
     conditional.sep.clear();
     conditional.sep.extend_from_slice(&vars[1..]);
@@ -121,32 +124,58 @@ pub(super) fn eliminate_first(
     Ok(())
 }
 
-/// Adds a factor on `from_vars` into a combined factor on `into_slots` places: `slot[i]`
-/// is the combined block of the factor's i-th variable.
-pub(super) fn add_into(h: &mut [f64], g: &mut [f64], m: usize, slots: &[usize], f: &Quadratic) {
+/// Adds a factor into a combined factor of `m` rows: `slots[i]` is the combined block of the
+/// factor's i-th variable. Both are symmetric and only their upper triangles are read and
+/// written (a block below the diagonal lands transposed above it).
+pub(super) fn add_into(
+    (h, g): (&mut [f64], &mut [f64]),
+    m: usize,
+    slots: &[usize],
+    (fh, fg): (&[f64], &[f64]),
+) {
     let k = 3 * slots.len();
     for (i, &si) in slots.iter().enumerate() {
         for r in 0..3 {
-            g[3 * si + r] += f.g[3 * i + r];
-            let row = &f.h[(3 * i + r) * k..(3 * i + r + 1) * k];
-            let out = &mut h[(3 * si + r) * m..(3 * si + r + 1) * m];
-            for (j, &sj) in slots.iter().enumerate() {
-                out[3 * sj] += row[3 * j];
-                out[3 * sj + 1] += row[3 * j + 1];
-                out[3 * sj + 2] += row[3 * j + 2];
+            g[3 * si + r] += fg[3 * i + r];
+        }
+        for (j, &sj) in slots.iter().enumerate().skip(i) {
+            let block = |r: usize, c: usize| fh[(3 * i + r) * k + 3 * j + c];
+            if i == j {
+                for r in 0..3 {
+                    for c in r..3 {
+                        h[(3 * si + r) * m + 3 * si + c] += block(r, c);
+                    }
+                }
+            } else if si < sj {
+                for r in 0..3 {
+                    let out = &mut h[(3 * si + r) * m + 3 * sj..(3 * si + r) * m + 3 * sj + 3];
+                    for (c, o) in out.iter_mut().enumerate() {
+                        *o += block(r, c);
+                    }
+                }
+            } else {
+                for c in 0..3 {
+                    let out = &mut h[(3 * sj + c) * m + 3 * si..(3 * sj + c) * m + 3 * si + 3];
+                    for (r, o) in out.iter_mut().enumerate() {
+                        *o += block(r, c);
+                    }
+                }
             }
         }
     }
 }
 
-/// The graph of `count` variables linked by `cliques` (each a list of variables that share a
-/// factor): each variable's neighbours, once each.
-pub(super) fn adjacency(count: usize, cliques: &[Vec<u32>]) -> Vec<Vec<u32>> {
+/// The graph of `count` variables linked by cliques (each a run of `slots`, ended by
+/// `ends`, of variables that share a factor): each variable's neighbours, once each.
+pub(super) fn adjacency(count: usize, slots: &[u32], ends: &[usize]) -> Vec<Vec<u32>> {
     let mut adjacent: Vec<Vec<u32>> = vec![Vec::new(); count];
-    for clique in cliques {
+    let mut start = 0;
+    for &end in ends {
+        let clique = &slots[start..end];
         for &a in clique {
             adjacent[a as usize].extend(clique.iter().copied().filter(|&b| b != a));
         }
+        start = end;
     }
     let mut mark = vec![u32::MAX; count];
     for (v, list) in adjacent.iter_mut().enumerate() {
@@ -197,38 +226,67 @@ pub(super) fn min_degree(mut adjacent: Vec<Vec<u32>>, last: &[bool]) -> Vec<u32>
     order
 }
 
-/// An edge's quadratic at `theta`, on its poses other than node 0 (H = JᵀΩJ, g = −JᵀΩe, the
-/// robust kernel's weight at the current error folded into Ω).
-pub(super) fn linearize_edge(e: &RelativeEdge, theta: &[Pose2]) -> (Vec<u32>, Quadratic) {
+/// An edge's quadratic on its poses other than node 0 (one or two): no heap, as an update
+/// linearizes every edge of its top afresh.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct EdgeFactor {
+    vars: [u32; 2],
+    len: usize,
+    /// (3·len)² row-major, full.
+    h: [f64; 36],
+    g: [f64; 6],
+}
+
+impl EdgeFactor {
+    pub fn vars(&self) -> &[u32] {
+        &self.vars[..self.len]
+    }
+
+    pub fn h(&self) -> &[f64] {
+        &self.h[..9 * self.len * self.len]
+    }
+
+    pub fn g(&self) -> &[f64] {
+        &self.g[..3 * self.len]
+    }
+}
+
+/// An edge's quadratic at `theta` (H = JᵀΩJ, g = −JᵀΩe, the robust kernel's weight at the
+/// current error folded into Ω).
+pub(super) fn linearize_edge(e: &RelativeEdge, theta: &[Pose2]) -> EdgeFactor {
     let (err, ji, jj) = e.linearize(theta);
     let chi2 = err.dot(&(e.information * err));
     let omega = e.information * e.robust.weight(chi2);
-    let mut blocks = Vec::with_capacity(2);
-    if e.from != 0 {
-        blocks.push((e.from as u32, ji));
-    }
-    if e.to != 0 {
-        blocks.push((e.to as u32, jj));
-    }
-    let k = 3 * blocks.len();
-    let mut q = Quadratic {
-        h: vec![0.0; k * k],
-        g: vec![0.0; k],
+    let mut f = EdgeFactor {
+        vars: [0; 2],
+        len: 0,
+        h: [0.0; 36],
+        g: [0.0; 6],
     };
-    for (a, (_, ja)) in blocks.iter().enumerate() {
+    let mut jacobians = [ji; 2];
+    for (v, j) in [(e.from, ji), (e.to, jj)] {
+        if v != 0 {
+            f.vars[f.len] = v as u32;
+            jacobians[f.len] = j;
+            f.len += 1;
+        }
+    }
+    let k = 3 * f.len;
+    let blocks = &jacobians[..f.len];
+    for (a, ja) in blocks.iter().enumerate() {
         let oa = ja.transpose() * omega;
         let ga = -(oa * err);
-        for (b, (_, jb)) in blocks.iter().enumerate() {
+        for (b, jb) in blocks.iter().enumerate() {
             let hab = oa * jb;
             for r in 0..3 {
                 for c in 0..3 {
-                    q.h[(3 * a + r) * k + 3 * b + c] = hab[(r, c)];
+                    f.h[(3 * a + r) * k + 3 * b + c] = hab[(r, c)];
                 }
             }
         }
         for r in 0..3 {
-            q.g[3 * a + r] = ga[r];
+            f.g[3 * a + r] = ga[r];
         }
     }
-    (blocks.iter().map(|(v, _)| *v).collect(), q)
+    f
 }
