@@ -513,7 +513,7 @@ impl IncrementalSmoother {
             }
             let m = 3 * x.vars.len();
             x.h.clear();
-            x.h.resize(m * m, 0.0);
+            x.h.resize(eliminate::packed(m, m), 0.0);
             x.g.clear();
             x.g.resize(m, 0.0);
             for &i in &x.here {

@@ -3,15 +3,16 @@
 //! factor on the separator), and the minimum-degree order of the variables re-eliminated in
 //! an update.
 //!
-//! Every variable is a pose (x, y, θ): blocks are 3 × 3, matrices row-major.
+//! Every variable is a pose (x, y, θ): blocks are 3 × 3. Symmetric matrices are kept as their
+//! upper triangles, row by row: half the arithmetic, and nothing to zero but what is summed.
 
 use crate::network::RelativeEdge;
 use crate::se2::Pose2;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-/// A quadratic factor in information form on `vars`: ½ δᵀHδ − gᵀδ, H of (3k)² (symmetric:
-/// only its upper triangle is read), g of 3k.
+/// A quadratic factor in information form on `vars`: ½ δᵀHδ − gᵀδ, H symmetric of (3k)²
+/// kept as its upper triangle row by row (see [`packed`]), g of 3k.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Quadratic {
     pub h: Vec<f64>,
@@ -52,8 +53,14 @@ impl Conditional {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct NotPositiveDefinite;
 
-/// Eliminates the first variable of a combined factor on `vars` (`h` of (3k)², its upper
-/// triangle read, `g` of 3k, the variable first) into `conditional`, its conditional on the rest, and `left`, the
+/// Where row `r` of a packed symmetric matrix of `m` rows starts: its element (r, c), c ≥ r,
+/// is at `packed(m, r) + c - r`.
+pub(super) fn packed(m: usize, r: usize) -> usize {
+    r * (2 * m + 1 - r) / 2
+}
+
+/// Eliminates the first variable of a combined factor on `vars` (`h` packed of (3k)², `g` of
+/// 3k, the variable first) into `conditional`, its conditional on the rest, and `left`, the
 /// factor left on the rest (both overwritten, their storage reused).
 pub(super) fn eliminate_first(
     vars: &[u32],
@@ -63,7 +70,7 @@ pub(super) fn eliminate_first(
     left: &mut Quadratic,
 ) -> Result<(), NotPositiveDefinite> {
     let m = 3 * vars.len();
-    let at = |r: usize, c: usize| h[r * m + c];
+    let at = |r: usize, c: usize| h[packed(m, r) + c - r];
     let scale = at(0, 0).max(at(1, 1)).max(at(2, 2));
     let tiny = 1e-12 * scale.max(f64::MIN_POSITIVE);
     let pivot = |x: f64| {
@@ -85,7 +92,8 @@ pub(super) fn eliminate_first(
     {
         let (s0, s12) = s.split_at_mut(rest);
         let (s1, s2) = s12.split_at_mut(rest);
-        let (h0, h1, h2) = (&h[3..m], &h[m + 3..2 * m], &h[2 * m + 3..3 * m]);
+        let row = |r: usize| &h[packed(m, r) + 3 - r..packed(m, r + 1)];
+        let (h0, h1, h2) = (row(0), row(1), row(2));
         for c in 0..rest {
             let x0 = h0[c] / l00;
             let x1 = (h1[c] - l10 * x0) / l11;
@@ -97,25 +105,21 @@ pub(super) fn eliminate_first(
     let d0 = g[0] / l00;
     let d1 = (g[1] - l10 * d0) / l11;
     let d = [d0, d1, (g[2] - l20 * d0 - l21 * d1) / l22];
-    // The upper triangle only (the factor is symmetric), each row from its diagonal on.
     left.h.clear();
-    left.h.resize(rest * rest, 0.0);
+    left.h.reserve(packed(rest, rest));
     left.g.clear();
     let (s0, s1, s2) = (&s[..rest], &s[rest..2 * rest], &s[2 * rest..]);
     for a in 0..rest {
         let (a0, a1, a2) = (s0[a], s1[a], s2[a]);
         left.g.push(g[3 + a] - (a0 * d[0] + a1 * d[1] + a2 * d[2]));
-        let row = &h[(3 + a) * m + 3 + a..(4 + a) * m];
-        let out = &mut left.h[a * rest + a..(a + 1) * rest];
-        for ((((o, &hv), &b0), &b1), &b2) in out
-            .iter_mut()
-            .zip(row)
-            .zip(&s0[a..])
-            .zip(&s1[a..])
-            .zip(&s2[a..])
-        {
-            *o = hv - (a0 * b0 + a1 * b1 + a2 * b2);
-        }
+        let row = &h[packed(m, 3 + a)..packed(m, 4 + a)];
+        left.h.extend(
+            row.iter()
+                .zip(&s0[a..])
+                .zip(&s1[a..])
+                .zip(&s2[a..])
+                .map(|(((&hv, &b0), &b1), &b2)| hv - (a0 * b0 + a1 * b1 + a2 * b2)),
+        );
     }
     conditional.sep.clear();
     conditional.sep.extend_from_slice(&vars[1..]);
@@ -124,9 +128,9 @@ pub(super) fn eliminate_first(
     Ok(())
 }
 
-/// Adds a factor into a combined factor of `m` rows: `slots[i]` is the combined block of the
-/// factor's i-th variable. Both are symmetric and only their upper triangles are read and
-/// written (a block below the diagonal lands transposed above it).
+/// Adds a factor (packed `fh`, `fg`) into a combined factor of `m` rows (packed `h`, `g`):
+/// `slots[i]` is the combined block of the factor's i-th variable. A block that lands below
+/// the diagonal is added transposed above it.
 pub(super) fn add_into(
     (h, g): (&mut [f64], &mut [f64]),
     m: usize,
@@ -134,29 +138,30 @@ pub(super) fn add_into(
     (fh, fg): (&[f64], &[f64]),
 ) {
     let k = 3 * slots.len();
+    let into = |r: usize, c: usize| packed(m, r) + c - r;
     for (i, &si) in slots.iter().enumerate() {
         for r in 0..3 {
             g[3 * si + r] += fg[3 * i + r];
         }
         for (j, &sj) in slots.iter().enumerate().skip(i) {
-            let block = |r: usize, c: usize| fh[(3 * i + r) * k + 3 * j + c];
+            let block = |r: usize, c: usize| fh[packed(k, 3 * i + r) + 3 * j + c - 3 * i - r];
             if i == j {
                 for r in 0..3 {
                     for c in r..3 {
-                        h[(3 * si + r) * m + 3 * si + c] += block(r, c);
+                        h[into(3 * si + r, 3 * si + c)] += block(r, c);
                     }
                 }
             } else if si < sj {
                 for r in 0..3 {
-                    let out = &mut h[(3 * si + r) * m + 3 * sj..(3 * si + r) * m + 3 * sj + 3];
-                    for (c, o) in out.iter_mut().enumerate() {
+                    let at = into(3 * si + r, 3 * sj);
+                    for (c, o) in h[at..at + 3].iter_mut().enumerate() {
                         *o += block(r, c);
                     }
                 }
             } else {
                 for c in 0..3 {
-                    let out = &mut h[(3 * sj + c) * m + 3 * si..(3 * sj + c) * m + 3 * si + 3];
-                    for (r, o) in out.iter_mut().enumerate() {
+                    let at = into(3 * sj + c, 3 * si);
+                    for (r, o) in h[at..at + 3].iter_mut().enumerate() {
                         *o += block(r, c);
                     }
                 }
@@ -232,8 +237,8 @@ pub(super) fn min_degree(mut adjacent: Vec<Vec<u32>>, last: &[bool]) -> Vec<u32>
 pub(super) struct EdgeFactor {
     vars: [u32; 2],
     len: usize,
-    /// (3·len)² row-major, full.
-    h: [f64; 36],
+    /// (3·len)², packed.
+    h: [f64; 21],
     g: [f64; 6],
 }
 
@@ -243,7 +248,7 @@ impl EdgeFactor {
     }
 
     pub fn h(&self) -> &[f64] {
-        &self.h[..9 * self.len * self.len]
+        &self.h[..packed(3 * self.len, 3 * self.len)]
     }
 
     pub fn g(&self) -> &[f64] {
@@ -260,7 +265,7 @@ pub(super) fn linearize_edge(e: &RelativeEdge, theta: &[Pose2]) -> EdgeFactor {
     let mut f = EdgeFactor {
         vars: [0; 2],
         len: 0,
-        h: [0.0; 36],
+        h: [0.0; 21],
         g: [0.0; 6],
     };
     let mut jacobians = [ji; 2];
@@ -276,11 +281,14 @@ pub(super) fn linearize_edge(e: &RelativeEdge, theta: &[Pose2]) -> EdgeFactor {
     for (a, ja) in blocks.iter().enumerate() {
         let oa = ja.transpose() * omega;
         let ga = -(oa * err);
-        for (b, jb) in blocks.iter().enumerate() {
+        for (b, jb) in blocks.iter().enumerate().skip(a) {
             let hab = oa * jb;
             for r in 0..3 {
                 for c in 0..3 {
-                    f.h[(3 * a + r) * k + 3 * b + c] = hab[(r, c)];
+                    let (row, col) = (3 * a + r, 3 * b + c);
+                    if col >= row {
+                        f.h[packed(k, row) + col - row] = hab[(r, c)];
+                    }
                 }
             }
         }

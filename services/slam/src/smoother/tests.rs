@@ -1,3 +1,4 @@
+use super::eliminate::packed;
 use super::*;
 use crate::network::EdgeKind;
 use crate::robust::Robust;
@@ -79,7 +80,9 @@ fn dense_step(theta: &[Pose2], edges: &[RelativeEdge]) -> Vec<Pose2> {
                 g[row] += qg[3 * a + r];
                 for (b, &vb) in vars.iter().enumerate() {
                     for c in 0..3 {
-                        h[(row, 3 * (vb as usize - 1) + c)] += qh[(3 * a + r) * k + 3 * b + c];
+                        let (i, j) = (3 * a + r, 3 * b + c);
+                        let (i, j) = (i.min(j), i.max(j));
+                        h[(row, 3 * (vb as usize - 1) + c)] += qh[packed(k, i) + j - i];
                     }
                 }
             }
