@@ -8,8 +8,6 @@
 
 use crate::network::RelativeEdge;
 use crate::se2::Pose2;
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
 
 /// A quadratic factor in information form on `vars`: ½ δᵀHδ − gᵀδ, H symmetric of (3k)²
 /// kept as its upper triangle row by row (see [`packed`]), g of 3k.
@@ -190,20 +188,28 @@ pub(super) fn adjacency(count: usize, slots: &[u32], ends: &[usize]) -> Vec<Vec<
 }
 
 /// A minimum-degree order of the graph `adjacent` (each neighbour once), the variables whose
-/// `last` is true after all others. Ties go to the lower index, so the order is deterministic.
+/// `last` is true after all others. Variables wait in buckets by degree (a degree is at most
+/// `count`), so the next one is found without a heap's comparisons; among equals the one
+/// queued last goes first, so the order is deterministic.
 pub(super) fn min_degree(mut adjacent: Vec<Vec<u32>>, last: &[bool]) -> Vec<u32> {
     let count = adjacent.len();
+    let key = |v: usize, degree: usize| degree + if last[v] { count } else { 0 };
     // `mark[b] == stamp`: b is already in the list being extended.
     let (mut mark, mut stamp) = (vec![0u32; count], 0u32);
-    let mut heap = BinaryHeap::with_capacity(2 * count);
+    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); 2 * count];
     for (v, list) in adjacent.iter().enumerate() {
-        heap.push(Reverse((last[v], list.len(), v as u32)));
+        buckets[key(v, list.len())].push(v as u32);
     }
+    let mut lowest = 0;
     let mut eliminated = vec![false; count];
     let mut order = Vec::with_capacity(count);
-    while let Some(Reverse((_, degree, v))) = heap.pop() {
+    while lowest < buckets.len() {
+        let Some(v) = buckets[lowest].pop() else {
+            lowest += 1;
+            continue;
+        };
         let vi = v as usize;
-        if eliminated[vi] || degree != adjacent[vi].len() {
+        if eliminated[vi] || key(vi, adjacent[vi].len()) != lowest {
             continue;
         }
         eliminated[vi] = true;
@@ -225,7 +231,9 @@ pub(super) fn min_degree(mut adjacent: Vec<Vec<u32>>, last: &[bool]) -> Vec<u32>
                     .copied()
                     .filter(|&b| mark[b as usize] != stamp),
             );
-            heap.push(Reverse((last[a as usize], list.len(), a)));
+            let k = key(a as usize, list.len());
+            buckets[k].push(a);
+            lowest = lowest.min(k);
         }
     }
     order
