@@ -1,4 +1,4 @@
-use super::eliminate::packed;
+use super::eliminate::{linearize_edge, packed};
 use super::*;
 use crate::network::EdgeKind;
 use crate::robust::Robust;
