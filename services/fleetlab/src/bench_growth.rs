@@ -9,6 +9,10 @@
 //! started again, placed by its GPS fixes). On the same paths again the mapper would pass
 //! over its nodes and not add any (docs/services.md, "Bounded growth"): the nodes of a site
 //! grow with the ground covered, and this bench covers new ground to grow them.
+//!
+//! With `--same-ground` every lap is on the park itself, as a fleet that works in one place
+//! for a month: after the first laps the nodes pass over covered ground, and what the site
+//! keeps of them (span rows, GPS edges up to their bound) is what grows.
 
 use crate::FLEET;
 use crate::bench_fleet::{Percentiles, agent, node_pool, robot_node};
@@ -25,8 +29,10 @@ pub struct BenchGrowthArgs {
     /// Site sizes (nodes) at which it measures, ascending.
     #[arg(long, value_delimiter = ',', default_value = "10000,100000,1000000")]
     pub sizes: Vec<usize>,
-    /// Robots driving, their nodes dealt in turn.
-    #[arg(long, default_value_t = 20)]
+    /// Robots driving, their nodes dealt in turn. Each lap is a new chain of its robot, and
+    /// a robot may start at most `fleetmap::MAX_CHAINS_PER_ROBOT` (256): the largest size
+    /// needs enough robots that none laps more often (checked before the run).
+    #[arg(long, default_value_t = 200)]
     pub robots: usize,
     /// Nodes at each size handed over one at a time and waited for (the time to be mapped,
     /// with no queue before it).
@@ -36,6 +42,9 @@ pub struct BenchGrowthArgs {
     /// other is refused).
     #[arg(long, default_value = "levelmap-bench-growth")]
     pub dir: PathBuf,
+    /// Every lap on the same ground (the park itself) instead of new ground.
+    #[arg(long)]
+    pub same_ground: bool,
     /// The mapper's Zenoh endpoint.
     #[arg(long, default_value = "tcp/127.0.0.1:7449")]
     pub zenoh: String,
@@ -63,6 +72,9 @@ struct AtSize {
     /// The process's resident memory after the restore (Linux `VmRSS`).
     resident_bytes: u64,
     resident_bytes_per_node: f64,
+    /// The most the process has held resident so far (Linux `VmHWM`): feeding, the solve,
+    /// the map, the restore, and the mapper stopped before it, at once.
+    peak_resident_bytes: u64,
     /// A whole-network solve asked for now (`POST …/optimize`'s work).
     solve_ms: f64,
     /// Each sampled node, handed over with no queue before it, until the worker is done
@@ -77,12 +89,13 @@ struct AtSize {
 #[derive(Serialize)]
 struct Report {
     robots: usize,
+    same_ground: bool,
     pool_nodes_per_loop: Vec<usize>,
     sizes: Vec<AtSize>,
 }
 
 /// Copies of the park along a lattice row before the next row starts.
-const LATTICE_COLUMNS: u64 = 32;
+const LATTICE_COLUMNS: u64 = 200;
 /// The lattice's spacing (m): the park's loops fit in 500 m.
 const LATTICE_M: f64 = 500.0;
 
@@ -101,10 +114,11 @@ struct Fleet {
     robots: Vec<Robot>,
     next: usize,
     started_ns: u64,
+    same_ground: bool,
 }
 
 impl Fleet {
-    fn new(pool: Vec<Vec<Node>>, robots: usize) -> Fleet {
+    fn new(pool: Vec<Vec<Node>>, robots: usize, same_ground: bool) -> Fleet {
         let robots = (0..robots)
             .map(|r| Robot {
                 name: format!("r{r}"),
@@ -120,6 +134,7 @@ impl Fleet {
             robots,
             next: 0,
             started_ns: runtime::session::now_ns(),
+            same_ground,
         }
     }
 
@@ -134,7 +149,11 @@ impl Fleet {
             (robot.lap, robot.k) = (robot.lap + 1, 0);
         }
         let template = &loop_nodes[(robot.offset + robot.k as usize) % loop_nodes.len()];
-        let copy = robot.lap * count as u64 + r as u64;
+        let copy = if self.same_ground {
+            0
+        } else {
+            robot.lap * count as u64 + r as u64
+        };
         let offset_m = [
             (copy % LATTICE_COLUMNS) as f64 * LATTICE_M,
             (copy / LATTICE_COLUMNS) as f64 * LATTICE_M,
@@ -165,6 +184,9 @@ fn lap_pool() -> Result<Vec<Vec<Node>>> {
                 let back = (b.translation.vector - start.translation.vector).norm() < 1.0
                     && b.rotation.angle_to(&start.rotation) < 30f64.to_radians();
                 if driven > 100.0 && back {
+                    if i + 1 < SHORTEST_LAP_NODES {
+                        bail!("loop {loop_index}: a lap of {} nodes", i + 1);
+                    }
                     return Ok(nodes[..=i].to_vec());
                 }
             }
@@ -175,6 +197,8 @@ fn lap_pool() -> Result<Vec<Vec<Node>>> {
 
 /// A lap's nodes at most (the park's longest loop has fewer).
 const LAP_NODES_MAX: usize = 1500;
+/// A lap's nodes at least, for the check on chains per robot ([`lap_pool`] checks it).
+const SHORTEST_LAP_NODES: usize = 25;
 
 /// Runs the bench and prints its figures.
 pub fn run(args: &BenchGrowthArgs) -> Result<()> {
@@ -183,6 +207,17 @@ pub fn run(args: &BenchGrowthArgs) -> Result<()> {
     }
     if args.robots == 0 {
         bail!("--robots must be at least 1");
+    }
+    let largest = args.sizes.last().copied().unwrap_or(0);
+    // The shortest lap is the park's first loop's (29 nodes); a robot's laps, counted with it.
+    let laps = largest.div_ceil(args.robots).div_ceil(SHORTEST_LAP_NODES) + 1;
+    if laps > fleetmap::MAX_CHAINS_PER_ROBOT {
+        bail!(
+            "{largest} nodes over {} robots is up to {laps} laps (chains) per robot, more than \
+             the {} the mapper takes: use more --robots",
+            args.robots,
+            fleetmap::MAX_CHAINS_PER_ROBOT
+        );
     }
     crate::runtime()?.block_on(run_async(args))
 }
@@ -194,7 +229,7 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
     eprintln!("bench-growth: laps of {pool_nodes_per_loop:?} nodes");
     let config = crate::park_mapper_config(&args.dir, "127.0.0.1:0", &args.zenoh)?;
     let mut mapper = mapper::start(config.clone()).await?;
-    let mut fleet = Fleet::new(pool, args.robots);
+    let mut fleet = Fleet::new(pool, args.robots, args.same_ground);
     let (mut fed, started) = (0usize, Instant::now());
     // Nodes fed before this mapper started (its counters start at 0).
     let mut fed_before_start = 0;
@@ -207,8 +242,10 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
             fed += 1;
             if fed % 10_000 == 0 {
                 eprintln!(
-                    "bench-growth: {fed} nodes fed, {:.0} s",
-                    started.elapsed().as_secs_f64()
+                    "bench-growth: {fed} nodes fed, {} mapped, {:.0} s, {} MB resident",
+                    mapped_nodes(&mapper),
+                    started.elapsed().as_secs_f64(),
+                    proc_status_kb("VmRSS:")? / 1024
                 );
             }
         }
@@ -219,6 +256,10 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
         let nodes = mapped_nodes(&mapper);
         let passed = passed_nodes(&mapper);
         let rejected = rejected_nodes(&mapper);
+        if rejected > 0 {
+            // Every node is new or passes: a refusal means the bench is not growing a site.
+            bail!("the mapper refused {rejected} nodes by {size} (its /metrics say why)");
+        }
         let solve_started = Instant::now();
         mapper.optimize(FLEET).await?;
         let solve_ms = ms(solve_started);
@@ -231,7 +272,7 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
         mapper = mapper::start(config.clone()).await?;
         let restore_ms = ms(restore_started);
         fed_before_start = fed;
-        let resident_bytes = resident_bytes()?;
+        let resident_bytes = proc_status_kb("VmRSS:")? * 1024;
         let at = AtSize {
             fed,
             nodes,
@@ -243,6 +284,7 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
             restore_ms,
             resident_bytes,
             resident_bytes_per_node: resident_bytes as f64 / nodes.max(1) as f64,
+            peak_resident_bytes: proc_status_kb("VmHWM:")? * 1024,
             solve_ms,
             node_to_view,
             map_png_ms,
@@ -251,14 +293,18 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
         };
         eprintln!(
             "bench-growth: {nodes} nodes: store {:.0} B/node, restore {restore_ms:.0} ms, \
-             {:.0} B resident/node, solve {solve_ms:.0} ms, node p99 {:.1} ms, map.png {map_png_ms:.0} ms",
-            at.store_bytes_per_node, at.resident_bytes_per_node, at.node_to_view.p99_ms
+             {:.0} B resident/node (peak {} MB), solve {solve_ms:.0} ms, node p99 {:.1} ms, map.png {map_png_ms:.0} ms",
+            at.store_bytes_per_node,
+            at.resident_bytes_per_node,
+            at.peak_resident_bytes >> 20,
+            at.node_to_view.p99_ms
         );
         sizes.push(at);
     }
     mapper.stop().await?;
     let report = Report {
         robots: args.robots,
+        same_ground: args.same_ground,
         pool_nodes_per_loop,
         sizes,
     };
@@ -370,15 +416,15 @@ async fn map_png(http: &std::net::SocketAddr) -> Result<(f64, u16, usize)> {
     .await?
 }
 
-/// The process's resident memory (Linux `/proc/self/status` `VmRSS`).
-fn resident_bytes() -> Result<u64> {
+/// One of the process's memory figures (kB) in Linux `/proc/self/status`: `VmRSS:` (resident
+/// now), `VmHWM:` (the most resident so far).
+fn proc_status_kb(field: &str) -> Result<u64> {
     let status = std::fs::read_to_string("/proc/self/status").context("/proc/self/status")?;
-    let kb = status
+    status
         .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .find_map(|l| l.strip_prefix(field))
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
-        .context("no VmRSS in /proc/self/status")?;
-    Ok(kb * 1024)
+        .with_context(|| format!("no {field} in /proc/self/status"))
 }
 
 fn ms(t0: Instant) -> f64 {
