@@ -10,9 +10,10 @@
 //! over its nodes and not add any (docs/services.md, "Bounded growth"): the nodes of a site
 //! grow with the ground covered, and this bench covers new ground to grow them.
 //!
-//! With `--same-ground` every lap is on the park itself, as a fleet that works in one place
-//! for a month: after the first laps the nodes pass over covered ground, and what the site
-//! keeps of them (span rows, GPS edges up to their bound) is what grows.
+//! With `--same-ground` every lap is on the park itself, each robot's one chain going on from
+//! lap to lap, as a fleet that works in one place for a month: after the first laps the
+//! nodes pass over covered ground, and what the site keeps of them (span rows, GPS edges up
+//! to their bound, solve points) is what grows.
 
 use crate::FLEET;
 use crate::bench_fleet::{Percentiles, agent, node_pool, robot_node};
@@ -29,9 +30,9 @@ pub struct BenchGrowthArgs {
     /// Site sizes (nodes) at which it measures, ascending.
     #[arg(long, value_delimiter = ',', default_value = "10000,100000,1000000")]
     pub sizes: Vec<usize>,
-    /// Robots driving, their nodes dealt in turn. Each lap is a new chain of its robot, and
-    /// a robot may start at most `fleetmap::MAX_CHAINS_PER_ROBOT` (256): the largest size
-    /// needs enough robots that none laps more often (checked before the run).
+    /// Robots driving, their nodes dealt in turn. On new ground each lap is a new chain of
+    /// its robot, and a robot may start at most `fleetmap::MAX_CHAINS_PER_ROBOT` (256): the
+    /// largest size needs enough robots that none laps more often (checked before the run).
     #[arg(long, default_value_t = 200)]
     pub robots: usize,
     /// Nodes at each size handed over one at a time and waited for (the time to be mapped,
@@ -149,10 +150,16 @@ impl Fleet {
             (robot.lap, robot.k) = (robot.lap + 1, 0);
         }
         let template = &loop_nodes[(robot.offset + robot.k as usize) % loop_nodes.len()];
-        let copy = if self.same_ground {
-            0
+        // New ground: each lap a copy of the park of its own, driven as a new chain. The
+        // same ground: the park itself, one chain lap after lap (a lap's end is within 1 m
+        // and 30° of its start, so odometry steps from one lap into the next as it drives).
+        let (copy, chain) = if self.same_ground {
+            (0, (1, robot.sent))
         } else {
-            robot.lap * count as u64 + r as u64
+            (
+                robot.lap * count as u64 + r as u64,
+                (robot.lap + 1, robot.k),
+            )
         };
         let offset_m = [
             (copy % LATTICE_COLUMNS) as f64 * LATTICE_M,
@@ -160,7 +167,6 @@ impl Fleet {
         ];
         // A node a second per robot, in compressed time.
         let stamp_ns = self.started_ns + robot.sent * 1_000_000_000;
-        let chain = (robot.lap + 1, robot.k);
         let payload = robot_node(template, (FLEET, &robot.name), chain, offset_m, stamp_ns);
         robot.k += 1;
         robot.sent += 1;
@@ -211,7 +217,7 @@ pub fn run(args: &BenchGrowthArgs) -> Result<()> {
     let largest = args.sizes.last().copied().unwrap_or(0);
     // The shortest lap is the park's first loop's (29 nodes); a robot's laps, counted with it.
     let laps = largest.div_ceil(args.robots).div_ceil(SHORTEST_LAP_NODES) + 1;
-    if laps > fleetmap::MAX_CHAINS_PER_ROBOT {
+    if !args.same_ground && laps > fleetmap::MAX_CHAINS_PER_ROBOT {
         bail!(
             "{largest} nodes over {} robots is up to {laps} laps (chains) per robot, more than \
              the {} the mapper takes: use more --robots",
@@ -292,8 +298,10 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
             map_png_bytes,
         };
         eprintln!(
-            "bench-growth: {nodes} nodes: store {:.0} B/node, restore {restore_ms:.0} ms, \
-             {:.0} B resident/node (peak {} MB), solve {solve_ms:.0} ms, node p99 {:.1} ms, map.png {map_png_ms:.0} ms",
+            "bench-growth: {fed} fed, {nodes} nodes, {passed} passed: store {} MB ({:.0} B/node), \
+             restore {restore_ms:.0} ms, {:.0} B resident/node (peak {} MB), solve {solve_ms:.0} ms, \
+             node p99 {:.1} ms, map.png {map_png_ms:.0} ms",
+            at.store_bytes >> 20,
             at.store_bytes_per_node,
             at.resident_bytes_per_node,
             at.peak_resident_bytes >> 20,
