@@ -61,6 +61,7 @@ struct AtSize {
     fed: usize,
     /// Of them, in the map (the rest passed over covered ground: not kept).
     nodes: usize,
+    /// Of them, passed over covered ground (over every start of the mapper).
     passed: u64,
     /// Of them, refused (out of order, a quarantined fleet, …: none expected).
     rejected: u64,
@@ -237,8 +238,8 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
     let mut mapper = mapper::start(config.clone()).await?;
     let mut fleet = Fleet::new(pool, args.robots, args.same_ground);
     let (mut fed, started) = (0usize, Instant::now());
-    // Nodes fed before this mapper started (its counters start at 0).
-    let mut fed_before_start = 0;
+    // Nodes fed, and passed, before this mapper started (its counters start at 0).
+    let (mut fed_before_start, mut passed_before_start) = (0, 0);
     let mut sizes = Vec::new();
     for &size in &args.sizes {
         let bulk = size.saturating_sub(args.sample);
@@ -260,7 +261,7 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
         let node_to_view = sample_nodes(&mapper, &mut fleet, size - fed).await?;
         fed = size;
         let nodes = mapped_nodes(&mapper);
-        let passed = passed_nodes(&mapper);
+        let passed = passed_before_start + passed_nodes(&mapper);
         let rejected = rejected_nodes(&mapper);
         if rejected > 0 {
             // Every node is new or passes: a refusal means the bench is not growing a site.
@@ -277,7 +278,7 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
         let restore_started = Instant::now();
         mapper = mapper::start(config.clone()).await?;
         let restore_ms = ms(restore_started);
-        fed_before_start = fed;
+        (fed_before_start, passed_before_start) = (fed, passed);
         let resident_bytes = proc_status_kb("VmRSS:")? * 1024;
         let at = AtSize {
             fed,
