@@ -158,11 +158,7 @@ impl Mapper2d {
             .map(|m| frame.compose(&m.pose))
             .filter(|pose| (pose.x - predicted.x).hypot(pose.y - predicted.y) <= p.max_shift_m);
         by_idc.or_else(|| {
-            let k = self
-                .submaps
-                .done
-                .iter()
-                .position(|s| s.nodes.iter().any(|&(n, _)| n == near))?;
+            let k = self.submap_of(near)?;
             let anchor = self.graph.poses[self.submaps.done[k].anchor];
             let window = SearchWindow {
                 linear_m: p.max_shift_m,

@@ -52,8 +52,7 @@ impl Mapper2d {
             })
             .filter_map(|(k, s)| {
                 let at = self.graph.poses[s.anchor].between(&here);
-                let radius = self.search_radius(s, path);
-                (s.distance_to([at.x, at.y]) <= radius).then(|| {
+                (s.distance_to([at.x, at.y]) <= self.reach(s, path, global)).then(|| {
                     let (c, _) = s.centre_and_reach();
                     ((at.x - c[0]).hypot(at.y - c[1]), k)
                 })
@@ -82,13 +81,25 @@ impl Mapper2d {
             + self.params.loop_search_growth * (path_m - submap.last_path_m).max(0.0)
     }
 
-    /// Searches `node`'s scan in submap `k`; the closure edge, refined by IDC, if it holds.
-    fn match_submap(&self, k: usize, node: usize, global: bool) -> Option<RelativeEdge> {
+    /// How far from `submap`'s extent a node's estimate may be for the submap to be a
+    /// candidate at `path_m`: the search radius, and no farther than the window can reach
+    /// (its corner, √2 × its half side, then the returns' range: beyond that no return lands
+    /// in the grid, and the search scores nothing). Without the second bound every submap
+    /// of a robot's drew a search once its path had grown long enough, however far, and a
+    /// node's time grew with the site.
+    fn reach(&self, submap: &Submap, path_m: f64, global: bool) -> f64 {
+        let (window, _) = self.window(submap, path_m, global);
+        let search_radius = self.search_radius(submap, path_m);
+        let window_reach = std::f64::consts::SQRT_2 * window.linear_m + self.params.submaps.grid.max_range_m;
+        search_radius.min(window_reach)
+    }
+
+    /// The window of a search in `submap` at `path_m`, the search radius at most the
+    /// window's cap (the wide one's when `global`), and the score it asks for.
+    fn window(&self, submap: &Submap, path_m: f64, global: bool) -> (SearchWindow, f64) {
         let p = &self.params.submaps;
-        let submap = &self.submaps.done[k];
-        let initial = self.graph.poses[submap.anchor].between(&self.graph.poses[node]);
-        let radius = self.search_radius(submap, self.node_path_m[node]);
-        let (window, min_score) = if global {
+        let radius = self.search_radius(submap, path_m);
+        if global {
             let window = SearchWindow {
                 linear_m: radius.min(p.global_linear_window_m),
                 angular_rad: std::f64::consts::PI,
@@ -100,7 +111,14 @@ impl Mapper2d {
                 angular_rad: p.angular_window_rad,
             };
             (window, p.min_score)
-        };
+        }
+    }
+
+    /// Searches `node`'s scan in submap `k`; the closure edge, refined by IDC, if it holds.
+    fn match_submap(&self, k: usize, node: usize, global: bool) -> Option<RelativeEdge> {
+        let submap = &self.submaps.done[k];
+        let initial = self.graph.poses[submap.anchor].between(&self.graph.poses[node]);
+        let (window, min_score) = self.window(submap, self.node_path_m[node], global);
         let found = self.unambiguous_match(k, node, initial, &window, min_score)?;
         let (near, m) = self.refine_in_submap(k, node, &found.pose, true)?;
         Some(RelativeEdge {
@@ -164,5 +182,45 @@ impl Mapper2d {
         unambiguous_search(
             &grids, scan, initial, window, min_score, ratio, radius, &p.grid,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::Mapper2dParams;
+    use super::super::tests::scan_at;
+    use super::*;
+    use crate::matching::correlative::search;
+
+    /// However long a robot's path, a submap is a candidate only as far as the window reaches:
+    /// beyond that no return lands in its grid, and the search finds nothing.
+    #[test]
+    fn a_submap_beyond_the_windows_reach_is_no_candidate() {
+        let mut mapper = Mapper2d::new(Mapper2dParams::default());
+        for k in 0..26 {
+            let pose = Pose2::new(-6.0 + 0.5 * k as f64, 0.0, 0.0);
+            mapper.add_scan(pose, scan_at(&pose, k)).expect("add");
+        }
+        let submap = mapper.submaps.done.first().expect("a submap finished");
+        let p = &mapper.params.submaps;
+        let window_reach = std::f64::consts::SQRT_2 * p.max_linear_window_m + p.grid.max_range_m;
+        let near_path = mapper.reach(submap, submap.last_path_m, false);
+        assert_eq!(near_path, mapper.params.loop_search_radius_m);
+        assert_eq!(mapper.reach(submap, 1e4, false), window_reach, "bounded");
+        let (window, _) = mapper.window(submap, 1e4, false);
+        let (centre, half_side) = submap.centre_and_reach();
+        let beyond = [centre[0] + half_side + window_reach + 0.2, centre[1]];
+        assert!(submap.distance_to(beyond) > window_reach);
+        let grids = mapper.pooled_grids(0);
+        let scan = &mapper.node_scans[submap.nodes[5].0];
+        let initial = Pose2::new(beyond[0], beyond[1], 0.0);
+        let found = search(&grids, scan, initial, &window, 1e-6, &p.grid);
+        assert!(found.is_none(), "{found:?}");
+        // Within the reach, the same scan is found where it was taken.
+        let (n, at) = submap.nodes[5];
+        let initial = at.compose(&Pose2::new(window.linear_m * 0.5, 0.0, 0.0));
+        let found = search(&grids, &mapper.node_scans[n], initial, &window, 0.5, &p.grid);
+        let found = found.expect("found within the window");
+        assert!((found.pose.x - at.x).hypot(found.pose.y - at.y) < 0.2, "{found:?}");
     }
 }

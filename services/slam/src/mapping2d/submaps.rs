@@ -72,6 +72,14 @@ struct PooledGrids {
     clock: u64,
 }
 
+/// Which finished submap holds each node, for the submaps finished so far (`indexed`).
+#[derive(Debug, Default)]
+struct NodeIndex {
+    /// By node: the submap's index, `u32::MAX` for none (yet).
+    submap_of: Vec<u32>,
+    indexed: usize,
+}
+
 /// Every robot's submaps, and how long each robot has gone without a closure.
 #[derive(Debug, Default, Serialize, Deserialize)]
 pub(super) struct Submaps {
@@ -79,6 +87,9 @@ pub(super) struct Submaps {
     /// A cache, made again from the scans on use: not saved.
     #[serde(skip)]
     pooled: Mutex<PooledGrids>,
+    /// An index, extended on use: not saved.
+    #[serde(skip)]
+    by_node: Mutex<NodeIndex>,
     /// By robot.
     pub robots: Vec<RobotSubmaps>,
 }
@@ -142,6 +153,27 @@ impl Mapper2d {
             .iter()
             .map(|&(n, pose)| (pose, self.node_scans[n].points()));
         ProbabilityGrid::from_scans(scans, &self.params.submaps.grid)
+    }
+
+    /// The finished submap that holds `node`, if one does (a look-up: scanning every
+    /// submap's nodes took time that grew with the site).
+    pub(super) fn submap_of(&self, node: usize) -> Option<usize> {
+        let mut index = self.submaps.by_node.lock().expect("submap index lock");
+        let NodeIndex {
+            submap_of,
+            indexed,
+        } = &mut *index;
+        for (k, submap) in self.submaps.done.iter().enumerate().skip(*indexed) {
+            for &(n, _) in &submap.nodes {
+                if submap_of.len() <= n {
+                    submap_of.resize(n + 1, u32::MAX);
+                }
+                submap_of[n] = u32::try_from(k).expect("fewer than 2³² submaps");
+            }
+        }
+        *indexed = self.submaps.done.len();
+        let k = *submap_of.get(node)?;
+        (k != u32::MAX).then_some(k as usize)
     }
 
     /// Submap `k`'s grid pooled for the correlative search: made on first use, kept while it
