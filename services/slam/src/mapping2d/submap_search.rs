@@ -90,7 +90,8 @@ impl Mapper2d {
     fn reach(&self, submap: &Submap, path_m: f64, global: bool) -> f64 {
         let (window, _) = self.window(submap, path_m, global);
         let search_radius = self.search_radius(submap, path_m);
-        let window_reach = std::f64::consts::SQRT_2 * window.linear_m + self.params.submaps.grid.max_range_m;
+        let window_reach =
+            std::f64::consts::SQRT_2 * window.linear_m + self.params.submaps.grid.max_range_m;
         search_radius.min(window_reach)
     }
 
@@ -219,8 +220,18 @@ mod tests {
         // Within the reach, the same scan is found where it was taken.
         let (n, at) = submap.nodes[5];
         let initial = at.compose(&Pose2::new(window.linear_m * 0.5, 0.0, 0.0));
-        let found = search(&grids, &mapper.node_scans[n], initial, &window, 0.5, &p.grid);
+        let found = search(
+            &grids,
+            &mapper.node_scans[n],
+            initial,
+            &window,
+            0.5,
+            &p.grid,
+        );
         let found = found.expect("found within the window");
-        assert!((found.pose.x - at.x).hypot(found.pose.y - at.y) < 0.2, "{found:?}");
+        assert!(
+            (found.pose.x - at.x).hypot(found.pose.y - at.y) < 0.2,
+            "{found:?}"
+        );
     }
 }

@@ -159,10 +159,7 @@ impl Mapper2d {
     /// submap's nodes took time that grew with the site).
     pub(super) fn submap_of(&self, node: usize) -> Option<usize> {
         let mut index = self.submaps.by_node.lock().expect("submap index lock");
-        let NodeIndex {
-            submap_of,
-            indexed,
-        } = &mut *index;
+        let NodeIndex { submap_of, indexed } = &mut *index;
         for (k, submap) in self.submaps.done.iter().enumerate().skip(*indexed) {
             for &(n, _) in &submap.nodes {
                 if submap_of.len() <= n {
