@@ -23,7 +23,7 @@ impl Mapper2d {
             return 0;
         }
         self.track_submaps(node);
-        let (robot, place) = self.node_robot[node];
+        let robot = self.node_robot[node].0;
         let path = self.node_path_m[node];
         // The IDC closures just added are the last `closed` edges.
         let edges = &self.graph.edges[self.graph.edges.len() - closed..];
@@ -41,6 +41,28 @@ impl Mapper2d {
         }
         state.last_search_m = path;
         let global = since >= p.global_after_m;
+        let candidates = self.submap_candidates(node, global);
+        let mut added = 0;
+        for &(_, k) in candidates.iter().take(p.max_submaps) {
+            self.stats.submap_searches += 1;
+            if let Some(edge) = self.match_submap(k, node, global) {
+                self.graph.edges.push(edge);
+                self.stats.loop_closures += 1;
+                self.stats.submap_closures += 1;
+                added += 1;
+            }
+        }
+        if added > 0 {
+            self.submaps.robots[robot].last_closure_m = Some(path);
+        }
+        added
+    }
+
+    /// The submaps `node` is searched in, nearest (by the grid's centre) first: its robot's,
+    /// at least `loop_min_node_gap` nodes back, within the reach of the node's estimate.
+    fn submap_candidates(&self, node: usize, global: bool) -> Vec<(f64, usize)> {
+        let (robot, place) = self.node_robot[node];
+        let path = self.node_path_m[node];
         let here = self.graph.poses[node];
         let mut candidates: Vec<(f64, usize)> = self
             .submaps
@@ -59,20 +81,7 @@ impl Mapper2d {
             })
             .collect();
         candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut added = 0;
-        for &(_, k) in candidates.iter().take(p.max_submaps) {
-            self.stats.submap_searches += 1;
-            if let Some(edge) = self.match_submap(k, node, global) {
-                self.graph.edges.push(edge);
-                self.stats.loop_closures += 1;
-                self.stats.submap_closures += 1;
-                added += 1;
-            }
-        }
-        if added > 0 {
-            self.submaps.robots[robot].last_closure_m = Some(path);
-        }
-        added
+        candidates
     }
 
     /// How far from its estimate a node may be in a submap: IDC's candidate radius.
@@ -233,5 +242,17 @@ mod tests {
             (found.pose.x - at.x).hypot(found.pose.y - at.y) < 0.2,
             "{found:?}"
         );
+        // The candidates: the newest node after a long drive is searched in the submap where
+        // it is, and not once its estimate is 100 m off, though the radius would allow it.
+        mapper.params.loop_min_node_gap = 0;
+        let newest = mapper.graph.poses.len() - 1;
+        mapper.node_path_m[newest] = 1e4;
+        let candidates = mapper.submap_candidates(newest, false);
+        assert!(candidates.iter().any(|&(_, k)| k == 0), "{candidates:?}");
+        mapper.graph.poses[newest].x += 100.0;
+        let submap = &mapper.submaps.done[0];
+        assert!(mapper.search_radius(submap, 1e4) > 1000.0);
+        let candidates = mapper.submap_candidates(newest, false);
+        assert!(candidates.is_empty(), "{candidates:?}");
     }
 }
