@@ -2,14 +2,16 @@
 //! core, release build: a 361-beam 360° scan of the synthetic park against a submap of five
 //! scans of it (about 40 × 40 m at 0.05 m cells, the default parameters), in a ±5 m × ±30°
 //! window and over the whole submap at every heading. Each prints the branch-and-bound
-//! nodes (candidates scored) of one search, against the window's poses.
+//! nodes (candidates scored) of one search, against the window's poses. And what making a
+//! submap's grids costs the mapper when it first searches the submap: rasterizing its scans,
+//! then pooling the grid into its levels.
 //!
 //!     cargo bench -p slam --bench correlative
 
 use slam::Pose2;
 use slam::matching::Scan2;
 use slam::matching::correlative::{
-    CorrelativeParams, PrecomputedGrids, SearchWindow, precompute, search,
+    CorrelativeParams, PrecomputedGrids, ProbabilityGrid, SearchWindow, precompute, search,
 };
 use slam::matching::synthetic::{Scene, uniform_bearings};
 use std::f64::consts::PI;
@@ -96,4 +98,46 @@ fn whole_submap_360deg(bencher: divan::Bencher) {
         Pose2::new((lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0, 0.0)
     };
     bench_window(bencher, window, centre, "whole submap × 360°");
+}
+
+/// A submap as the mapper pools it (`SubmapSearchParams::default().grid`: 0.1 m cells, 20 m of
+/// returns, 9 levels): 21 scans over 10 m of path, rasterized and then pooled.
+fn mapper_submap() -> (Vec<(Pose2, Scan2)>, CorrelativeParams) {
+    let scene = Scene::park();
+    let params = slam::SubmapSearchParams::default().grid;
+    let scans = (0..21)
+        .map(|k| {
+            let pose = Pose2::new(0.5 * k as f64, 0.1 * k as f64, 0.02 * k as f64);
+            (pose, scan_at(&scene, &pose, k as u64))
+        })
+        .collect();
+    (scans, params)
+}
+
+fn returns(scans: &[(Pose2, Scan2)]) -> impl Iterator<Item = (Pose2, &[[f64; 2]])> {
+    scans.iter().map(|(p, s)| (*p, s.points()))
+}
+
+/// Rasterizing the mapper's submap (the probability grid, no levels).
+#[divan::bench]
+fn rasterize_mapper_submap(bencher: divan::Bencher) {
+    let (scans, params) = mapper_submap();
+    bencher.bench_local(|| ProbabilityGrid::from_scans(returns(&scans), &params));
+}
+
+/// Pooling the mapper's submap grid into its levels.
+#[divan::bench]
+fn pool_mapper_submap(bencher: divan::Bencher) {
+    let (scans, params) = mapper_submap();
+    let grid = ProbabilityGrid::from_scans(returns(&scans), &params).expect("grid");
+    let (w, h) = grid.bounds();
+    let grids = PrecomputedGrids::new(grid.clone(), params.max_depth);
+    eprintln!(
+        "mapper submap: {:.0} × {:.0} m, {} levels, {:.1} MB of cells",
+        h[0] - w[0],
+        h[1] - w[1],
+        grids.depth() + 1,
+        grids.cell_bytes() as f64 / 1e6
+    );
+    bencher.bench_local(|| PrecomputedGrids::new(grid.clone(), params.max_depth));
 }

@@ -134,7 +134,11 @@ impl Mapper2d {
             .iter()
             .map(|&n| (n, origin.between(&self.graph.poses[n])))
             .collect();
-        let Some(grid) = self.rasterize(&placed) else {
+        let scans = placed
+            .iter()
+            .map(|&(n, pose)| (pose, self.node_scans[n].points()));
+        // The extent alone: the grid is made when the submap is first searched.
+        let Some(bounds) = ProbabilityGrid::bounds_of(scans, &self.params.submaps.grid) else {
             return;
         };
         self.submaps.done.push(Submap {
@@ -143,16 +147,8 @@ impl Mapper2d {
             nodes: placed,
             last_place: self.node_robot[last].1,
             last_path_m: self.node_path_m[last],
-            bounds: grid.bounds(),
+            bounds,
         });
-    }
-
-    /// The submap's nodes' scans at their poses, as one grid; `None` when empty or too large.
-    fn rasterize(&self, placed: &[(usize, Pose2)]) -> Option<ProbabilityGrid> {
-        let scans = placed
-            .iter()
-            .map(|&(n, pose)| (pose, self.node_scans[n].points()));
-        ProbabilityGrid::from_scans(scans, &self.params.submaps.grid)
     }
 
     /// The finished submap that holds `node`, if one does (a look-up: scanning every
@@ -203,7 +199,8 @@ impl Mapper2d {
             Resolution::Coarse => &self.params.global_search.grid,
         };
         // A coarser grid of the same returns is never larger than the fine one.
-        let grids = Arc::new(precompute(scans, params).expect("it was rasterized when finished"));
+        let grids =
+            Arc::new(precompute(scans, params).expect("its extent was laid out when finished"));
         if pooled.kept.len() >= POOLED_GRIDS_KEPT
             && let Some(oldest) = (0..pooled.kept.len()).min_by_key(|&i| pooled.kept[i].2)
         {

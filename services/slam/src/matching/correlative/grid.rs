@@ -8,6 +8,10 @@ use crate::Pose2;
 /// Cell values: a probability in [0, 1] scaled to 0–255 (a byte keeps a submap's stack small).
 pub(super) const FULL: u32 = 255;
 
+/// An exponent past which a return's Gaussian rounds to 0 (e^−6.3 · 255 = 0.47): such cells
+/// are left as they are without calling `exp`, the rasterizer's cost.
+const NEGLIGIBLE: f64 = 6.3;
+
 /// A probability grid in some frame (a submap's): cell (i, j) covers
 /// `[x0 + i·r, x0 + (i+1)·r) × [y0 + j·r, y0 + (j+1)·r)`.
 #[derive(Clone, PartialEq)]
@@ -28,61 +32,59 @@ impl ProbabilityGrid {
         scans: impl IntoIterator<Item = (Pose2, &'a [[f64; 2]])>,
         params: &CorrelativeParams,
     ) -> Option<ProbabilityGrid> {
-        let max_range2 = params.max_range_m * params.max_range_m;
-        let points: Vec<[f64; 2]> = scans
-            .into_iter()
-            .flat_map(|(pose, points)| {
-                points
-                    .iter()
-                    .filter(move |p| p[0] * p[0] + p[1] * p[1] <= max_range2)
-                    .map(move |&p| pose.transform_point(p))
-            })
-            .collect();
-        let r = params.resolution_m;
-        let reach = (3.0 * params.hit_sigma_m / r).ceil() as i64;
-        let margin = (reach + 1) as f64 * r;
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in &points {
-            for d in 0..2 {
-                lo[d] = lo[d].min(p[d]);
-                hi[d] = hi[d].max(p[d]);
-            }
-        }
-        if points.is_empty() {
-            return None;
-        }
-        let origin = [lo[0] - margin, lo[1] - margin];
-        let width = ((hi[0] + margin - origin[0]) / r).ceil() as usize + 1;
-        let height = ((hi[1] + margin - origin[1]) / r).ceil() as usize + 1;
-        if width.saturating_mul(height) > params.max_cells {
-            return None;
-        }
+        let points = returns_in_range(scans, params);
+        let (origin, width, height) = layout(&points, params)?;
         let mut grid = ProbabilityGrid {
             origin,
-            resolution_m: r,
+            resolution_m: params.resolution_m,
             width,
             height,
             cells: vec![0; width * height],
         };
+        grid.mark(&points, params);
+        Some(grid)
+    }
+
+    /// The extent [`Self::from_scans`] would give the same scans (see [`Self::bounds`]),
+    /// without rasterizing them.
+    pub fn bounds_of<'a>(
+        scans: impl IntoIterator<Item = (Pose2, &'a [[f64; 2]])>,
+        params: &CorrelativeParams,
+    ) -> Option<([f64; 2], [f64; 2])> {
+        let (origin, width, height) = layout(&returns_in_range(scans, params), params)?;
+        Some(extent(origin, params.resolution_m, width, height))
+    }
+
+    /// Marks each point's Gaussian into the cells.
+    fn mark(&mut self, points: &[[f64; 2]], params: &CorrelativeParams) {
+        let (width, height) = (self.width, self.height);
+        let reach = kernel_reach(params);
         // The kernel by cell offset, from the hit's cell centre.
         let inv2s2 = 1.0 / (2.0 * params.hit_sigma_m * params.hit_sigma_m);
-        for p in &points {
-            let (ci, cj) = grid.cell_of(*p);
+        for p in points {
+            let (ci, cj) = self.cell_of(*p);
             for dj in -reach..=reach {
                 for di in -reach..=reach {
                     let (i, j) = (ci + di, cj + dj);
                     if i < 0 || j < 0 || i >= width as i64 || j >= height as i64 {
                         continue;
                     }
-                    let centre = grid.centre(i, j);
+                    let centre = self.centre(i, j);
                     let d2 = (centre[0] - p[0]).powi(2) + (centre[1] - p[1]).powi(2);
-                    let v = ((-d2 * inv2s2).exp() * FULL as f64).round() as u8;
-                    let cell = &mut grid.cells[j as usize * width + i as usize];
+                    let x = d2 * inv2s2;
+                    let cell = &mut self.cells[j as usize * width + i as usize];
+                    // e^x ≥ 1 + x + x²/2 + x³/6 bounds the value from above; where the
+                    // cell holds at least that bound less ½, the rounded value cannot
+                    // exceed it and `exp` is not called.
+                    let bound = FULL as f64 / (1.0 + x * (1.0 + x * (0.5 + x / 6.0)));
+                    if x > NEGLIGIBLE || f64::from(*cell) >= bound - 0.499 {
+                        continue;
+                    }
+                    let v = ((-x).exp() * FULL as f64).round() as u8;
                     *cell = (*cell).max(v);
                 }
             }
         }
-        Some(grid)
     }
 
     /// The cell holding point `p` (may lie outside the grid).
@@ -112,12 +114,7 @@ impl ProbabilityGrid {
 
     /// The grid's extent in its frame: lower-left and upper-right corners (m).
     pub fn bounds(&self) -> ([f64; 2], [f64; 2]) {
-        let r = self.resolution_m;
-        let hi = [
-            self.origin[0] + self.width as f64 * r,
-            self.origin[1] + self.height as f64 * r,
-        ];
-        (self.origin, hi)
+        extent(self.origin, self.resolution_m, self.width, self.height)
     }
 
     /// The value of cell (i, j), 0 outside the grid.
@@ -128,6 +125,63 @@ impl ProbabilityGrid {
         }
         self.cells[j as usize * self.width + i as usize]
     }
+}
+
+/// The returns of `scans` within `params.max_range_m` of their scan, in the grid's frame.
+fn returns_in_range<'a>(
+    scans: impl IntoIterator<Item = (Pose2, &'a [[f64; 2]])>,
+    params: &CorrelativeParams,
+) -> Vec<[f64; 2]> {
+    let max_range2 = params.max_range_m * params.max_range_m;
+    scans
+        .into_iter()
+        .flat_map(|(pose, points)| {
+            points
+                .iter()
+                .filter(move |p| p[0] * p[0] + p[1] * p[1] <= max_range2)
+                .map(move |&p| pose.transform_point(p))
+        })
+        .collect()
+}
+
+/// Cells a return's Gaussian marks on each side of its own.
+fn kernel_reach(params: &CorrelativeParams) -> i64 {
+    (3.0 * params.hit_sigma_m / params.resolution_m).ceil() as i64
+}
+
+/// The grid that holds `points` with their kernels: origin, width and height; `None` when
+/// there is no point or the grid would exceed `params.max_cells`.
+fn layout(points: &[[f64; 2]], params: &CorrelativeParams) -> Option<([f64; 2], usize, usize)> {
+    let r = params.resolution_m;
+    let margin = (kernel_reach(params) + 1) as f64 * r;
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in points {
+        for d in 0..2 {
+            lo[d] = lo[d].min(p[d]);
+            hi[d] = hi[d].max(p[d]);
+        }
+    }
+    if points.is_empty() {
+        return None;
+    }
+    let origin = [lo[0] - margin, lo[1] - margin];
+    let width = ((hi[0] + margin - origin[0]) / r).ceil() as usize + 1;
+    let height = ((hi[1] + margin - origin[1]) / r).ceil() as usize + 1;
+    (width.saturating_mul(height) <= params.max_cells).then_some((origin, width, height))
+}
+
+/// A grid's lower-left and upper-right corners (m).
+fn extent(
+    origin: [f64; 2],
+    resolution_m: f64,
+    width: usize,
+    height: usize,
+) -> ([f64; 2], [f64; 2]) {
+    let hi = [
+        origin[0] + width as f64 * resolution_m,
+        origin[1] + height as f64 * resolution_m,
+    ];
+    (origin, hi)
 }
 
 // Its size, not its cells (a submap's are megabytes).
@@ -162,18 +216,10 @@ impl Level {
         for (row, out) in self.cells.chunks(self.width).zip(rows.chunks_mut(width)) {
             max_of_shifted(row, out, half);
         }
+        // Along y, whole rows at once: shifting the row-major cells by `half` rows shifts
+        // every column by `half` cells.
         let mut cells = vec![0u8; width * height];
-        let mut column = vec![0u8; self.height];
-        let mut pooled = vec![0u8; height];
-        for x in 0..width {
-            for (y, c) in column.iter_mut().enumerate() {
-                *c = rows[y * width + x];
-            }
-            max_of_shifted(&column, &mut pooled, half);
-            for (y, &v) in pooled.iter().enumerate() {
-                cells[y * width + x] = v;
-            }
-        }
+        max_of_shifted(&rows, &mut cells, half * width);
         Level {
             pad: self.pad + half as i64,
             width,
@@ -356,6 +402,73 @@ mod tests {
             assert_eq!(floor_to_i64(x), x.floor() as i64, "{x}");
         }
         assert_eq!(floor_to_i64(f64::NAN), 0);
+    }
+
+    #[test]
+    fn the_extent_alone_is_the_grids() {
+        let params = CorrelativeParams {
+            resolution_m: 0.1,
+            hit_sigma_m: 0.1,
+            max_range_m: 5.0,
+            ..CorrelativeParams::default()
+        };
+        let near = [[0.0, 0.0], [0.73, 0.21], [1.4, -0.5]];
+        let with_far = [[-2.0, 3.1], [9.0, 9.0]];
+        let scans = [
+            (Pose2::new(0.3, -0.2, 0.4), &near[..]),
+            (Pose2::new(-1.0, 2.0, -2.0), &with_far[..]),
+        ];
+        let grid = ProbabilityGrid::from_scans(scans, &params).expect("points");
+        assert_eq!(
+            ProbabilityGrid::bounds_of(scans, &params),
+            Some(grid.bounds())
+        );
+        let out_of_range = [(Pose2::IDENTITY, &[[9.0, 9.0]][..])];
+        assert_eq!(ProbabilityGrid::bounds_of(out_of_range, &params), None);
+        let small = CorrelativeParams {
+            max_cells: 10,
+            ..params
+        };
+        assert_eq!(ProbabilityGrid::from_scans(scans, &small), None);
+        assert_eq!(ProbabilityGrid::bounds_of(scans, &small), None);
+    }
+
+    #[test]
+    fn every_cell_holds_its_largest_rounded_gaussian() {
+        let params = CorrelativeParams {
+            resolution_m: 0.1,
+            hit_sigma_m: 0.1,
+            ..CorrelativeParams::default()
+        };
+        // Dense, overlapping returns: most cells are marked by many, where skipping `exp`
+        // for a cell already high enough is taken most.
+        let mut rng = crate::splitmix::SplitMix::new(7);
+        let points: Vec<[f64; 2]> = (0..3000)
+            .map(|_| [rng.uniform(0.0, 2.0), rng.uniform(-0.7, 0.8)])
+            .collect();
+        let grid =
+            ProbabilityGrid::from_scans([(Pose2::IDENTITY, &points[..])], &params).expect("points");
+        let inv2s2 = 1.0 / (2.0 * params.hit_sigma_m * params.hit_sigma_m);
+        let reach = kernel_reach(&params);
+        let (width, height) = grid.size();
+        for j in 0..height as i64 {
+            for i in 0..width as i64 {
+                let c = grid.centre(i, j);
+                let expected = points
+                    .iter()
+                    .filter(|&&p| {
+                        let (pi, pj) = grid.cell_of(p);
+                        (pi - i).abs() <= reach && (pj - j).abs() <= reach
+                    })
+                    .map(|p| {
+                        let d2 = (c[0] - p[0]).powi(2) + (c[1] - p[1]).powi(2);
+                        ((-d2 * inv2s2).exp() * FULL as f64).round() as u8
+                    })
+                    .max()
+                    .unwrap_or(0);
+                assert_eq!(grid.get(i, j), expected, "cell ({i}, {j})");
+            }
+        }
     }
 
     #[test]
