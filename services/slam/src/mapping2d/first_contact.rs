@@ -92,6 +92,12 @@ pub(super) struct ContactSearch {
     /// Each robot's path (m) at its newest node.
     robot_path_m: Vec<f64>,
     hypotheses: Vec<Hypothesis>,
+    /// By submap: its part was anchored when last asked. An anchor is never lost (parts only
+    /// merge), so a pair of anchored submaps is passed over without asking the parts: each
+    /// new submap's walk over every earlier one costs a look-up per pair, not two walks up
+    /// the part tree. Made again on use: not saved.
+    #[serde(skip)]
+    anchored: Vec<bool>,
 }
 
 /// Walks the pairs of a growing list once each: entry `later` with every `earlier` before
@@ -152,13 +158,29 @@ impl Mapper2d {
                     None => break,
                 },
             };
-            let (a, b) = (&self.submaps.done[pair.0], &self.submaps.done[pair.1]);
-            if a.robot != b.robot && self.parts.may_meet(a.anchor, b.anchor) {
+            let robots_differ = self.submaps.done[pair.0].robot != self.submaps.done[pair.1].robot;
+            if robots_differ && self.submaps_may_meet(pair.0, pair.1) {
                 budget -= 1;
                 joined += self.search_pair(pair.0, pair.1, &p);
             }
         }
         joined
+    }
+
+    /// Whether the parts of submaps `a` and `b` may meet ([`crate::PartTracker::may_meet`]
+    /// of their anchors).
+    fn submaps_may_meet(&mut self, a: usize, b: usize) -> bool {
+        let anchored = &mut self.contact.anchored;
+        if anchored.len() < self.submaps.done.len() {
+            anchored.resize(self.submaps.done.len(), false);
+        }
+        if anchored[a] && anchored[b] {
+            return false;
+        }
+        let (x, y) = (self.submaps.done[a].anchor, self.submaps.done[b].anchor);
+        anchored[a] = !self.parts.floats(x);
+        anchored[b] = !self.parts.floats(y);
+        self.parts.may_meet(x, y)
     }
 
     /// Moves the finished submaps whose robot has driven `stretch_m` beyond them (at
