@@ -258,7 +258,8 @@ async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
         }
         drain(&mapper, (fed - fed_before_start) as u64).await?;
         let fed_per_s = fed as f64 / started.elapsed().as_secs_f64();
-        let node_to_view = sample_nodes(&mapper, &mut fleet, size - fed).await?;
+        let node_to_view =
+            tokio::task::block_in_place(|| sample_nodes(&mapper, &mut fleet, size - fed))?;
         fed = size;
         let nodes = mapped_nodes(&mapper);
         let passed = passed_before_start + passed_nodes(&mapper);
@@ -386,11 +387,7 @@ async fn drain(mapper: &mapper::Running, fed: u64) -> Result<()> {
 
 /// Hands over `count` nodes one at a time, each waited for until the worker is done with it
 /// (acked once in the store and the view, or passed over covered ground).
-async fn sample_nodes(
-    mapper: &mapper::Running,
-    fleet: &mut Fleet,
-    count: usize,
-) -> Result<Percentiles> {
+fn sample_nodes(mapper: &mapper::Running, fleet: &mut Fleet, count: usize) -> Result<Percentiles> {
     let mut times = Vec::with_capacity(count);
     for _ in 0..count {
         // Read before the node is handed over: the worker may take it at once.
@@ -402,12 +399,17 @@ async fn sample_nodes(
             if t0.elapsed() > Duration::from_secs(60) {
                 bail!("a node was not mapped within 60 s");
             }
-            tokio::time::sleep(Duration::from_micros(100)).await;
+            // A thread's sleep, not Tokio's: Tokio's timer counts whole milliseconds, which
+            // would round every node's time up to one.
+            std::thread::sleep(SAMPLE_POLL);
         }
         times.push(ms(t0));
     }
     Ok(Percentiles::of(times))
 }
+
+/// How often a sampled node's end is looked for: well under its time, and no busy core.
+const SAMPLE_POLL: Duration = Duration::from_micros(20);
 
 /// Cells of the map asked for: as the Foxglove feed's grid.
 const MAP_CELLS: usize = 1 << 22;

@@ -271,7 +271,7 @@ async fn run_async(args: &DemoArgs) -> Result<()> {
         ate_rmse_m: ate,
         ate_aligned,
         components: slam::PoseGraph {
-            poses: view.poses.clone(),
+            poses: view.poses.to_vec(),
             edges: view.edges.to_vec(),
             gps: Vec::new(),
         }

@@ -321,6 +321,13 @@ impl FleetMap {
         mapped.max(localized)
     }
 
+    /// [`Self::chain_acked`] of each of `robot`'s chains, in its order: what every view of the
+    /// map reads, so each chain costs one look-up.
+    pub fn chains_acked<'a>(&'a self, robot: &'a RobotRecord) -> impl Iterator<Item = u64> + 'a {
+        let localized = self.localized.last_seqs_of(&robot.id);
+        (robot.chains.iter()).map(move |c| c.last_node_seq.max(localized(c.chain_id).unwrap_or(0)))
+    }
+
     /// The network's odometry chain that a robot's chain goes on in, once it has a node.
     fn network_chain_of(&self, robot: &str, chain_id: u64) -> Option<usize> {
         let r = *self.by_id.get(robot)?;

@@ -21,7 +21,7 @@ impl Marginals {
         nodes: &[usize],
     ) -> Result<Vec<Option<Matrix3<f64>>>, slam::GraphError> {
         let graph = slam::PoseGraph {
-            poses: view.poses.clone(),
+            poses: view.poses.to_vec(),
             edges: view.edges.to_vec(),
             gps: view.gps.to_vec(),
         };

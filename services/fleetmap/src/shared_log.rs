@@ -1,7 +1,8 @@
-//! An append-only list that successive snapshots share: full chunks are kept behind an `Arc`,
-//! so a new snapshot of a list that only grew copies at most one chunk. The fleet views hold
-//! the nodes and the network's edges this way: copied whole at every batch, they cost the worker tens of
-//! MB per batch on a large map.
+//! A list that successive snapshots share: chunks are kept behind an `Arc`, so a new snapshot
+//! copies only the chunks that changed. The fleet views hold the nodes and the network's edges
+//! this way (append-only: a new snapshot copies at most one chunk) and the poses (changed in
+//! place: a node's window moves a few, a solve all); copied whole at every batch, they cost the
+//! worker tens of MB per batch on a large map.
 
 use std::sync::Arc;
 
@@ -46,9 +47,35 @@ impl<T: Clone> SharedLog<T> {
         }
     }
 
+    /// A snapshot of `items`, a list whose items may change in place: each chunk of
+    /// `previous` that equals the one at its place in `items` is shared, the rest copied. The
+    /// comparison reads both lists but allocates and writes only what changed.
+    pub fn refresh(previous: &SharedLog<T>, items: &[T]) -> SharedLog<T>
+    where
+        T: PartialEq,
+    {
+        let chunks = items
+            .chunks(CHUNK)
+            .enumerate()
+            .map(|(i, now)| match previous.chunks.get(i) {
+                Some(before) if **before == *now => Arc::clone(before),
+                _ => Arc::from(now),
+            })
+            .collect();
+        SharedLog {
+            chunks,
+            len: items.len(),
+        }
+    }
+
+    /// The first item, if there is one.
+    pub fn first(&self) -> Option<&T> {
+        self.get(0)
+    }
+
     /// Every item, in order.
     pub fn iter(&self) -> impl Iterator<Item = &T> + '_ {
-        self.chunks.iter().flat_map(|c| c.iter())
+        self.into_iter()
     }
 
     /// How many.
@@ -69,6 +96,19 @@ impl<T: Clone> SharedLog<T> {
     /// A copy as one vector.
     pub fn to_vec(&self) -> Vec<T> {
         self.iter().cloned().collect()
+    }
+}
+
+impl<'a, T: Clone> IntoIterator for &'a SharedLog<T> {
+    type Item = &'a T;
+    type IntoIter = std::iter::FlatMap<
+        std::slice::Iter<'a, Arc<[T]>>,
+        std::slice::Iter<'a, T>,
+        fn(&'a Arc<[T]>) -> std::slice::Iter<'a, T>,
+    >;
+
+    fn into_iter(self) -> Self::IntoIter {
+        self.chunks.iter().flat_map(|c| c.iter())
     }
 }
 
@@ -104,5 +144,24 @@ mod tests {
         // A shorter list than the previous snapshot's shares nothing.
         let shorter = SharedLog::extend(&second, &items[..10]);
         assert_eq!(shorter.to_vec(), items[..10]);
+    }
+
+    #[test]
+    fn a_refreshed_snapshot_shares_the_chunks_that_did_not_change() {
+        let mut items: Vec<u32> = (0..3 * CHUNK as u32 + 5).collect();
+        let first = SharedLog::refresh(&SharedLog::default(), &items);
+        items[CHUNK + 1] = 7;
+        items.push(9);
+        let second = SharedLog::refresh(&first, &items);
+        assert_eq!(second.to_vec(), items);
+        assert_eq!(second.first(), Some(&0));
+        let shared: Vec<bool> = (first.chunks.iter().zip(&second.chunks))
+            .map(|(a, b)| Arc::ptr_eq(a, b))
+            .collect();
+        // The changed chunk and the one that grew are copied; the others shared.
+        assert_eq!(shared, [true, false, true, false]);
+        let shorter = SharedLog::refresh(&second, &items[..CHUNK + 2]);
+        assert_eq!(shorter.to_vec(), items[..CHUNK + 2]);
+        assert!(Arc::ptr_eq(&shorter.chunks[0], &second.chunks[0]));
     }
 }

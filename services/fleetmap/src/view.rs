@@ -1,6 +1,6 @@
 //! A fleet's map at one moment, for readers: the robots, the nodes, the poses and the
 //! network, shared with the view before it (`SharedLog`) so that a new view after every
-//! accepted node costs what changed.
+//! accepted node copies what changed.
 
 use crate::fleet::{FleetMap, NodeRecord};
 use crate::shared_log::SharedLog;
@@ -68,7 +68,7 @@ pub struct FleetView {
     /// Every node with what it came with, in map order.
     pub nodes: SharedLog<Arc<NodeRecord>>,
     /// The nodes' poses in the map frame.
-    pub poses: Vec<Pose2>,
+    pub poses: SharedLog<Pose2>,
     /// The network's relative edges.
     pub edges: SharedLog<RelativeEdge>,
     /// The network's GPS edges.
@@ -91,7 +91,7 @@ impl FleetView {
         last_ingest_ms: f64,
         updated_ns: u64,
     ) -> FleetView {
-        let poses = map.poses().to_vec();
+        let poses = map.poses();
         let robots = map
             .robots()
             .iter()
@@ -102,16 +102,12 @@ impl FleetView {
                     id: r.id.clone(),
                     nodes: r.nodes.len(),
                     last_node_seq: r.last_node_seq,
-                    chains: r
-                        .chains
-                        .iter()
-                        .map(|c| ChainView {
+                    chains: (r.chains.iter().zip(map.chains_acked(r)))
+                        .map(|(c, acked_node_seq)| ChainView {
                             chain_id: c.chain_id,
                             first_node_seq: c.first_node_seq,
                             last_node_seq: c.last_node_seq,
-                            acked_node_seq: map
-                                .chain_acked(&r.id, c.chain_id)
-                                .unwrap_or(c.last_node_seq),
+                            acked_node_seq,
                         })
                         .collect(),
                     map_pose_at_last_node: poses[last].compose(&record.scan_origin.inverse()),
@@ -127,7 +123,7 @@ impl FleetView {
                 previous.map_or(&SharedLog::default(), |v| &v.nodes),
                 map.nodes(),
             ),
-            poses,
+            poses: SharedLog::refresh(previous.map_or(&SharedLog::default(), |v| &v.poses), poses),
             edges: SharedLog::extend(
                 previous.map_or(&SharedLog::default(), |v| &v.edges),
                 &map.graph().edges,
@@ -150,6 +146,14 @@ impl FleetView {
 
     /// The occupancy grid of the fleet's leveled scans at their optimized poses.
     pub fn grid(&self, params: &slam::GridParams) -> Result<slam::OccupancyGrid, slam::GridError> {
-        crate::fleet::grid_of(|| self.nodes.iter().map(|n| &**n), &self.poses, params)
+        slam::OccupancyGrid::from_fans_made_again(
+            || {
+                self.poses
+                    .iter()
+                    .copied()
+                    .zip(self.nodes.iter().map(|n| n.fan()))
+            },
+            params,
+        )
     }
 }

@@ -384,7 +384,11 @@ impl GpsEdge {
 
     /// Antenna position predicted by the node pose, minus the fix (m).
     pub fn error(&self, poses: &[Pose2]) -> Vector2<f64> {
-        let p = &poses[self.node];
+        self.error_at(&poses[self.node])
+    }
+
+    /// [`Self::error`] with the node at pose `p`.
+    pub fn error_at(&self, p: &Pose2) -> Vector2<f64> {
         let a = p.transform_point([self.lever_arm_m.x, self.lever_arm_m.y]);
         Vector2::new(a[0] - self.position_m.x, a[1] - self.position_m.y)
     }

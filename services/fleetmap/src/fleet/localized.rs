@@ -25,10 +25,13 @@ pub struct LocalizedSpan {
     pub passed: Option<slam::Passed>,
 }
 
-/// Where each chain stands in localized nodes.
+/// Where each chain stands in localized nodes: by robot, then by chain, so that a robot's
+/// chains are found without making a key (each view of the map reads every chain's).
 #[derive(Debug, Default)]
 pub(super) struct LocalizedChains {
-    chains: HashMap<(String, u64), Chain>,
+    chains: HashMap<String, HashMap<u64, Chain>>,
+    /// Chains in all (bounded).
+    count: usize,
 }
 
 #[derive(Debug)]
@@ -45,25 +48,37 @@ struct Chain {
 impl LocalizedChains {
     /// The highest node_seq localized of a chain.
     pub(super) fn last_seq(&self, robot: &str, chain_id: u64) -> Option<u64> {
-        self.chains
-            .get(&(robot.to_owned(), chain_id))
-            .map(|c| c.last_seq)
+        self.last_seqs_of(robot)(chain_id)
+    }
+
+    /// The highest node_seq localized of each chain of `robot`, by chain id.
+    pub(super) fn last_seqs_of(&self, robot: &str) -> impl Fn(u64) -> Option<u64> + '_ {
+        let chains = self.chains.get(robot);
+        move |chain_id| Some(chains?.get(&chain_id)?.last_seq)
     }
 
     /// Whether a run localized on a version came since the chain's last mapped node: its
     /// odometry link would span a drive the network never saw.
     pub(super) fn breaks(&self, robot: &str, chain_id: u64) -> bool {
-        self.chains
-            .get(&(robot.to_owned(), chain_id))
-            .is_some_and(|c| c.breaks)
+        let chain = self.chains.get(robot).and_then(|c| c.get(&chain_id));
+        chain.is_some_and(|c| c.breaks)
     }
 
     /// A mapped node of the chain ends its run.
     pub(super) fn close_span(&mut self, robot: &str, chain_id: u64) {
-        if let Some(c) = self.chains.get_mut(&(robot.to_owned(), chain_id)) {
+        let chain = self
+            .chains
+            .get_mut(robot)
+            .and_then(|c| c.get_mut(&chain_id));
+        if let Some(c) = chain {
             c.open_from = None;
             c.breaks = false;
         }
+    }
+
+    /// Chains in all.
+    fn len(&self) -> usize {
+        self.count
     }
 
     /// Takes node `seq` of the chain: the run it extends or starts.
@@ -103,14 +118,20 @@ impl LocalizedChains {
     }
 
     fn chain(&mut self, robot: &str, chain_id: u64, seq: u64) -> &mut Chain {
-        self.chains
-            .entry((robot.to_owned(), chain_id))
-            .or_insert(Chain {
+        if !self.chains.contains_key(robot) {
+            self.chains.insert(robot.to_owned(), HashMap::new());
+        }
+        let count = &mut self.count;
+        let chains = self.chains.get_mut(robot).expect("inserted above");
+        chains.entry(chain_id).or_insert_with(|| {
+            *count += 1;
+            Chain {
                 last_seq: seq,
                 open_from: None,
                 open_passed: false,
                 breaks: false,
-            })
+            }
+        })
     }
 }
 
@@ -135,7 +156,7 @@ impl FleetMap {
             .localized
             .last_seq(&node.robot, node.chain_id)
             .is_some();
-        if !known && self.localized.chains.len() >= bound {
+        if !known && self.localized.len() >= bound {
             return Err(IngestError::Refused {
                 robot: node.robot.clone(),
                 node_seq: node.node_seq,

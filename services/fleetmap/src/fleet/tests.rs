@@ -122,6 +122,15 @@ fn localized_nodes_are_taken_in_sequence_without_growing_the_network() {
     }
     assert_eq!(map.nodes().len(), 3);
     assert_eq!(map.chain_acked("r", 7), Some(5));
+    // Readers see the chain acked to its localized node, not to its last mapped one.
+    let view = crate::FleetView::of(&map, None, 0.0, 0);
+    assert_eq!(
+        (
+            view.robots[0].chains[0].last_node_seq,
+            view.robots[0].chains[0].acked_node_seq
+        ),
+        (2, 5)
+    );
     let last = spans.last().unwrap();
     assert_eq!((last.first_seq, last.last_seq), (3, 5));
     assert_eq!(map.sequence(&node("r", 7, 4, 3, 4.0)), Sequence::Duplicate);

@@ -120,7 +120,7 @@ fn milli(v: f64) -> f64 {
 }
 
 fn graph_columns(v: &FleetView) -> GraphColumns<'_> {
-    let residuals: Vec<_> = v.gps.iter().map(|g| g.error(&v.poses)).collect();
+    let residuals: Vec<_> = v.gps.iter().map(|g| g.error_at(&v.poses[g.node])).collect();
     let kind_index = |k: &EdgeKind| {
         EdgeKind::ALL
             .iter()
@@ -184,7 +184,7 @@ fn graph_rows(v: &FleetView, information: bool) -> GraphRows {
             .gps
             .iter()
             .map(|g| {
-                let r = g.error(&v.poses);
+                let r = g.error_at(&v.poses[g.node]);
                 GpsResidual {
                     node: g.node,
                     position_m: [g.position_m.x, g.position_m.y],
@@ -239,7 +239,7 @@ pub(super) async fn graph_g2o(State(api): State<Api>, Path(fleet): Path<String>)
         .limits
         .heavy(move || {
             let graph = slam::PoseGraph {
-                poses: v.poses.clone(),
+                poses: v.poses.to_vec(),
                 edges: v.edges.to_vec(),
                 gps: Vec::new(),
             };
