@@ -7,6 +7,7 @@
 //! (`SiteLog::append`) is what stops a writer that lost it and does not know.
 
 use crate::LogError;
+use crate::client::passing_refusal;
 use async_nats::jetstream::context::Context;
 use async_nats::jetstream::kv::{Config, Store, UpdateErrorKind};
 use async_nats::jetstream::stream::LastRawMessageErrorKind;
@@ -33,6 +34,10 @@ enum Latest {
 
 /// The header a KV entry names its operation in (`PUT`, `DEL`, `PURGE`).
 const KV_OPERATION: &str = "KV-Operation";
+
+/// How often a claim refused in passing is written (JetStream's 10164), and the wait between.
+const CLAIM_TRIES: u32 = 5;
+const CLAIM_RETRY: Duration = Duration::from_millis(100);
 
 /// The KV bucket of the sites' leases (and the hosts' presence), as the mapper hosts and
 /// the gateways open it.
@@ -160,15 +165,26 @@ impl Leases {
         expected: u64,
     ) -> Result<Option<Lease>, LogError> {
         let value = Bytes::from(host.to_owned());
-        match self.store.update(site, value, expected).await {
-            Ok(revision) => Ok(Some(Lease {
-                site: site.to_owned(),
-                host: host.to_owned(),
-                revision,
-            })),
-            // Another host wrote in between: it holds the site.
-            Err(e) if e.kind() == UpdateErrorKind::WrongLastRevision => Ok(None),
-            Err(e) => Err(LogError::JetStream(e.to_string())),
+        let mut tries = 1;
+        loop {
+            match self.store.update(site, value.clone(), expected).await {
+                Ok(revision) => {
+                    return Ok(Some(Lease {
+                        site: site.to_owned(),
+                        host: host.to_owned(),
+                        revision,
+                    }));
+                }
+                // Another host wrote in between: it holds the site.
+                Err(e) if e.kind() == UpdateErrorKind::WrongLastRevision => return Ok(None),
+                // Refused without being applied (seen in CI while the hosts renewed): the
+                // same write again, at the same revision, cannot claim twice.
+                Err(e) if passing_refusal(&e.to_string()) && tries < CLAIM_TRIES => {
+                    tries += 1;
+                    tokio::time::sleep(CLAIM_RETRY).await;
+                }
+                Err(e) => return Err(LogError::JetStream(e.to_string())),
+            }
         }
     }
 
