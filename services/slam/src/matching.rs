@@ -23,6 +23,7 @@ mod validate;
 pub use idc::{IdcParams, Match, idc};
 pub use refine::{Prior, Reference, RefineParams, refine, refine_against};
 pub use scan::Scan2;
+#[cfg(feature = "solver")]
 pub(crate) use validate::evaluate;
 pub use validate::{QualityGate, accept};
 

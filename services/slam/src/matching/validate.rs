@@ -36,6 +36,8 @@ use serde::{Deserialize, Serialize};
 /// The match of `current` at `pose` (its frame in `reference`'s frame) against `reference`,
 /// evaluated as IDC evaluates its own result: covariance and quality at that pose, with no
 /// iteration (`iterations` 0, `converged` false). How a pose found some other way is checked.
+/// (The 2D mapper's use, so only with the `solver` feature.)
+#[cfg(feature = "solver")]
 pub(crate) fn evaluate(
     reference: &Scan2,
     current: &Scan2,
