@@ -35,6 +35,7 @@ fn a_foxglove_client_with_the_token_sees_what_the_http_api_serves() {
         .arg("3")
         .stdout(std::process::Stdio::piped())
         .spawn()
+        .map(KillOnDrop::from)
         .expect("the Foxglove client starts");
     // The client is connected before the first node: give it the time to open.
     std::thread::sleep(Duration::from_secs(3));
@@ -42,7 +43,10 @@ fn a_foxglove_client_with_the_token_sees_what_the_http_api_serves() {
     let edge = spawn_edge(&dir, 0, &mapper.zenoh, 40.0, 4.0);
     let report = edge_report(edge, Duration::from_secs(120));
     assert_eq!(report["outbox_pending"], 0, "{report}");
-    let live = live.wait_with_output().expect("the client ends");
+    let live = live
+        .into_inner()
+        .wait_with_output()
+        .expect("the client ends");
     let out = String::from_utf8_lossy(&live.stdout);
     eprintln!("foxglove live: {out}");
     assert!(live.status.success(), "the live check failed: {out}");

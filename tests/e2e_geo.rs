@@ -15,16 +15,6 @@ const DURATION_S: u64 = 60;
 /// Landmarks are the trunks and posts whose surface a robot passed this close to (m).
 const LANDMARK_REACH_M: f64 = 6.0;
 
-/// A child process killed when dropped: a failed check does not leave the demo serving.
-struct KillOnDrop(std::process::Child);
-
-impl Drop for KillOnDrop {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 /// The trunks and posts the robots pass, as `{"east_m", "north_m", "radius_m"}` in the
 /// park's frame (the datum's east-north frame).
 fn landmarks() -> serde_json::Value {
@@ -72,11 +62,11 @@ fn rasterio_reads_the_geotiff_and_the_tiles_put_landmarks_at_their_wgs84_places(
         .arg(dir.join("run"))
         .stdout(Stdio::piped())
         .spawn()
-        .map(KillOnDrop)
+        .map(KillOnDrop::from)
         .expect("levelmap demo starts");
     // The report is printed once the robots are done; the map is served from then on.
     let mut report = String::new();
-    for line in BufReader::new(demo.0.stdout.take().unwrap()).lines() {
+    for line in BufReader::new(demo.stdout.take().unwrap()).lines() {
         let line = line.expect("the demo's output");
         report.push_str(&line);
         if line == "}" {
@@ -103,7 +93,7 @@ fn rasterio_reads_the_geotiff_and_the_tiles_put_landmarks_at_their_wgs84_places(
         ],
     );
     eprintln!("{figures}");
-    sigterm(&demo.0);
-    assert!(demo.0.wait().unwrap().success(), "the demo stops cleanly");
+    sigterm(&demo);
+    assert!(demo.wait().unwrap().success(), "the demo stops cleanly");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -6,7 +6,6 @@
 mod common;
 
 use common::*;
-use std::process::Child;
 use std::time::{Duration, Instant};
 
 const ROBOTS: usize = 3;
@@ -57,7 +56,7 @@ fn ten_mapper_kills_while_three_robots_publish_lose_and_repeat_nothing() {
     let dir = temp_dir("mapper-kill-loop");
     let mut mapper = MapperProcess::start(&dir);
     // 180 s of park at 4x: the robots drive for 45 s, through every kill.
-    let edges: Vec<Child> = (0..ROBOTS)
+    let edges: Vec<KillOnDrop> = (0..ROBOTS)
         .map(|r| spawn_edge(&dir, r, &mapper.zenoh, 180.0, 4.0))
         .collect();
     let mut pauses = Pauses::new();
@@ -79,7 +78,7 @@ fn ten_mapper_kills_while_three_robots_publish_lose_and_repeat_nothing() {
 fn ten_edge_kills_lose_and_repeat_nothing() {
     let dir = temp_dir("edge-kill-loop");
     let mapper = MapperProcess::start(&dir);
-    let steady: Vec<Child> = (1..ROBOTS)
+    let steady: Vec<KillOnDrop> = (1..ROBOTS)
         .map(|r| spawn_edge(&dir, r, &mapper.zenoh, 120.0, 4.0))
         .collect();
     let mut pauses = Pauses::new();

@@ -14,7 +14,7 @@ use common::netns::{Namespace, Netns, require_root_and_tools, run};
 use common::*;
 use serde_json::json;
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 const ROBOTS: usize = 2;
@@ -130,18 +130,17 @@ impl Partition {
 
     /// A robot's edge service inside the namespace (`ip netns exec` runs the same command
     /// there), its log in `dir`.
-    fn spawn_edge(&self, dir: &Path, robot: usize, connect: &str) -> Edge {
+    fn spawn_edge(&self, dir: &Path, robot: usize, connect: &str) -> KillOnDrop {
         let source = format!("[source.sim]\nloop_index = {robot}\nduration_s = {SIM_DURATION_S}\n");
         let edge = edge_command(dir, robot, connect, SPEED, &source);
         let log = std::fs::File::create(dir.join(format!("robot{robot}.log"))).expect("log");
-        let child = self
-            .net
+        self.net
             .wrap(&edge)
             .stdout(Stdio::piped())
             .stderr(log)
             .spawn()
-            .expect("levelmap edge starts in the namespace");
-        Edge(Some(child))
+            .map(KillOnDrop::from)
+            .expect("levelmap edge starts in the namespace")
     }
 }
 
@@ -150,20 +149,9 @@ impl Drop for Partition {
         for rule in self.host_rules.drain(..) {
             let _ = Command::new("iptables").arg("-D").args(&rule).output();
         }
-        // `net` goes next, with the veth pair (once no process is left inside: see `Edge`).
-    }
-}
-
-/// An edge process, killed if the test ends before its report: a process left in the
-/// namespace would keep the namespace and its veth pair alive.
-struct Edge(Option<Child>);
-
-impl Drop for Edge {
-    fn drop(&mut self) {
-        if let Some(child) = &mut self.0 {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
+        // `net` goes next, with the veth pair, once no process is left inside: the edges
+        // (`KillOnDrop`) are dropped before it, since a process left in the namespace would
+        // keep the namespace and its veth pair alive.
     }
 }
 
@@ -229,7 +217,7 @@ fn robots_ride_out_loss_a_cut_and_a_half_open_link_by_themselves() {
         "partition drill: +0.0 s is {:.1} s after the Unix epoch",
         runtime::session::now_ns() as f64 * 1e-9
     );
-    let mut edges: Vec<Edge> = (0..ROBOTS)
+    let mut edges: Vec<KillOnDrop> = (0..ROBOTS)
         .map(|r| net.spawn_edge(&dir, r, &zenoh))
         .collect();
     wait_for(Duration::from_secs(60), || {
@@ -330,11 +318,8 @@ fn robots_ride_out_loss_a_cut_and_a_half_open_link_by_themselves() {
 
     // The robots finish driving and stay until every node is acked.
     let reports: Vec<serde_json::Value> = edges
-        .iter_mut()
-        .map(|edge| {
-            let child = edge.0.take().expect("the edge process");
-            edge_report(child, Duration::from_secs(300))
-        })
+        .drain(..)
+        .map(|edge| edge_report(edge, Duration::from_secs(300)))
         .collect();
     let total_s = started.elapsed().as_secs_f64();
     for (r, report) in reports.iter().enumerate() {

@@ -13,7 +13,7 @@ use common::*;
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::Duration;
 
 const TOKEN: &str = "record-token";
@@ -64,7 +64,7 @@ fn per_robot(poses: &BTreeMap<(String, u64), [f64; 3]>) -> BTreeMap<String, u64>
 }
 
 /// `levelmap record` on the fleet, once it has subscribed.
-fn start_recorder(connect: &str, out: &std::path::Path) -> Child {
+fn start_recorder(connect: &str, out: &std::path::Path) -> KillOnDrop {
     let mut child = levelmap()
         .args([
             "record",
@@ -80,6 +80,7 @@ fn start_recorder(connect: &str, out: &std::path::Path) -> Child {
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
+        .map(KillOnDrop::from)
         .expect("levelmap record starts");
     let stderr = child.stderr.take().expect("stderr");
     let mut lines = BufReader::new(stderr).lines();
@@ -102,7 +103,7 @@ fn a_recorded_run_reads_back_in_python_and_replays_to_the_same_map() {
     );
     let out = dir.join("run.mcap");
     let recorder = start_recorder(&live.zenoh, &out);
-    let edges: Vec<Child> = (0..2)
+    let edges: Vec<KillOnDrop> = (0..2)
         .map(|robot| spawn_edge(&dir, robot, &live.zenoh, 40.0, 0.0))
         .collect();
     let sent: u64 = edges
@@ -142,7 +143,10 @@ fn a_recorded_run_reads_back_in_python_and_replays_to_the_same_map() {
     assert!(per_robot(&live_poses).len() == 2, "both robots mapped");
     std::thread::sleep(Duration::from_millis(1500));
     sigterm(&recorder);
-    let output = recorder.wait_with_output().expect("the recorder ends");
+    let output = recorder
+        .into_inner()
+        .wait_with_output()
+        .expect("the recorder ends");
     assert!(output.status.success(), "the recorder failed");
     let report: Value = serde_json::from_slice(&output.stdout).expect("the JSON report");
     eprintln!("recorder: {report:#}");

@@ -119,6 +119,7 @@ fn read_back(style: &str, namespace: &str) {
         ])
         .stderr(Stdio::inherit())
         .spawn()
+        .map(KillOnDrop::from)
         .expect("the reader starts");
     assert!(
         wait_for(Duration::from_secs(60), || dir

@@ -78,6 +78,7 @@ fn the_demo_exits_after_its_summary_with_a_dashboard_open() {
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::null())
         .spawn()
+        .map(KillOnDrop::from)
         .expect("levelmap demo starts");
     let up = wait_for(Duration::from_secs(30), || http_get(&http, "/healthz"));
     assert!(up.is_some(), "the demo's mapper did not answer");

@@ -15,7 +15,7 @@ mod nats;
 
 use common::*;
 use std::path::Path;
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 const HOSTS: [&str; 2] = ["h1", "h2"];
@@ -46,7 +46,7 @@ fn acks(hosts: &[Option<MapperProcess>]) -> u64 {
         .sum()
 }
 
-fn robots(dir: &Path, routers: &[&str]) -> Vec<Child> {
+fn robots(dir: &Path, routers: &[&str]) -> Vec<KillOnDrop> {
     (0..ROBOTS)
         .map(|r| {
             let source = format!("[source.sim]\nloop_index = {r}\nduration_s = 160.0\n");
@@ -54,6 +54,7 @@ fn robots(dir: &Path, routers: &[&str]) -> Vec<Child> {
                 .stdout(Stdio::piped())
                 .stderr(Stdio::null())
                 .spawn()
+                .map(KillOnDrop::from)
                 .expect("levelmap edge starts")
         })
         .collect()

@@ -151,12 +151,13 @@ fn the_services_take_their_config_from_the_environment() {
         ("LEVELMAP_ZENOH__LISTEN", &format!("[{zenoh:?}]")),
     ];
     // No config file: every key from the environment, or its default.
-    let mut mapper = levelmap()
+    let mapper = levelmap()
         .arg("mapper")
         .envs(mapper_env)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
+        .map(KillOnDrop::from)
         .expect("levelmap mapper starts");
     let up = wait_for(Duration::from_secs(30), || http_get(&http, "/healthz"));
     assert!(up.is_some(), "the mapper did not answer on {http}");
@@ -176,14 +177,14 @@ fn the_services_take_their_config_from_the_environment() {
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
+        .map(KillOnDrop::from)
         .expect("levelmap edge starts");
     let report = edge_report(edge, Duration::from_secs(120));
     assert_eq!(report["robot"], "7", "{report}");
     let made = report["nodes"].as_u64().unwrap();
     assert!(made >= 2, "{report}");
     assert_eq!(node_seqs(&http, "yard", "7"), (0..made).collect::<Vec<_>>());
-    let _ = mapper.kill();
-    let _ = mapper.wait();
+    drop(mapper);
 
     // A variable that names no key stops the start, naming it.
     let out = levelmap()

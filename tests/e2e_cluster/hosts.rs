@@ -7,7 +7,7 @@ use crate::common::*;
 use crate::nats;
 use sitelog::local::Placement;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 pub(crate) const ROBOTS: usize = 2;
@@ -183,7 +183,7 @@ impl Hosts {
 
     /// The robots, on the standby's router (the owner's acks reach them through the mesh),
     /// once each has nodes in the owner's map; those nodes.
-    pub(crate) fn robots_on_owner(&self) -> (Vec<Child>, Vec<Vec<u64>>) {
+    pub(crate) fn robots_on_owner(&self) -> (Vec<KillOnDrop>, Vec<Vec<u64>>) {
         let standby = self.routers[self.standby].clone();
         self.robots_on_owner_via(&[&standby], 60.0)
     }
@@ -193,7 +193,7 @@ impl Hosts {
         &self,
         routers: &[&str],
         duration_s: f64,
-    ) -> (Vec<Child>, Vec<Vec<u64>>) {
+    ) -> (Vec<KillOnDrop>, Vec<Vec<u64>>) {
         self.robots_on_owner_with(routers, duration_s, "")
     }
 
@@ -204,7 +204,7 @@ impl Hosts {
         routers: &[&str],
         duration_s: f64,
         extra: &str,
-    ) -> (Vec<Child>, Vec<Vec<u64>>) {
+    ) -> (Vec<KillOnDrop>, Vec<Vec<u64>>) {
         let source = format!("[source.sim]\nduration_s = {duration_s:.1}\n");
         let robots = self.member("robots");
         let edges: Vec<_> = (0..ROBOTS)
@@ -216,6 +216,7 @@ impl Hosts {
                     .stdout(Stdio::piped())
                     .stderr(Stdio::null())
                     .spawn()
+                    .map(KillOnDrop::from)
                     .expect("levelmap edge starts")
             })
             .collect();
@@ -276,14 +277,14 @@ impl Hosts {
     }
 
     /// Every node each robot made is in the standby's map once, in order.
-    pub(crate) fn every_node_once_on_standby(&self, edges: Vec<Child>) {
+    pub(crate) fn every_node_once_on_standby(&self, edges: Vec<KillOnDrop>) {
         self.every_node_once(edges, || self.standby().http.clone());
     }
 
     /// The owner, back after a fault, gets the site again from the standby once it has been
     /// alive for the hand-back time (it is first in the site's order); every node made is
     /// there once.
-    pub(crate) fn every_node_once_back_home(&self, edges: Vec<Child>) {
+    pub(crate) fn every_node_once_back_home(&self, edges: Vec<KillOnDrop>) {
         let owner = self.owner().http.clone();
         self.every_node_once(edges, || {
             wait_for(Duration::from_secs(60), || summary_nodes(&owner))
@@ -298,7 +299,7 @@ impl Hosts {
 
     /// Every node each robot made is in the map of the host `serving` names once the robots
     /// are done, once, in order.
-    pub(crate) fn every_node_once(&self, edges: Vec<Child>, serving: impl Fn() -> String) {
+    pub(crate) fn every_node_once(&self, edges: Vec<KillOnDrop>, serving: impl Fn() -> String) {
         let reports: Vec<_> = edges
             .into_iter()
             .map(|edge| edge_report(edge, Duration::from_secs(180)))

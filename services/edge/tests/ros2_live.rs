@@ -57,6 +57,7 @@ fn live_topics_give_what_the_recording_gives(style: KeyStyle, name: &str) {
         .arg(name)
         .stderr(Stdio::inherit())
         .spawn()
+        .map(testdata::KillOnDrop::from)
         .expect("the publisher starts");
     // The publisher listens first; the source connects as a client.
     let started = Instant::now();

