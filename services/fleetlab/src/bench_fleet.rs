@@ -138,17 +138,23 @@ struct BenchReport {
     foxglove_clients: Option<Vec<foxglove::FoxgloveClient>>,
 }
 
+/// The simulated robot of the park's loop `loop_index` whose scans the pools replay, for
+/// `nodes` nodes (a scan every 4 s), its clock from 0.
+pub(crate) fn loop_source(loop_index: usize, nodes: usize) -> SimSource {
+    let config = SimSourceConfig {
+        loop_index,
+        seed: 7,
+        duration_s: nodes as f64 * 4.0,
+        ..SimSourceConfig::default()
+    };
+    SimSource::new(&config, 0, 10.0).expect("park loop")
+}
+
 /// The nodes of the park's three loops, each a node per scan, to be replayed.
 pub(crate) fn node_pool(per_loop: usize, clouds: bool) -> Vec<Vec<Node>> {
     (0..3)
         .map(|loop_index| {
-            let config = SimSourceConfig {
-                loop_index,
-                seed: 7,
-                duration_s: per_loop as f64 * 4.0,
-                ..SimSourceConfig::default()
-            };
-            let mut source = SimSource::new(&config, 0, 10.0).expect("park loop");
+            let mut source = loop_source(loop_index, per_loop);
             let mut builder =
                 NodeBuilder::new(FLEET, "r", Default::default(), Default::default(), 0);
             if clouds {

@@ -13,13 +13,20 @@
 //! With `--same-ground` every lap is on the park itself, each robot's one chain going on from
 //! lap to lap, as a fleet that works in one place for a month: after the first laps the
 //! nodes pass over covered ground, and what the site keeps of them (span rows, GPS edges up
-//! to their bound, solve points) is what grows.
+//! to their bound, solve points) is what grows. A lap's scans are the same from lap to lap,
+//! and so is its dead reckoning but for one step: from a lap's last node on to the next lap's
+//! first, odometry moves by the true motion (the simulator's), and each lap's odometry frame
+//! is the previous one's carried on by that step ([`Seam`]). Without it, odometry would jump
+//! by the lap's drift there (1.1 m on the park's second loop), more than a pass is located
+//! within.
 
 use crate::FLEET;
-use crate::bench_fleet::{Percentiles, agent, node_pool, robot_node};
+use crate::bench_fleet::{Percentiles, agent, loop_source, node_pool, robot_node};
 use anyhow::{Context, Result, bail};
 use clap::Args;
+use leveling::nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
+use slam::Pose2;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use wire::Node;
@@ -108,11 +115,24 @@ struct Robot {
     lap: u64,
     k: u64,
     sent: u64,
+    /// On the same ground: its odometry frame in its first lap's (the seams it crossed).
+    odometry_base: Pose2,
+}
+
+/// Where a loop's lap ends and the next begins, on the same ground.
+#[derive(Clone, Copy, Debug)]
+struct Seam {
+    /// The robot's true planar motion from the lap's last node to its first.
+    step: Pose2,
+    /// The next lap's odometry frame in this lap's: the lap's last node's odometry, carried
+    /// on by `step`, is where the first node's odometry puts it.
+    next_frame: Pose2,
 }
 
 /// The robots, their nodes dealt in turn.
 struct Fleet {
     pool: Vec<Vec<Node>>,
+    seams: Vec<Seam>,
     robots: Vec<Robot>,
     next: usize,
     started_ns: u64,
@@ -120,7 +140,7 @@ struct Fleet {
 }
 
 impl Fleet {
-    fn new(pool: Vec<Vec<Node>>, robots: usize, same_ground: bool) -> Fleet {
+    fn new(pool: Vec<Vec<Node>>, seams: Vec<Seam>, robots: usize, same_ground: bool) -> Fleet {
         let robots = (0..robots)
             .map(|r| Robot {
                 name: format!("r{r}"),
@@ -129,10 +149,12 @@ impl Fleet {
                 lap: 0,
                 k: 0,
                 sent: 0,
+                odometry_base: Pose2::default(),
             })
             .collect();
         Fleet {
             pool,
+            seams,
             robots,
             next: 0,
             started_ns: runtime::session::now_ns(),
@@ -150,11 +172,18 @@ impl Fleet {
         if robot.k as usize == loop_nodes.len() {
             (robot.lap, robot.k) = (robot.lap + 1, 0);
         }
-        let template = &loop_nodes[(robot.offset + robot.k as usize) % loop_nodes.len()];
+        let index = (robot.offset + robot.k as usize) % loop_nodes.len();
+        let mut template = loop_nodes[index].clone();
         // New ground: each lap a copy of the park of its own, driven as a new chain. The
-        // same ground: the park itself, one chain lap after lap (a lap's end is within 1 m
-        // and 30° of its start, so odometry steps from one lap into the next as it drives).
+        // same ground: the park itself, one chain lap after lap, its odometry carried across
+        // each seam by the true step.
         let (copy, chain) = if self.same_ground {
+            let seam = self.seams[r % self.seams.len()];
+            let crossed = (index == 0 && robot.sent > 0).then_some(seam.step);
+            if crossed.is_some() {
+                robot.odometry_base = robot.odometry_base.compose(&seam.next_frame);
+            }
+            template = rebased(template, &robot.odometry_base, crossed)?;
             (0, (1, robot.sent))
         } else {
             (
@@ -168,11 +197,45 @@ impl Fleet {
         ];
         // A node a second per robot, in compressed time.
         let stamp_ns = self.started_ns + robot.sent * 1_000_000_000;
-        let payload = robot_node(template, (FLEET, &robot.name), chain, offset_m, stamp_ns);
+        let payload = robot_node(&template, (FLEET, &robot.name), chain, offset_m, stamp_ns);
         robot.k += 1;
         robot.sent += 1;
         Ok((wire::node_key(FLEET, &robot.name)?, payload))
     }
+}
+
+/// `node` with its dead reckoning in the odometry frame `base` (planar), and `step` as its
+/// motion since the node before when it follows a seam.
+fn rebased(node: Node, base: &Pose2, step: Option<Pose2>) -> Result<Node> {
+    let mut parts = node.into_parts();
+    let frame = Isometry3::from_parts(
+        Translation3::new(base.x, base.y, 0.0),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), base.theta),
+    );
+    parts.odometry.pose = frame * parts.odometry.pose;
+    if step.is_some() {
+        parts.odometry_delta = step;
+    }
+    Ok(Node::new(parts)?)
+}
+
+/// The seam of each loop's lap ([`Seam`]), from the simulator's true poses at the lap's first
+/// and last nodes.
+fn seams(pool: &[Vec<Node>]) -> Vec<Seam> {
+    pool.iter()
+        .enumerate()
+        .map(|(loop_index, lap)| {
+            let (first, last) = (&lap[0], &lap[lap.len() - 1]);
+            let source = loop_source(loop_index, LAP_NODES_MAX);
+            let truth = |n: &Node| Pose2::from_isometry3(&source.truth_at(n.odometry.stamp_ns));
+            let odometry = |n: &Node| Pose2::from_isometry3(&n.odometry.pose);
+            let step = truth(last).between(&truth(first));
+            let next_frame = odometry(last)
+                .compose(&step)
+                .compose(&odometry(first).inverse());
+            Seam { step, next_frame }
+        })
+        .collect()
 }
 
 /// The nodes of each loop for one lap: from the start until the robot is back within 1 m of
@@ -231,12 +294,22 @@ pub fn run(args: &BenchGrowthArgs) -> Result<()> {
 
 async fn run_async(args: &BenchGrowthArgs) -> Result<()> {
     eprintln!("bench-growth: simulating a lap of each of the park's loops…");
-    let pool = tokio::task::spawn_blocking(lap_pool).await??;
+    let same_ground = args.same_ground;
+    let (pool, seams) = tokio::task::spawn_blocking(move || {
+        let pool = lap_pool()?;
+        let seams = if same_ground {
+            seams(&pool)
+        } else {
+            Vec::new()
+        };
+        anyhow::Ok((pool, seams))
+    })
+    .await??;
     let pool_nodes_per_loop: Vec<usize> = pool.iter().map(Vec::len).collect();
     eprintln!("bench-growth: laps of {pool_nodes_per_loop:?} nodes");
     let config = crate::park_mapper_config(&args.dir, "127.0.0.1:0", &args.zenoh)?;
     let mut mapper = mapper::start(config.clone()).await?;
-    let mut fleet = Fleet::new(pool, args.robots, args.same_ground);
+    let mut fleet = Fleet::new(pool, seams, args.robots, args.same_ground);
     let (mut fed, started) = (0usize, Instant::now());
     // Nodes fed, and passed, before this mapper started (its counters start at 0).
     let (mut fed_before_start, mut passed_before_start) = (0, 0);

@@ -71,6 +71,12 @@ impl SimSource {
         })
     }
 
+    /// The robot's true pose at `stamp_ns` (the source's clock): what the simulator's benches
+    /// and tests check against; a real source has none.
+    pub fn truth_at(&self, stamp_ns: u64) -> leveling::nalgebra::Isometry3<f64> {
+        self.robot.truth_at(stamp_ns.saturating_sub(self.epoch_ns))
+    }
+
     fn shift(&self, pose: TimedPose) -> TimedPose {
         TimedPose {
             stamp_ns: pose.stamp_ns + self.epoch_ns,
