@@ -40,3 +40,27 @@ impl Drop for KillOnDrop {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+    use std::process::Command;
+
+    #[test]
+    fn a_process_is_killed_and_reaped_when_a_test_panics_holding_it() {
+        let child = Command::new("sleep")
+            .arg("60")
+            .spawn()
+            .expect("sleep starts");
+        let proc_dir = format!("/proc/{}", child.id());
+        assert!(Path::new(&proc_dir).exists());
+        let unwound = std::panic::catch_unwind(move || {
+            let _held = KillOnDrop::from(child);
+            panic!("a failed check");
+        });
+        assert!(unwound.is_err());
+        // Killed and reaped: no process, not even a zombie, is left under its id.
+        assert!(!Path::new(&proc_dir).exists(), "{proc_dir} is still there");
+    }
+}
