@@ -1,7 +1,11 @@
 //! The mapper as the drills start it: a `levelmap mapper` process on its own ports and
 //! store, stopped, killed and started again on the same store; and its store checked.
 
-use super::*;
+use super::{KillOnDrop, free_port, http_get, levelmap, netns, sigterm, wait_for};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Stdio};
+use std::time::Duration;
 
 /// A mapper process on its own ports and store.
 pub struct MapperProcess {
@@ -10,7 +14,7 @@ pub struct MapperProcess {
     pub config: PathBuf,
     /// The network namespace it runs in, if not the test's.
     ns: Option<String>,
-    child: Child,
+    child: KillOnDrop,
 }
 
 /// A mapper stopped or killed: what starts it again as it was.
@@ -115,6 +119,7 @@ impl MapperProcess {
             .stdout(Stdio::null())
             .stderr(log)
             .spawn()
+            .map(KillOnDrop::from)
             .expect("levelmap mapper starts");
         let up = wait_for(Duration::from_secs(30), || http_get(&http, "/healthz"));
         if up.is_none() {
@@ -182,13 +187,6 @@ impl MapperProcess {
     pub fn restart(stopped: Stopped) -> MapperProcess {
         let net = stopped.ns.as_ref().map(|ns| ns as &dyn netns::Namespace);
         Self::spawn_in(net, stopped.http, stopped.zenoh, stopped.config)
-    }
-}
-
-impl Drop for MapperProcess {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 

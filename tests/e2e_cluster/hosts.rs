@@ -357,7 +357,8 @@ pub(crate) fn stream_leader(servers: &nats::Cluster, stream: &str) -> Option<Str
 /// A `levelmap gateway` in front of the running hosts.
 pub(crate) struct GatewayProcess {
     pub(crate) http: String,
-    pub(crate) child: std::process::Child,
+    /// Held only to kill the gateway when this is dropped.
+    _process: KillOnDrop,
 }
 
 impl GatewayProcess {
@@ -388,16 +389,13 @@ impl GatewayProcess {
             .stdout(Stdio::null())
             .stderr(log)
             .spawn()
+            .map(KillOnDrop::from)
             .expect("levelmap gateway starts");
         wait_for(Duration::from_secs(30), || http_get(&http, "/healthz")).expect("gateway up");
-        GatewayProcess { http, child }
-    }
-}
-
-impl Drop for GatewayProcess {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        GatewayProcess {
+            http,
+            _process: child,
+        }
     }
 }
 
