@@ -13,8 +13,11 @@ use mapper::store::{FleetBatch, SiteChange, SolvePoint};
 use serde::{Deserialize, Serialize};
 use sitelog::RecordId;
 
-/// The format of a batch record this build writes.
-pub const RECORD_FORMAT: u8 = 1;
+/// The format of a batch record this build writes: 3, a span's passes with their last
+/// pass's map pose.
+pub const RECORD_FORMAT: u8 = 3;
+/// Batch records before the passes' map poses (read, no longer written).
+const RECORD_FORMAT_1: u8 = 1;
 /// The format of a change record ([`SiteChange`]).
 pub const CHANGE_FORMAT: u8 = 2;
 
@@ -31,7 +34,9 @@ impl LogRecord {
     /// A record read back from the log.
     pub fn decode(bytes: &[u8]) -> Result<LogRecord, RecordError> {
         match bytes.split_first() {
-            Some((&RECORD_FORMAT, _)) => SiteRecord::decode(bytes).map(LogRecord::Batch),
+            Some((&(RECORD_FORMAT | RECORD_FORMAT_1), _)) => {
+                SiteRecord::decode(bytes).map(LogRecord::Batch)
+            }
             Some((&CHANGE_FORMAT, rest)) => postcard::from_bytes(rest)
                 .map(LogRecord::Change)
                 .map_err(|e| RecordError::Damaged(e.to_string())),
@@ -90,19 +95,22 @@ pub struct RecordSpan {
     passed: Option<RecordPassed>,
 }
 
-/// A pass ([`slam::Passed`]): (nodes, path m, the last one's odometry x, y, theta).
-type RecordPassed = (u64, f64, Option<(f64, f64, f64)>);
+/// A pass ([`slam::Passed`]): (nodes, path m, the last one's odometry x, y, theta, its map
+/// pose x, y, theta, the path since one was located m).
+type RecordPassed = (u64, f64, Option<XyTheta>, Option<XyTheta>, f64);
+type XyTheta = (f64, f64, f64);
 
 impl From<&fleetmap::LocalizedSpan> for RecordSpan {
     fn from(s: &fleetmap::LocalizedSpan) -> Self {
+        let xy_theta = |p: slam::Pose2| (p.x, p.y, p.theta);
         RecordSpan {
             robot: s.robot.clone(),
             chain_id: s.chain_id,
             first_seq: s.first_seq,
             last_seq: s.last_seq,
             passed: s.passed.map(|p| {
-                let odometry = p.odometry.map(|o| (o.x, o.y, o.theta));
-                (p.nodes as u64, p.path_m, odometry)
+                let (odometry, pose) = (p.odometry.map(xy_theta), p.pose.map(xy_theta));
+                (p.nodes as u64, p.path_m, odometry, pose, p.unlocated_m)
             }),
         }
     }
@@ -110,16 +118,67 @@ impl From<&fleetmap::LocalizedSpan> for RecordSpan {
 
 impl From<&RecordSpan> for fleetmap::LocalizedSpan {
     fn from(s: &RecordSpan) -> Self {
+        let pose = |(x, y, theta): XyTheta| slam::Pose2::new(x, y, theta);
         fleetmap::LocalizedSpan {
             robot: s.robot.clone(),
             chain_id: s.chain_id,
             first_seq: s.first_seq,
             last_seq: s.last_seq,
-            passed: s.passed.map(|(nodes, path_m, odometry)| slam::Passed {
-                nodes: nodes as usize,
-                path_m,
-                odometry: odometry.map(|(x, y, theta)| slam::Pose2::new(x, y, theta)),
-            }),
+            passed: s
+                .passed
+                .map(|(nodes, path_m, odometry, at, unlocated_m)| slam::Passed {
+                    nodes: nodes as usize,
+                    path_m,
+                    odometry: odometry.map(pose),
+                    pose: at.map(pose),
+                    unlocated_m,
+                }),
+        }
+    }
+}
+
+/// Batch records of format 1, read back as this build's: their passes have no map pose.
+mod format1 {
+    use serde::Deserialize;
+
+    #[derive(Deserialize)]
+    pub(super) struct SiteRecord {
+        nodes: Vec<(u64, Vec<u8>)>,
+        first_edge: u64,
+        edges: Vec<Vec<u8>>,
+        solved: Option<(u64, u64, u64)>,
+        pass_fixes: Vec<Vec<u8>>,
+        localized: Vec<RecordSpan>,
+    }
+
+    #[derive(Deserialize)]
+    struct RecordSpan {
+        robot: String,
+        chain_id: u64,
+        first_seq: u64,
+        last_seq: u64,
+        passed: Option<(u64, f64, Option<super::XyTheta>)>,
+    }
+
+    impl From<SiteRecord> for super::SiteRecord {
+        fn from(r: SiteRecord) -> Self {
+            let localized = r.localized.into_iter().map(|s| super::RecordSpan {
+                robot: s.robot,
+                chain_id: s.chain_id,
+                first_seq: s.first_seq,
+                last_seq: s.last_seq,
+                passed: s
+                    .passed
+                    .map(|(nodes, path_m, odometry)| (nodes, path_m, odometry, None, 0.0)),
+            });
+            super::SiteRecord {
+                nodes: r.nodes,
+                first_edge: r.first_edge,
+                edges: r.edges,
+                solved: r.solved,
+                pass_fixes: r.pass_fixes,
+                localized: localized.collect(),
+            }
         }
     }
 }
@@ -128,7 +187,7 @@ impl From<&RecordSpan> for fleetmap::LocalizedSpan {
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
     /// Written by a later release.
-    #[error("record format {0}: this build reads formats up to {CHANGE_FORMAT}")]
+    #[error("record format {0}: this build reads formats up to {RECORD_FORMAT}")]
     Format(u8),
     /// Bytes that are no record.
     #[error("record: {0}")]
@@ -149,6 +208,9 @@ impl SiteRecord {
             Some((&RECORD_FORMAT, rest)) => {
                 postcard::from_bytes(rest).map_err(|e| RecordError::Damaged(e.to_string()))
             }
+            Some((&RECORD_FORMAT_1, rest)) => postcard::from_bytes::<format1::SiteRecord>(rest)
+                .map(Into::into)
+                .map_err(|e| RecordError::Damaged(e.to_string())),
             Some((&other, _)) => Err(RecordError::Format(other)),
             None => Err(RecordError::Damaged("empty".into())),
         }
@@ -262,6 +324,8 @@ mod tests {
                     nodes: 3,
                     path_m: 2.5,
                     odometry: Some(slam::Pose2::new(1.0, 2.0, 0.5)),
+                    pose: Some(slam::Pose2::new(-3.0, 4.0, 0.25)),
+                    unlocated_m: 1.5,
                 }),
             }],
             ..Default::default()
@@ -282,10 +346,10 @@ mod tests {
         let batch = SiteRecord::default().encode();
         assert!(matches!(LogRecord::decode(&batch), Ok(LogRecord::Batch(_))));
         let mut later = bytes.clone();
-        later[0] = CHANGE_FORMAT + 1;
+        later[0] = RECORD_FORMAT + 1;
         assert!(matches!(
             LogRecord::decode(&later),
-            Err(RecordError::Format(3))
+            Err(RecordError::Format(4))
         ));
         assert!(LogRecord::decode(&bytes[..bytes.len() - 1]).is_err());
     }
@@ -370,7 +434,7 @@ mod tests {
                     chain_id: 2,
                     first_seq: 4,
                     last_seq: 6,
-                    passed: Some((3, 2.5, Some((1.0, 2.0, 0.5)))),
+                    passed: Some((3, 2.5, Some((1.0, 2.0, 0.5)), None, 0.0)),
                 },
                 RecordSpan {
                     robot: "r2".into(),
@@ -399,15 +463,23 @@ mod tests {
                 },
             ),
         ];
-        let mut records = vec![("batch", LogRecord::Batch(batch))];
+        // Format 3: the same batch, its pass with the last pass's map pose.
+        let mut batch3 = batch.clone();
+        batch3.localized[0].passed =
+            Some((3, 2.5, Some((1.0, 2.0, 0.5)), Some((-3.0, 4.0, 0.25)), 1.5));
+        let mut records = vec![
+            ("batch", LogRecord::Batch(batch)),
+            ("batch-3", LogRecord::Batch(batch3)),
+        ];
         records.extend(changes.map(|(name, c)| (name, LogRecord::Change(c))));
         (fix, edge, records)
     }
 
-    /// Records written by an earlier build (7a2c744, `tests/fixtures/log-records/README.md`)
-    /// read back as written, and written alike by this one. A log outlives the release that
-    /// wrote it and postcard is not self-describing: a changed field of a record fails here
-    /// rather than in the logs of a running cluster (a change is a new format number).
+    /// Records written by earlier builds (`tests/fixtures/log-records/README.md`) read back
+    /// as written, and those of the formats this build writes written alike. A log outlives
+    /// the release that wrote it and postcard is not self-describing: a changed field of a
+    /// record fails here rather than in the logs of a running cluster (a change is a new
+    /// format number).
     #[test]
     fn records_written_by_an_earlier_release_read_back_as_written() {
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/log-records");
@@ -421,7 +493,14 @@ mod tests {
                 LogRecord::Batch(batch) => batch.encode(),
                 LogRecord::Change(change) => encode_change(change),
             };
-            assert!(written == stored, "{name}: this build writes it otherwise");
+            if stored[0] == RECORD_FORMAT_1 {
+                assert_eq!(
+                    written[0], RECORD_FORMAT,
+                    "{name}: written in this build's format"
+                );
+            } else {
+                assert!(written == stored, "{name}: this build writes it otherwise");
+            }
             if let LogRecord::Batch(batch) = read {
                 assert_eq!(batch.pass_fixes().unwrap(), std::slice::from_ref(&fix));
                 let edges: Vec<slam::RelativeEdge> = batch

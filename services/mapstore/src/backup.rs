@@ -139,6 +139,7 @@ fn copy_into(snapshot: &ReadTransaction, path: &Path) -> Result<BackupReport, St
         super::SITE_LOG,
         super::SNAPSHOTS,
         l::LOCALIZED,
+        l::PASS_POSES,
         l::MODES,
         m::STORE_META,
         m::FLEET_MAPPING,
@@ -240,6 +241,7 @@ mod tests {
             ("site_log", rows(&t, super::super::SITE_LOG)),
             ("snapshots", rows(&t, super::super::SNAPSHOTS)),
             ("localized_spans", rows(&t, l::LOCALIZED)),
+            ("pass_poses", rows(&t, l::PASS_POSES)),
             ("robot_modes", rows(&t, l::MODES)),
             ("store_meta", rows(&t, m::STORE_META)),
             ("fleet_mapping", rows(&t, m::FLEET_MAPPING)),
@@ -295,6 +297,10 @@ mod tests {
             txn.open_table(l::LOCALIZED)
                 .unwrap()
                 .insert(key, span)
+                .unwrap();
+            txn.open_table(l::PASS_POSES)
+                .unwrap()
+                .insert(key, (1.5, -2.0, 0.25, 3.0))
                 .unwrap();
             txn.open_table(l::MODES)
                 .unwrap()

@@ -34,10 +34,11 @@ impl Store {
                 .retain_in((fleet, 0, 0)..=(fleet, u64::MAX, u64::MAX), |_, _| false)?;
             // Robot names are wire ids (ASCII): every one sorts below U+10FFFF.
             let last_robot = "\u{10ffff}";
-            txn.open_table(localization::LOCALIZED)?.retain_in(
-                (fleet, "", 0, 0)..=(fleet, last_robot, u64::MAX, u64::MAX),
-                |_, _| false,
-            )?;
+            let spans = (fleet, "", 0, 0)..=(fleet, last_robot, u64::MAX, u64::MAX);
+            txn.open_table(localization::LOCALIZED)?
+                .retain_in(spans.clone(), |_, _| false)?;
+            txn.open_table(localization::PASS_POSES)?
+                .retain_in(spans, |_, _| false)?;
             txn.open_table(localization::MODES)?
                 .retain_in((fleet, "")..=(fleet, last_robot), |_, _| false)?;
             txn.open_table(SITE_LOG)?.remove(fleet)?;
@@ -64,17 +65,21 @@ fn drop_indexed(
 mod tests {
     use super::*;
     use crate::{FleetBatch, SiteChange};
+    use redb::ReadableTable;
 
     /// Two fleets with a row in every table that is keyed by fleet.
     fn two_fleets(store: &Store) {
         for fleet in ["park", "park2"] {
-            let spans = vec![fleetmap::LocalizedSpan {
-                robot: "r1".into(),
-                chain_id: 0,
-                first_seq: 1,
-                last_seq: 2,
-                passed: None,
-            }];
+            let spans = vec![
+                fleetmap::LocalizedSpan {
+                    robot: "r1".into(),
+                    chain_id: 0,
+                    first_seq: 1,
+                    last_seq: 2,
+                    passed: None,
+                },
+                passed_span(),
+            ];
             let fixes = [slam::GpsEdge {
                 node: 0,
                 position_m: slam::nalgebra::Vector2::zeros(),
@@ -116,6 +121,23 @@ mod tests {
         }
     }
 
+    /// A run of passes with its last pass's map pose.
+    fn passed_span() -> fleetmap::LocalizedSpan {
+        fleetmap::LocalizedSpan {
+            robot: "r2".into(),
+            chain_id: 1,
+            first_seq: 4,
+            last_seq: 9,
+            passed: Some(slam::Passed {
+                nodes: 6,
+                path_m: 2.5,
+                odometry: Some(slam::Pose2::new(1.0, 2.0, 0.5)),
+                pose: Some(slam::Pose2::new(-3.0, 4.0, 0.25)),
+                unlocated_m: 1.5,
+            }),
+        }
+    }
+
     #[test]
     fn a_forgotten_site_has_no_row_left_and_the_others_keep_theirs() {
         let (dir, store) = crate::temp_store("forget");
@@ -139,7 +161,15 @@ mod tests {
         let kept = store.load_fleet("park2").unwrap();
         assert_eq!((kept.nodes.len(), kept.edges.len()), (2, 1));
         assert_eq!((kept.solve_points.len(), kept.pass_fixes.len()), (1, 1));
-        assert_eq!(kept.localized.len(), 1);
+        assert_eq!(kept.localized.len(), 2);
+        assert_eq!(
+            kept.localized[1],
+            passed_span(),
+            "a pass's map pose is kept"
+        );
+        let poses = store.read_txn().unwrap();
+        let poses = poses.open_table(crate::localization::PASS_POSES).unwrap();
+        assert_eq!(poses.iter().unwrap().count(), 1, "park's pass pose is gone");
         assert!(store.cloud("park2", 1).unwrap().is_some());
         assert!(store.snapshot("park2").unwrap().is_some());
         assert_eq!(store.site_log_sequence("park2").unwrap(), 9);

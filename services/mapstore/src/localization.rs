@@ -12,6 +12,12 @@ use redb::{ReadTransaction, ReadableTable, TableDefinition, WriteTransaction};
 type SpanRow = (u64, u64, f64, f64, f64, f64);
 pub(super) const LOCALIZED: TableDefinition<(&str, &str, u64, u64), SpanRow> =
     TableDefinition::new("localized_spans");
+/// A passed run's last pass on the map, keyed as its span: (x, y, θ) and the path since a
+/// pass was last located (m). A table of its own, so that spans stored before it was kept
+/// read as they were (their chains' next nodes then go on from their last added node).
+type PassPoseRow = (f64, f64, f64, f64);
+pub(super) const PASS_POSES: TableDefinition<(&str, &str, u64, u64), PassPoseRow> =
+    TableDefinition::new("pass_poses");
 /// (fleet, robot) → the version the robot localizes on, 0 to map; robot "" is the fleet's
 /// setting for robots without one of their own.
 pub(super) const MODES: TableDefinition<(&str, &str), u64> = TableDefinition::new("robot_modes");
@@ -56,6 +62,7 @@ pub enum ModeError {
 /// Makes the tables when missing.
 pub(super) fn open_tables(txn: &WriteTransaction) -> Result<(), StoreError> {
     txn.open_table(LOCALIZED)?;
+    txn.open_table(PASS_POSES)?;
     txn.open_table(MODES)?;
     Ok(())
 }
@@ -67,6 +74,7 @@ pub(super) fn write_spans(
     spans: &[LocalizedSpan],
 ) -> Result<(), StoreError> {
     let mut table = txn.open_table(LOCALIZED)?;
+    let mut poses = txn.open_table(PASS_POSES)?;
     for s in spans {
         let key = (fleet, s.robot.as_str(), s.chain_id, s.first_seq);
         let row = match s.passed {
@@ -77,6 +85,10 @@ pub(super) fn write_spans(
             None => (s.last_seq, 0, f64::NAN, 0.0, 0.0, 0.0),
         };
         table.insert(key, row)?;
+        if let Some(pose) = s.passed.and_then(|p| p.pose) {
+            let unlocated_m = s.passed.map_or(0.0, |p| p.unlocated_m);
+            poses.insert(key, (pose.x, pose.y, pose.theta, unlocated_m))?;
+        }
     }
     Ok(())
 }
@@ -110,6 +122,7 @@ pub(super) fn read_spans(
     fleet: &str,
 ) -> Result<Vec<LocalizedSpan>, StoreError> {
     let table = txn.open_table(LOCALIZED)?;
+    let poses = txn.open_table(PASS_POSES)?;
     let range = (fleet, "", 0u64, 0u64)..;
     let mut spans = Vec::new();
     for entry in table.range(range)? {
@@ -119,10 +132,13 @@ pub(super) fn read_spans(
             break;
         }
         let (last_seq, nodes, path_m, x, y, theta) = v.value();
+        let at = poses.get(k.value())?.map(|row| row.value());
         let passed = (!path_m.is_nan()).then(|| slam::Passed {
             nodes: nodes as usize,
             path_m,
             odometry: Some(slam::Pose2::new(x, y, theta)),
+            pose: at.map(|(x, y, theta, _)| slam::Pose2::new(x, y, theta)),
+            unlocated_m: at.map_or(0.0, |a| a.3),
         });
         spans.push(LocalizedSpan {
             robot: robot.to_owned(),

@@ -39,8 +39,9 @@ impl FleetMap {
         let last_node = chain.last_node;
         let key = (node.robot.clone(), node.chain_id);
         let odometry = Pose2::from_isometry3(&node.odometry.pose).compose(&node.scan_origin);
-        // From the chain's last node, added or passed; after a restart (no state), from its
-        // last added node, and the first covered node is added.
+        // From the chain's last node, added or passed (its passes stored with their map pose
+        // are restored, [`FleetMap::restore_span`]); after a restart whose chain's last node
+        // was added, from that node, and its first covered node is added.
         let last = self.covers.get(&key).filter(|c| c.seq + 1 == node.node_seq);
         let (from_odometry, from_map, was_covered, unlocated_m) = match last {
             Some(c) => (
@@ -92,14 +93,40 @@ impl FleetMap {
     }
 
     /// A pass of `node`'s chain taken: the GPS fixes it brought, located against a covering
-    /// node, become that node's (waiting for the next solve applied).
-    pub(super) fn take_pass_evidence(&mut self, node: &Node) {
+    /// node, become that node's (waiting for the next solve applied). Where the pass was on
+    /// the map, and the path since one was located; `None` when [`FleetMap::pass`] did not
+    /// pass it.
+    pub(super) fn take_pass_evidence(&mut self, node: &Node) -> Option<(Pose2, f64)> {
         let key = (node.robot.clone(), node.chain_id);
-        let Some(cover) = self.covers.get_mut(&key).filter(|c| c.seq == node.node_seq) else {
-            return;
-        };
-        if let (Some((near, gps)), Some(located)) = (cover.evidence.take(), cover.located) {
+        let cover = self
+            .covers
+            .get_mut(&key)
+            .filter(|c| c.seq == node.node_seq)?;
+        let located = cover.located?;
+        let unlocated_m = cover.unlocated_m;
+        if let Some((near, gps)) = cover.evidence.take() {
             self.mapper.add_pass_fixes(near, &located, &gps);
         }
+        Some((located, unlocated_m))
+    }
+
+    /// A stored run of passes taken again (a restart): the chain's next node is predicted
+    /// from its last pass, as without the restart. Passes stored without their map pose
+    /// leave it to the chain's last added node.
+    pub(super) fn restore_cover(&mut self, span: &super::LocalizedSpan, passed: &slam::Passed) {
+        let (Some(odometry), Some(pose)) = (passed.odometry, passed.pose) else {
+            return;
+        };
+        self.covers.insert(
+            (span.robot.clone(), span.chain_id),
+            Cover {
+                seq: span.last_seq,
+                odometry,
+                located: Some(pose),
+                covered: true,
+                unlocated_m: passed.unlocated_m,
+                evidence: None,
+            },
+        );
     }
 }

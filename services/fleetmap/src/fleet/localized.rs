@@ -169,17 +169,21 @@ impl FleetMap {
                 },
             });
         }
-        // A pass is counted in its chain's path (the next mapped node's loop closures), and
-        // its GPS fixes go to the node it passed.
-        if passed {
-            self.take_pass_evidence(node);
-        }
+        // A pass is counted in its chain's path (the next mapped node's loop closures) with
+        // where it was on the map (the next pass's prediction), and its GPS fixes go to the
+        // node it passed.
         let passed = passed
             .then(|| {
+                let (pose, unlocated_m) = self.take_pass_evidence(node).unzip();
                 let network_chain = self.network_chain_of(&node.robot, node.chain_id)?;
                 let odometry =
                     slam::Pose2::from_isometry3(&node.odometry.pose).compose(&node.scan_origin);
-                Some(self.mapper.note_pass(network_chain, odometry))
+                Some(self.mapper.note_pass(
+                    network_chain,
+                    odometry,
+                    pose,
+                    unlocated_m.unwrap_or(0.0),
+                ))
             })
             .flatten();
         Ok(self
@@ -187,13 +191,15 @@ impl FleetMap {
             .take(&node.robot, node.chain_id, node.node_seq, passed))
     }
 
-    /// A stored span taken again (a replay).
+    /// A stored span taken again (a replay): a passed run's chain goes on from its last
+    /// pass, as it would have without the restart.
     pub fn restore_span(&mut self, span: &LocalizedSpan) {
         self.localized.restore(span);
         if let Some(passed) = span.passed
             && let Some(network_chain) = self.network_chain_of(&span.robot, span.chain_id)
         {
             self.mapper.restore_passed(network_chain, passed);
+            self.restore_cover(span, &passed);
         }
     }
 }

@@ -17,7 +17,8 @@ use std::sync::Arc;
 /// 2: the global search's state, `MapperStats` and `CoverageParams` gained fields.
 /// 3: first contact searches whole submaps (`FirstContactParams` changed, hypotheses keep
 /// their submaps, pairs get a second look).
-pub const SNAPSHOT_FORMAT: u32 = 3;
+/// 4: a chain's passes (`slam::Passed`) keep the last pass's map pose.
+pub const SNAPSHOT_FORMAT: u32 = 4;
 
 /// Why a snapshot was not used.
 #[derive(Debug, thiserror::Error)]

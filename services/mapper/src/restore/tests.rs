@@ -321,6 +321,69 @@ fn passes_over_covered_ground_restore_from_a_snapshot_as_in_a_full_replay() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Over covered ground a restart changes nothing: a robot that was passing when the mapper
+/// stopped goes on passing from its last pass's map pose (stored with its span), and the
+/// nodes added after the restart are at most those of the running mapper and one per robot
+/// whose last node was added (the first covered node of a stretch is added, and a restart
+/// does not know whether that node's place was covered).
+#[test]
+fn a_restarted_map_passes_where_the_running_one_does() {
+    let (dir, store) = temp_store("restart-passes");
+    let config = coverage_config(&dir);
+    let all = nodes(110);
+    let cut = 3 * 80;
+    let mut running = map_as_the_worker(&store, &config, &all[..cut], usize::MAX);
+    let stored = store.load_fleet("park").unwrap();
+    let mut restarted = replay(&config, &stored).unwrap();
+    // The robots whose last node before the stop (k = 79) was passed.
+    let passing: Vec<usize> = (0..3)
+        .filter(|r| {
+            let robot = format!("robot{r}");
+            let last_pass = stored.localized.iter().filter(|s| s.robot == robot);
+            last_pass
+                .filter(|s| s.passed.is_some())
+                .any(|s| s.last_seq == 79)
+        })
+        .collect();
+    assert!(!passing.is_empty(), "no robot was passing at the stop");
+    // Each node after the stop, as the worker takes it: its pose when passed, else added.
+    let take = |map: &mut FleetMap, input: &wire::Node| {
+        let passed = map.pass(input);
+        match passed {
+            Some(_) => drop(map.take_localized(input, true).unwrap()),
+            None => drop(map.ingest(input).unwrap()),
+        }
+        passed
+    };
+    let (mut first, mut added) = (vec![Vec::new(); 3], [0, 0]);
+    for (k, bytes) in all[cut..].iter().enumerate() {
+        let input = wire::decode_node(bytes).unwrap();
+        let decisions = [take(&mut running, &input), take(&mut restarted, &input)];
+        for (n, d) in decisions.iter().enumerate() {
+            added[n] += usize::from(d.is_none());
+        }
+        if k < 3 {
+            first[k % 3] = decisions.to_vec();
+        }
+    }
+    for &r in &passing {
+        assert!(
+            first[r][0].is_some() && first[r][0] == first[r][1],
+            "robot{r}'s first node after the restart: running {:?}, restarted {:?}",
+            first[r][0],
+            first[r][1]
+        );
+    }
+    assert!(
+        added[1] <= added[0] + (3 - passing.len()),
+        "added after the stop: running {}, restarted {} ({} robots passing)",
+        added[0],
+        added[1],
+        passing.len()
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn an_unreadable_or_unfit_snapshot_falls_back_to_the_full_replay() {
     let (dir, store) = temp_store("fallback");

@@ -65,8 +65,9 @@ impl Default for CoverageParams {
 }
 
 /// A chain's nodes passed since its last node: how many, the path they drove, the last one's
-/// odometry. The chain's next node counts them in its path and place, so that its loop
-/// closures see how far the robot went (a lap passed is a lap driven).
+/// odometry and map pose. The chain's next node counts them in its path and place, so that
+/// its loop closures see how far the robot went (a lap passed is a lap driven); the next
+/// pass is predicted from the last one's map pose, after a restart too.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Passed {
     /// Nodes passed.
@@ -75,11 +76,24 @@ pub struct Passed {
     pub path_m: f64,
     /// The last one's odometry pose (scan frame in the odometry frame).
     pub odometry: Option<Pose2>,
+    /// The last one's map pose: located, or carried on by odometry from the last located;
+    /// `None` when not known (passes stored before it was kept).
+    pub pose: Option<Pose2>,
+    /// Path driven since a pass was last located (m).
+    pub unlocated_m: f64,
 }
 
 impl Mapper2d {
-    /// Counts a node of `robot`'s chain passed at `odometry`; the chain's passes so far.
-    pub fn note_pass(&mut self, robot: usize, odometry: Pose2) -> Passed {
+    /// Counts a node of `robot`'s chain passed at `odometry`, at `pose` on the map (when
+    /// known) with `unlocated_m` driven since a pass was last located; the chain's passes so
+    /// far.
+    pub fn note_pass(
+        &mut self,
+        robot: usize,
+        odometry: Pose2,
+        pose: Option<Pose2>,
+        unlocated_m: f64,
+    ) -> Passed {
         let Some(chain) = self.chains.get_mut(robot).and_then(Option::as_mut) else {
             return Passed::default();
         };
@@ -89,6 +103,8 @@ impl Mapper2d {
             nodes: chain.passed.nodes + 1,
             path_m: chain.passed.path_m + step.x.hypot(step.y),
             odometry: Some(odometry),
+            pose,
+            unlocated_m,
         };
         chain.passed
     }
