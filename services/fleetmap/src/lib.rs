@@ -30,7 +30,7 @@ pub mod testing;
 /// new closure test): stores written before are then rebuilt from their nodes at start. An
 /// undeclared change is caught too (the replayed edges differ from the stored ones) and
 /// rebuilt the same way.
-pub const MAPPING_CODE: &str = concat!("levelmap ", env!("CARGO_PKG_VERSION"), " mapping r3");
+pub const MAPPING_CODE: &str = concat!("levelmap ", env!("CARGO_PKG_VERSION"), " mapping r4");
 
 pub use fleet::{
     ChainRecord, FleetMap, IngestError, Ingested, LocalizedSpan, MAX_CHAINS_PER_ROBOT,

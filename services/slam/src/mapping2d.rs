@@ -290,7 +290,17 @@ impl Mapper2d {
             let offset = matched.map_or(step, |m| m.pose);
             return Ok(Placed::Attached { node: last, offset });
         }
-        let estimate = self.graph.poses[last].compose(&matched.as_ref().map_or(step, |m| m.pose));
+        // Unmatched after passes: from the last pass's map pose (located against the map),
+        // not through the odometry of every pass since the last node.
+        let after_passes = chain
+            .passed
+            .pose
+            .zip(chain.passed.odometry)
+            .map(|(pose, at)| pose.compose(&at.between(&odometry)));
+        let estimate = match (&matched, after_passes) {
+            (None, Some(estimate)) => estimate,
+            _ => self.graph.poses[last].compose(&matched.as_ref().map_or(step, |m| m.pose)),
+        };
         // Through the nodes passed since the last, if any.
         let from = chain.passed.odometry.unwrap_or(chain.last_odometry);
         let to_here = from.between(&odometry);
