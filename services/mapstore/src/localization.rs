@@ -85,9 +85,18 @@ pub(super) fn write_spans(
             None => (s.last_seq, 0, f64::NAN, 0.0, 0.0, 0.0),
         };
         table.insert(key, row)?;
-        if let Some(pose) = s.passed.and_then(|p| p.pose) {
-            let unlocated_m = s.passed.map_or(0.0, |p| p.unlocated_m);
-            poses.insert(key, (pose.x, pose.y, pose.theta, unlocated_m))?;
+        // A run extended without a pose (a format-1 record of an earlier release's host)
+        // keeps no earlier pass's pose: the chain then goes on from its last added node.
+        match s
+            .passed
+            .and_then(|p| p.pose.map(|pose| (pose, p.unlocated_m)))
+        {
+            Some((pose, unlocated_m)) => {
+                poses.insert(key, (pose.x, pose.y, pose.theta, unlocated_m))?;
+            }
+            None => {
+                poses.remove(key)?;
+            }
         }
     }
     Ok(())

@@ -1,4 +1,5 @@
-//! The store: clouds apart, a disk that fills and empties, fleets read one by one.
+//! The store: clouds apart, a disk that fills and empties, fleets read one by one, a passed
+//! run's pose.
 
 use super::*;
 
@@ -213,6 +214,43 @@ fn clouds_are_dropped_oldest_first_by_age_then_by_bytes_per_fleet() {
         store.prune_clouds("park", |_| false, 0).unwrap().kept_bytes,
         500
     );
+    drop(store);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A run of passes rewritten as it grows keeps its last pass's map pose; extended by a row
+/// without one (an earlier release's record), it keeps none rather than an older pass's.
+#[test]
+fn a_passed_run_keeps_its_last_pose_and_no_stale_one() {
+    let (dir, store) = crate::temp_store("pass-poses");
+    let span = |last_seq, pose: Option<slam::Pose2>| fleetmap::LocalizedSpan {
+        robot: "r1".into(),
+        chain_id: 0,
+        first_seq: 4,
+        last_seq,
+        passed: Some(slam::Passed {
+            nodes: (last_seq - 3) as usize,
+            path_m: 1.0,
+            odometry: Some(slam::Pose2::new(1.0, 0.0, 0.0)),
+            pose,
+            unlocated_m: 0.5 * f64::from(pose.is_some()),
+        }),
+    };
+    let commit = |s: fleetmap::LocalizedSpan| {
+        let batch = FleetBatch {
+            fleet: "park",
+            localized: vec![s],
+            ..Default::default()
+        };
+        store.commit(&[batch]).unwrap();
+    };
+    commit(span(5, Some(slam::Pose2::new(-3.0, 4.0, 0.25))));
+    commit(span(6, Some(slam::Pose2::new(-2.5, 4.0, 0.25))));
+    let stored = store.load_fleet("park").unwrap().localized;
+    assert_eq!(stored, [span(6, Some(slam::Pose2::new(-2.5, 4.0, 0.25)))]);
+    commit(span(7, None));
+    let stored = store.load_fleet("park").unwrap().localized;
+    assert_eq!(stored, [span(7, None)], "no stale pose");
     drop(store);
     std::fs::remove_dir_all(&dir).ok();
 }
